@@ -1,0 +1,40 @@
+"""PNG previews of a tile, for a person to look at: the RGB and a colour-coded label image."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .textures.pngio import write_png
+
+
+def to_srgb8(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB -> 8-bit sRGB (the standard transfer curve, values clipped to [0, 1])."""
+    x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.floor(srgb * 255.0 + 0.5).astype(np.uint8)
+
+
+def label_image(instance: np.ndarray, roof_class: np.ndarray) -> np.ndarray:
+    """Flat roofs in cool colours, sloped roofs in warm ones, one shade per building; edges dark."""
+    ids = instance.astype(np.uint64)
+    shade = ((ids * np.uint64(2654435761)) >> np.uint64(8)) % np.uint64(97)
+    t = (shade.astype(np.float64) / 96.0)[..., None]
+    cool = np.array([40, 110, 230]) * (1 - t) + np.array([60, 210, 200]) * t
+    warm = np.array([230, 90, 40]) * (1 - t) + np.array([250, 200, 60]) * t
+    out = np.zeros(instance.shape + (3,), dtype=np.float64)
+    out[roof_class == 1] = cool[roof_class == 1]
+    out[roof_class == 2] = warm[roof_class == 2]
+    edge = np.zeros(instance.shape, dtype=bool)
+    edge[:-1] |= instance[:-1] != instance[1:]
+    edge[:, :-1] |= instance[:, :-1] != instance[:, 1:]
+    out[edge & (instance > 0)] *= 0.45
+    return out.astype(np.uint8)
+
+
+def write_previews(tile_path: Path, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray) -> None:
+    """``<tile>.png`` (RGB) and ``<tile>_labels.png`` beside an EXR tile."""
+    tile_path = Path(tile_path)
+    write_png(tile_path.with_suffix(".png"), to_srgb8(rgb))
+    write_png(tile_path.with_name(tile_path.stem + "_labels.png"), label_image(instance, roof_class))
