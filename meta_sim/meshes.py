@@ -151,11 +151,12 @@ def building_mesh(buildings) -> MeshArrays:
 
 
 def road_mesh(roads, z: float = 0.03) -> MeshArrays:
+    """Road rectangles; crossing roads overlap, so each sits a millimetre above the last."""
     mesh = MeshArrays("roads")
     background = label_color(0, 0)
-    for road in roads:
+    for k, road in enumerate(roads):
         pts = _ccw([tuple(p) for p in road.polygon])
-        mesh.add([(x, y, z) for x, y in pts], 0, pts, background)
+        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], 0, pts, background)
     return mesh
 
 
