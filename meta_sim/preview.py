@@ -38,3 +38,18 @@ def write_previews(tile_path: Path, rgb: np.ndarray, instance: np.ndarray, roof_
     tile_path = Path(tile_path)
     write_png(tile_path.with_suffix(".png"), to_srgb8(rgb))
     write_png(tile_path.with_name(tile_path.stem + "_labels.png"), label_image(instance, roof_class))
+
+
+def write_mosaic(path: Path, images: list[np.ndarray], rects, pixel_size_m: float, max_px: int = 1536) -> None:
+    """The tiles of one design placed where they lie in the city (north up), as one sRGB PNG."""
+    x0 = min(r[0] for r in rects)
+    y1 = max(r[3] for r in rects)
+    width = max(int(round((r[2] - x0) / pixel_size_m)) for r in rects)
+    height = max(int(round((y1 - r[1]) / pixel_size_m)) for r in rects)
+    canvas = np.zeros((height, width, 3), dtype=np.float32)
+    for image, rect in zip(images, rects):
+        col = int(round((rect[0] - x0) / pixel_size_m))
+        row = int(round((y1 - rect[3]) / pixel_size_m))
+        canvas[row:row + image.shape[0], col:col + image.shape[1]] = image
+    step = max(1, -(-max(width, height) // max_px))
+    write_png(path, to_srgb8(canvas[::step, ::step]))

@@ -25,7 +25,7 @@ from . import meshes, tiles
 from .design import DesignSpace
 from .errors import MetaSimError
 from .layout import LayoutParams, layout_for_tiles
-from .preview import write_previews
+from .preview import write_mosaic, write_previews
 from .render_presets import RenderPreset
 
 BLOCK_TILES = 3  # tiles per block side: a 1152 px render amortises Blender's per-frame cost
@@ -146,7 +146,9 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         needed = sorted({j for _, _, pending in work for j in pending})
         blocks = [b for b in blocks_of(settings.n_tiles, cols) if set(b) & set(needed)]
         clock = time.perf_counter()
-        scene = CityScene(layout, [rects[j] for j in needed], pixel_size_m=settings.pixel_size_m)
+        # The scene always holds every requested tile, whichever are pending, so a resumed
+        # job renders the same pixels as an uninterrupted one.
+        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m)
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:
@@ -179,6 +181,9 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                         if progress:
                             progress(1)
                     summary.seconds["write"] += time.perf_counter() - clock
+                if settings.preview:
+                    images = [tiles.read_tile(tile_path(out_dir, job, j)).rgb for j in range(settings.n_tiles)]
+                    write_mosaic(out_dir / f"{job.name}_mosaic.png", images, rects, settings.pixel_size_m)
         finally:
             scene.close()
     return summary

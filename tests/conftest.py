@@ -1,0 +1,25 @@
+"""Shared fixtures: a private cache (texture banks) for the whole test session."""
+
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+
+# Banks are built once per session into a private cache, never the user's ~/.cache.
+_CACHE = Path(tempfile.mkdtemp(prefix="meta-sim-test-cache-"))
+os.environ["META_SIM_CACHE"] = str(_CACHE)
+
+
+@pytest.fixture(scope="session")
+def bank():
+    from meta_sim.textures import ensure_default_bank
+
+    return ensure_default_bank()
+
+
+@pytest.fixture(scope="session")
+def heldout_bank():
+    from meta_sim.textures import ensure_heldout_bank
+
+    return ensure_heldout_bank()
