@@ -1,0 +1,75 @@
+"""Roof texture banks: the procedural default bank, the held-out bank, users'
+photo folders, the HSV colour similarity between textures, and contact
+sheets. Pure Python + numpy (OpenImageIO only to read photos); never imports
+bpy or torch."""
+
+from meta_sim.textures.bank import (
+    BANK_FORMAT,
+    BANK_VERSION,
+    KINDS,
+    MANIFEST,
+    SIMILARITY_FILE,
+    SIMILARITY_TO_DEFAULT_FILE,
+    TextureBank,
+    TextureEntry,
+    build_bank_from_folder,
+    build_default_bank,
+    cache_root,
+    default_bank_dir,
+    ensure_default_bank,
+    ensure_heldout_bank,
+    heldout_bank_dir,
+    load_bank,
+    pixel_sha256,
+    save_manifest,
+)
+from meta_sim.textures.pngio import read_rgb8, resize_area, write_png
+from meta_sim.textures.procedural import Recipe, generate, recipe_by_id, recipes
+from meta_sim.textures.sheet import contact_sheet
+from meta_sim.textures.similarity import (
+    Similarity,
+    bank_similarity,
+    hsv_cone_histogram,
+    load_similarity,
+    rank_by_similarity,
+    similarity,
+    similarity_matrix,
+    write_similarity,
+)
+
+__all__ = [
+    "BANK_FORMAT",
+    "BANK_VERSION",
+    "KINDS",
+    "MANIFEST",
+    "SIMILARITY_FILE",
+    "SIMILARITY_TO_DEFAULT_FILE",
+    "Recipe",
+    "Similarity",
+    "TextureBank",
+    "TextureEntry",
+    "bank_similarity",
+    "build_bank_from_folder",
+    "build_default_bank",
+    "cache_root",
+    "contact_sheet",
+    "default_bank_dir",
+    "ensure_default_bank",
+    "ensure_heldout_bank",
+    "generate",
+    "heldout_bank_dir",
+    "hsv_cone_histogram",
+    "load_bank",
+    "load_similarity",
+    "pixel_sha256",
+    "rank_by_similarity",
+    "read_rgb8",
+    "recipe_by_id",
+    "recipes",
+    "resize_area",
+    "save_manifest",
+    "similarity",
+    "similarity_matrix",
+    "write_png",
+    "write_similarity",
+]
