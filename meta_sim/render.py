@@ -13,6 +13,8 @@ skipped, so a rerun resumes an interrupted job.
 
 from __future__ import annotations
 
+import json
+import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -137,6 +139,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
             progress(settings.n_tiles - len(pending))
         if pending:
             by_city[(job.city_seed, params)].append((job, textures, pending))
+    write_job_manifest(out_dir, jobs, settings)
 
     for (city_seed, params), work in by_city.items():
         clock = time.perf_counter()
@@ -226,3 +229,25 @@ def single_job(space: DesignSpace, design: dict, seed: int) -> Job:
 def sample_designs(space: DesignSpace, n: int, seed: int) -> list[dict]:
     """``n`` uniform designs; the first k do not depend on n (a larger set extends a smaller)."""
     return space.sample(np.random.default_rng([seed, 1]), n)
+
+
+def write_job_manifest(out_dir: Path, jobs: list[Job], settings: RenderSettings) -> Path:
+    """``designs.json`` beside the tiles: every job rendered into the folder, with its design,
+    city seed, settings and tile names (jobs already listed by an earlier run are kept)."""
+    path = Path(out_dir) / "designs.json"
+    entries = {}
+    if path.is_file():
+        try:
+            entries = {e["name"]: e for e in json.loads(path.read_text()).get("jobs", [])}
+        except (ValueError, KeyError, TypeError, AttributeError):
+            entries = {}  # a damaged manifest is rebuilt from this run
+    for job in jobs:
+        entries[job.name] = {"name": job.name, "design": job.design, "city_seed": job.city_seed,
+                             "design_space": settings.space.name, "preset": settings.preset.name,
+                             "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m,
+                             "tiles": [tile_path(out_dir, job, j).name for j in range(settings.n_tiles)]}
+    data = {"format": "meta-sim-render-job", "version": 1, "jobs": [entries[k] for k in sorted(entries)]}
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(data, indent=1) + "\n")
+    os.replace(tmp, path)
+    return path

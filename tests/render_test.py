@@ -240,3 +240,36 @@ def test_worker_runs_as_module_and_as_blender_script_with_identical_tiles(tmp_pa
     bad = subprocess.run([sys.executable, "-m", "meta_sim.worker", "--design", "flat_roof=99,sloped_roof=1",
                           "--out", str(tmp_path / "c")], capture_output=True, text=True, env=env, cwd=ROOT)
     assert bad.returncode == 2 and "out of range" in bad.stderr
+
+
+def test_scene_builds_only_what_the_tiles_see(space):
+    from meta_sim.blender.scene import CityScene
+
+    layout, rects = layout_for_tiles(SEED, 9, 115.2)
+    scene = CityScene(layout, [rects[4]], pixel_size_m=1.2, shadow_margin_m=20.0)
+    try:
+        x0, y0, x1, y1 = rects[4]
+        assert 0 < len(scene.buildings) < len(layout.buildings) / 2
+        for b in scene.buildings:
+            bx0, by0, bx1, by1 = b.bbox
+            assert bx1 > x0 - 20 and bx0 < x1 + 20 and by1 > y0 - 20 and by0 < y1 + 20
+        assert 0 < scene.n_trees < len(layout.trees)
+    finally:
+        scene.close()
+
+
+def test_training_set_manifest_lists_every_design(tmp_path):
+    result = _cli("render", "--random-designs", 3, "--tiles", 1, "--seed", 4, "--cities", 2,
+                  "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path)
+    assert result.exit_code == 0, result.output
+    import json
+
+    manifest = json.loads((tmp_path / "designs.json").read_text())
+    assert [j["name"] for j in manifest["jobs"]] == ["d00000", "d00001", "d00002"]
+    assert [j["city_seed"] for j in manifest["jobs"]] == [4, 5, 4]
+    for job in manifest["jobs"]:
+        tile = tiles.read_tile(tmp_path / job["tiles"][0])
+        assert tile.meta["design"] == job["design"] and tile.meta["city_seed"] == job["city_seed"]
+    again = _cli("render", "--random-designs", 3, "--tiles", 1, "--seed", 4, "--cities", 2,
+                 "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path)
+    assert "0 tiles written, 3 already done" in again.output

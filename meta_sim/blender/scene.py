@@ -18,8 +18,10 @@ runs inside ``blender -b`` and with the ``bpy`` module.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import sys
 import tempfile
 from dataclasses import dataclass
 
@@ -104,6 +106,33 @@ def _noise_image(name: str, colour, amount: float, seed: int, size: int = 64) ->
     image.pixels.foreach_set(rgba.ravel())
     image.pack()
     return image
+
+
+@contextlib.contextmanager
+def _quiet(log_path: str):
+    """Send Blender's per-frame chatter (and GL warnings) to a log file instead of the terminal.
+
+    On failure the log's tail is attached to the error, so nothing useful is lost.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    with open(log_path, "w") as log:
+        os.dup2(log.fileno(), 1)
+        os.dup2(log.fileno(), 2)
+        try:
+            yield
+        except RuntimeError as exc:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            with open(log_path) as text:
+                tail = text.read()[-2000:]
+            raise RuntimeError(f"{exc}\nBlender said:\n{tail}") from None
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
 
 
 class CityScene:
@@ -250,7 +279,8 @@ class CityScene:
         width, height = self._frame(rect)
         path = os.path.join(self._tmp, f"{name}.exr")
         self.scene.render.filepath = path
-        bpy.ops.render.render(write_still=True)
+        with _quiet(os.path.join(self._tmp, "blender.log")):
+            bpy.ops.render.render(write_still=True)
         image = oiio.ImageInput.open(path)
         if image is None:
             raise RuntimeError(f"Blender wrote no readable image: {oiio.geterror()}")
