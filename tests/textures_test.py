@@ -19,6 +19,7 @@ from meta_sim.textures import (
     MANIFEST,
     SIMILARITY_FILE,
     SIMILARITY_TO_DEFAULT_FILE,
+    Similarity,
     build_bank_from_folder,
     build_default_bank,
     contact_sheet,
@@ -44,14 +45,13 @@ HASHES = Path(__file__).parent / "data" / "texture_hashes.json"
 ID_PATTERN = re.compile(r"^(flat|sloped)-[a-z0-9]+(-[a-z0-9]+)*$")
 
 
-@pytest.fixture(scope="module")
-def bank(tmp_path_factory):
-    return build_default_bank(tmp_path_factory.mktemp("default"))
+# ``bank`` and ``heldout_bank`` (session fixtures in conftest.py) are the
+# cached default and held-out banks, built by ensure_*_bank in a private cache.
 
 
 @pytest.fixture(scope="module")
-def heldout(tmp_path_factory):
-    return build_default_bank(tmp_path_factory.mktemp("heldout"), heldout=True)
+def heldout(heldout_bank):
+    return heldout_bank
 
 
 @pytest.fixture(scope="module")
@@ -218,8 +218,6 @@ def test_written_similarity_matches_a_recomputation(bank, tmp_path):
 
 def test_rank_by_similarity_orders_candidates_and_keeps_ties_stable():
     hists = np.stack([hsv_cone_histogram(_solid(c)) for c in [(255, 0, 0), (250, 0, 0), (0, 0, 255), (0, 0, 250)]])
-    from meta_sim.textures import Similarity
-
     sim = Similarity(("a",), ("r1", "r2", "b1", "b2"), similarity_matrix(hists[:1], hists))
     assert rank_by_similarity("a", ["b2", "b1", "r2", "r1"], sim) == ["r2", "r1", "b2", "b1"]
     with pytest.raises(MetaSimError, match="not a column"):

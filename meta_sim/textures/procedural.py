@@ -529,7 +529,8 @@ def _pavers(c: _Canvas, p: Mapping) -> np.ndarray:
         edge = np.minimum(dist_x, dist_y)
     colour = _pick(p["palette"], _rand(c.seed_for("unit-colour"), unit))
     if p.get("checker"):
-        colour = np.where((parity == 1)[:, :, None], _pick(p["checker"], _rand(c.seed_for("unit-colour2"), unit)), colour)
+        second = _pick(p["checker"], _rand(c.seed_for("unit-colour2"), unit))
+        colour = np.where((parity == 1)[:, :, None], second, colour)
     tone = 1.0 + p.get("tone", 0.05) * (2.0 * _rand(c.seed_for("unit-tone"), unit) - 1.0)
     surface = 1.0 + p.get("texture", 0.05) * (2.0 * c.fbm("surface", 0.3, octaves=3) - 1.0)
     bevel_m = p.get("bevel_m", 0.01)
@@ -761,7 +762,8 @@ def _vegetation(c: _Canvas, p: Mapping) -> np.ndarray:
     substrate, and optional paver paths on a periodic grid."""
     n = _count(c.repeat_m, p["rosette_m"])
     cells = _worley(c.u, c.v, n, n, c.seed_for("rosettes"), jitter=0.95)
-    species = 0.7 * c.fbm("species", p.get("patch_m", 1.5), octaves=3) + 0.3 * _rand(c.seed_for("rosette-pick"), cells.cell)
+    species = (0.7 * c.fbm("species", p.get("patch_m", 1.5), octaves=3)
+               + 0.3 * _rand(c.seed_for("rosette-pick"), cells.cell))
     species = _smoothstep(0.3, 0.7, species) * 0.999
     colour = _pick(p["palette"], species)
     radius = 0.6 / n
@@ -781,7 +783,8 @@ def _vegetation(c: _Canvas, p: Mapping) -> np.ndarray:
         path = _coverage(dist, spec["width_m"], c.pixel_m)
         slab = _count(c.repeat_m, spec["width_m"] / 2.0)
         joints = np.minimum(_pdist(c.u * slab), _pdist(c.v * slab)) * c.repeat_m / slab
-        stone = _scale(np.broadcast_to(_hex(spec["colour"]), rgb.shape), 1.0 - 0.35 * _coverage(joints, 0.015, c.pixel_m))
+        stone = _scale(np.broadcast_to(_hex(spec["colour"]), rgb.shape),
+                       1.0 - 0.35 * _coverage(joints, 0.015, c.pixel_m))
         stone = _scale(stone, 1.0 + 0.06 * (2.0 * c.speckle("path") - 1.0))
         edge = _coverage(np.abs(dist - 0.5 * spec["width_m"]), 0.04, c.pixel_m)
         rgb = _mix(_scale(rgb, 1.0 - 0.35 * edge), stone, path)
@@ -826,7 +829,7 @@ def _shadowed(c, rgb, dx, dy, hw, hh, offset_m, strength):
 
 
 def _skylights(c: _Canvas, rgb: np.ndarray, p: Mapping) -> np.ndarray:
-    a, b, lx, ly, cell_m = _grid_cell(c, p["spacing_m"])
+    _, _, lx, ly, cell_m = _grid_cell(c, p["spacing_m"])
     hw, hh = 0.5 * p["size_m"][0], 0.5 * p["size_m"][1]
     dx = lx - 0.5 * cell_m
     dy = ly - 0.5 * cell_m
@@ -849,7 +852,8 @@ def _hvac(c: _Canvas, rgb: np.ndarray, p: Mapping) -> np.ndarray:
     dy = ly - 0.5 * cell_m - margin * (2.0 * _rand(seed, a, b, 2) - 1.0)
     rgb = _scale(rgb, 1.0 - 0.5 * present * _box(dx - 0.35, dy - 0.35, hw, hh, c.pixel_m))
     body = _box(dx, dy, hw, hh, c.pixel_m) * present
-    casing = _scale(np.broadcast_to(_hex(p["casing"]), rgb.shape), 1.0 + 0.12 * _box(dx, dy, hw - 0.05, hh - 0.05, c.pixel_m))
+    lid = _box(dx, dy, hw - 0.05, hh - 0.05, c.pixel_m)
+    casing = _scale(np.broadcast_to(_hex(p["casing"]), rgb.shape), 1.0 + 0.12 * lid)
     rgb = _mix(rgb, casing, body)
     fan_r = 0.8 * min(hw, hh * 0.5) if hw < hh else 0.8 * min(hh, hw * 0.5)
     along_x = hw >= hh
@@ -899,7 +903,6 @@ _FAMILIES: dict[str, Callable[[_Canvas, Mapping], np.ndarray]] = {
     "equipment": _equipment,
 }
 _OVERLAYS = {"skylights": _skylights, "hvac": _hvac, "solar": _solar}
-FAMILIES = tuple(_FAMILIES)
 
 
 # --- recipes --------------------------------------------------------------
@@ -1129,7 +1132,8 @@ FLAT_RECIPES: tuple[Recipe, ...] = (
           cell="#1b2540", cell_light="#3a4d78", frame="#aeb4ba"),
     # Other finishes.
     _flat("wood-deck", "Wooden roof deck", 6.0, "tiles", course_m=0.145, width_m=2.0, stagger="random",
-          width_jitter=0.3, gap_m=0.008, gap_shade=0.25, shadow=0.0, palette=_p("#8a5a3a", "#7a4e31", "#966644", "#6e4630"),
+          width_jitter=0.3, gap_m=0.008, gap_shade=0.25, shadow=0.0,
+          palette=_p("#8a5a3a", "#7a4e31", "#966644", "#6e4630"),
           tone=0.1, grain=0.25, grain_dir="x", grain_m=0.01, grain_len_m=0.8, granules=0.04),
     _flat("terrace-terracotta", "Terracotta terrace tiles", 6.0, "pavers", size_m=(0.3, 0.3), joint_m=0.012,
           joint_colour="#c9c2b6", palette=_p("#b5603b", "#a8573a", "#c26d45", "#9c4e33"), tone=0.07, bevel=0.08,
@@ -1152,7 +1156,8 @@ SLOPED_RECIPES: tuple[Recipe, ...] = (
             **_barrel(_p("#2f5e3c", "#2a5436", "#3a6b46"), gloss=0.35, tone=0.05)),
     _sloped("clay-aged", "Aged clay tiles with lichen", 6.0, "tiles",
             **_barrel(_p("#9a6650", "#8a5a46", "#a87260"), weathering=0.12,
-                      spots=dict(size_m=0.1, density=0.3, radius=0.45, palette=_p(("#2e2a26", 2), "#4d4a3a", "#c9c08a")),
+                      spots=dict(size_m=0.1, density=0.3, radius=0.45,
+                                 palette=_p(("#2e2a26", 2), "#4d4a3a", "#c9c08a")),
                       stains=dict(colour="#4a4038", amount=0.45, size_m=2.0))),
     # Interlocking concrete and flat clay tiles.
     _sloped("concrete-tile-grey", "Grey concrete double-roman tiles", 6.0, "tiles", course_m=0.34, width_m=0.3,
@@ -1188,8 +1193,10 @@ SLOPED_RECIPES: tuple[Recipe, ...] = (
             **_three_tab(_p("#c9c9c4", "#d4d4cf", "#bdbdb8"), _p("#efefea", "#8d8d88"), shadow=0.45)),
     # Slate.
     _sloped("slate-grey", "Grey slate", 6.0, "tiles", **_slate(_p("#5f6366", "#686c70", "#565a5d", "#72767a"))),
-    _sloped("slate-dark", "Dark blue-black slate", 6.0, "tiles", **_slate(_p("#2e3136", "#33373c", "#292c30", "#3a3e44"))),
-    _sloped("slate-purple", "Purple Welsh slate", 6.0, "tiles", **_slate(_p("#4d4250", "#574a5a", "#453b48", "#5f5262"))),
+    _sloped("slate-dark", "Dark blue-black slate", 6.0, "tiles",
+            **_slate(_p("#2e3136", "#33373c", "#292c30", "#3a3e44"))),
+    _sloped("slate-purple", "Purple Welsh slate", 6.0, "tiles",
+            **_slate(_p("#4d4250", "#574a5a", "#453b48", "#5f5262"))),
     _sloped("slate-green", "Green-grey slate", 6.0, "tiles", **_slate(_p("#5b6a5c", "#647363", "#526052", "#6d7a6a"))),
     # Standing-seam metal.
     _sloped("seam-red", "Red standing-seam metal", 8.0, "profiled", **_seam("#8e2a22")),
@@ -1202,7 +1209,8 @@ SLOPED_RECIPES: tuple[Recipe, ...] = (
     _sloped("seam-bronze", "Bronze standing-seam metal", 8.0, "profiled", **_seam("#4a3a2c")),
     _sloped("seam-black", "Black standing-seam metal", 8.0, "profiled", **_seam("#1f2022")),
     # Wood shakes.
-    _sloped("shakes-silver", "Silver-weathered wood shakes", 5.0, "tiles", **_shakes(_p("#8a8882", "#7d7b75", "#97948d"))),
+    _sloped("shakes-silver", "Silver-weathered wood shakes", 5.0, "tiles",
+            **_shakes(_p("#8a8882", "#7d7b75", "#97948d"))),
     _sloped("shakes-cedar", "Cedar wood shakes", 5.0, "tiles", **_shakes(_p("#8b5e3c", "#7a5034", "#9b6b46"))),
     _sloped("shakes-mossy", "Dark mossy wood shakes", 5.0, "tiles",
             **_shakes(_p("#4d4338", "#574c3f", "#433a30"), stains=dict(colour="#4a5a2a", amount=0.6, size_m=1.5))),
@@ -1231,7 +1239,8 @@ SLOPED_RECIPES: tuple[Recipe, ...] = (
             stains=dict(colour="#6f6d63", amount=0.45, size_m=2.0)),
     _sloped("metal-tile-maroon", "Stone-coated metal tile, maroon", 6.0, "tiles", course_m=0.37, width_m=0.2,
             stagger="none", profile="wave", relief_m=0.035, shadow=0.6, shadow_m=0.05, lip=0.15,
-            palette=_p("#5a2226", "#62272b"), tone=0.03, granules=0.2, flecks=_p("#7a3a3e", "#2a1012"), fleck_share=0.2),
+            palette=_p("#5a2226", "#62272b"), tone=0.03, granules=0.2, flecks=_p("#7a3a3e", "#2a1012"),
+            fleck_share=0.2),
 )
 
 HELDOUT_FLAT_RECIPES: tuple[Recipe, ...] = (
@@ -1261,7 +1270,8 @@ HELDOUT_SLOPED_RECIPES: tuple[Recipe, ...] = (
     _sloped("slate-fishscale", "Blue-grey fish-scale slate", 5.0, "tiles", course_m=0.15, width_m=0.2,
             stagger="half", profile="round", butt_depth=0.55, shadow=0.4, shadow_m=0.015, gap_m=0.0,
             palette=_p("#5a6470", "#646e7a", "#505a66"), tone=0.08, granules=0.05, under_dark=0.55),
-    _sloped("clay-ochre", "Ochre clay barrel tiles", 6.0, "tiles", **_barrel(_p("#c9a04f", "#b88e44", "#d6b062", "#a87c3c"))),
+    _sloped("clay-ochre", "Ochre clay barrel tiles", 6.0, "tiles",
+            **_barrel(_p("#c9a04f", "#b88e44", "#d6b062", "#a87c3c"))),
     _sloped("clay-glazed-blue", "Glazed blue clay tiles", 6.0, "tiles",
             **_barrel(_p("#2d4f8a", "#284680", "#355a96"), gloss=0.35, tone=0.05)),
     _sloped("shingle-plum", "Plum architectural shingles", 5.0, "tiles",
