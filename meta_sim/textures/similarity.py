@@ -17,8 +17,10 @@ Definition (version 1), for an 8-bit sRGB image as stored (no linearisation):
    [0, 1]: 1 for identical colour distributions, 0 for disjoint ones.
 
 It is symmetric and ``similarity(p, p) = 1``. It sees colour only, not
-structure, and is computed in float64 (it is not required to be
-byte-identical across machines).
+structure, and is computed in float64 with numpy's cos/sin, so a colour
+exactly on a bin edge lands where rounding puts it (pure blue has
+``x = -0.5000000000000004``, bin i = 1; exact greys have x = y = 0, bin 4).
+Values are not required to be byte-identical across machines.
 """
 
 from __future__ import annotations
