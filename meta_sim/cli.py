@@ -51,7 +51,6 @@ def textures_build(out, source, heldout, size, repeat_m):
         if out is None:
             raise MetaSimError("with --from, give the bank folder to write with --out")
         bank = tx.build_bank_from_folder(source, out, repeat_m=repeat_m, size=size)
-        tx.write_similarity(bank, Path(out) / "similarity.json")
     elif out is None:
         bank = tx.ensure_heldout_bank() if heldout else tx.ensure_default_bank()
     else:

@@ -273,3 +273,23 @@ def test_training_set_manifest_lists_every_design(tmp_path):
     again = _cli("render", "--random-designs", 3, "--tiles", 1, "--seed", 4, "--cities", 2,
                  "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path)
     assert "0 tiles written, 3 already done" in again.output
+
+
+def test_end_to_end_full_size_render_through_the_console_script(tmp_path):
+    """The demo's command at full size: 9 tiles of 384 x 384 px at 0.3 m/px with previews."""
+    meta_sim = Path(sys.executable).with_name("meta-sim")
+    result = subprocess.run([str(meta_sim), "render", "--design", "flat_roof=flat-membrane-white,"
+                             "sloped_roof=sloped-clay-terracotta", "--seed", "1", "--tiles", "9",
+                             "--preset", "fast", "--out", str(tmp_path), "--preview"],
+                            capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    exrs = sorted(tmp_path.glob("*.exr"))
+    assert len(exrs) == 9
+    total_building = 0
+    for path in exrs:
+        tile = tiles.read_tile(path)
+        assert tile.rgb.shape == (384, 384, 3) and tile.meta["pixel_size_m"] == 0.3
+        total_building += tile.building.sum()
+    assert total_building > 0.05 * 9 * 384 * 384  # a city, not an empty field
+    mosaic = read_rgb8(next(tmp_path.glob("*_mosaic.png")))
+    assert mosaic.shape == (1152, 1152, 3)
