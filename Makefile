@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 DEMO := out/demo
-DEMO_DESIGN := flat_roof=flat-membrane-white,sloped_roof=sloped-clay-terracotta
+DEMO_DESIGN := flat_roof=flat-membrane-white-tpo,sloped_roof=sloped-clay-terracotta
 
 .PHONY: setup demo test test-all bench-render clean
 

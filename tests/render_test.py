@@ -278,7 +278,7 @@ def test_training_set_manifest_lists_every_design(tmp_path):
 def test_end_to_end_full_size_render_through_the_console_script(tmp_path):
     """The demo's command at full size: 9 tiles of 384 x 384 px at 0.3 m/px with previews."""
     meta_sim = Path(sys.executable).with_name("meta-sim")
-    result = subprocess.run([str(meta_sim), "render", "--design", "flat_roof=flat-membrane-white,"
+    result = subprocess.run([str(meta_sim), "render", "--design", "flat_roof=flat-membrane-white-tpo,"
                              "sloped_roof=sloped-clay-terracotta", "--seed", "1", "--tiles", "9",
                              "--preset", "fast", "--out", str(tmp_path), "--preview"],
                             capture_output=True, text=True, cwd=ROOT)
