@@ -175,6 +175,19 @@ class DesignSpace:
             raise MetaSimError(f"{path}: not valid JSON ({exc})") from None
         return cls.from_dict(data)
 
+    @classmethod
+    def for_textures(cls, name: str, flat_ids, sloped_ids) -> "DesignSpace":
+        """The rooftop space of a texture bank: one parameter per roof kind the bank has.
+
+        A bank without sloped textures gives a flat-only space whose cities build no sloped roofs.
+        """
+        params = [Categorical(n, tuple(ids), kind) for n, ids, kind in
+                  (("flat_roof", flat_ids, "flat"), ("sloped_roof", sloped_ids, "sloped")) if ids]
+        if not params:
+            raise MetaSimError(f"texture bank {name!r} has no flat or sloped textures")
+        layout = {} if sloped_ids else {"sloped_share": 0.0}
+        return cls(name, tuple(params), layout)
+
     # --- lookup ------------------------------------------------------------
     @property
     def names(self) -> tuple[str, ...]:

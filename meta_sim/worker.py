@@ -42,7 +42,8 @@ RENDER_OPTIONS = (
     Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),
     Option("--bank", Path, None, "texture bank folder (default: the built-in bank, built on first use)"),
-    Option("--space", str, "rooftops-v1", "design space: a built-in name or a JSON file"),
+    Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1, "
+           "or with --bank, one parameter per roof kind of that bank)"),
     Option("--tile-px", int, 384, "tile width and height in pixels"),
     Option("--gsd", float, 0.3, "ground sampling distance: metres per pixel"),
     Option("--preview", bool, False, "also write an RGB PNG and a colour-coded label PNG per tile", True),
@@ -76,8 +77,13 @@ def plan(options: dict):
     if not 0.01 <= options["gsd"] <= 10.0:
         raise MetaSimError("--gsd must be between 0.01 and 10 metres per pixel")
     preset = get_preset(options["preset"])
-    space = DesignSpace.load(options["space"])
     banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
+    if options.get("space"):
+        space = DesignSpace.load(options["space"])
+    elif options.get("bank"):
+        space = DesignSpace.for_textures(f"bank:{banks[0].name}", banks[0].ids("flat"), banks[0].ids("sloped"))
+    else:
+        space = DesignSpace.load()
     heldout = ensure_heldout_bank()
     extra = {p.name: heldout.ids(p.texture_kind) for p in space.parameters
              if getattr(p, "texture_kind", None)}

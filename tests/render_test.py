@@ -293,3 +293,41 @@ def test_end_to_end_full_size_render_through_the_console_script(tmp_path):
     assert total_building > 0.05 * 9 * 384 * 384  # a city, not an empty field
     mosaic = read_rgb8(next(tmp_path.glob("*_mosaic.png")))
     assert mosaic.shape == (1152, 1152, 3)
+
+
+def test_user_photo_folder_becomes_a_bank_and_renders(tmp_path, bank):
+    import shutil
+
+    photos = tmp_path / "photos"
+    for kind, count in (("flat", 2), ("sloped", 2)):
+        (photos / kind).mkdir(parents=True)
+        for texture_id in bank.ids(kind)[:count]:
+            shutil.copy(bank.image_path(texture_id), photos / kind / f"My {texture_id}.png")
+    user_bank = tmp_path / "bank"
+    built = _cli("textures", "build", "--from", photos, "--out", user_bank)
+    assert built.exit_code == 0, built.output
+    out = tmp_path / "tiles"
+    result = _cli("render", "--bank", user_bank, "--design", "flat_roof=1,sloped_roof=0", "--tiles", 1,
+                  "--tile-px", 48, "--gsd", 2.4, "--out", out)
+    assert result.exit_code == 0, result.output
+    tile = tiles.read_tile(next(out.glob("*.exr")))
+    assert tile.meta["design"]["flat_roof"].startswith("flat-my-")
+    assert tile.meta["design_space"].startswith("bank:")
+
+
+def test_flat_only_bank_builds_no_sloped_roofs(tmp_path, bank):
+    import shutil
+
+    photos = tmp_path / "photos"
+    (photos / "flat").mkdir(parents=True)
+    for texture_id in bank.ids("flat")[:3]:
+        shutil.copy(bank.image_path(texture_id), photos / "flat" / f"{texture_id}.png")
+    assert _cli("textures", "build", "--from", photos, "--out", tmp_path / "bank").exit_code == 0
+    out = tmp_path / "tiles"
+    result = _cli("render", "--bank", tmp_path / "bank", "--design", "flat_roof=2", "--tiles", 4,
+                  "--tile-px", 48, "--gsd", 2.4, "--out", out)
+    assert result.exit_code == 0, result.output
+    classes = set()
+    for path in out.glob("*.exr"):
+        classes |= set(np.unique(tiles.read_tile(path).roof_class))
+    assert classes == {0, 1}
