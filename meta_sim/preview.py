@@ -6,14 +6,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .imageio import linear_to_srgb
 from .textures.pngio import write_png
 
 
 def to_srgb8(linear: np.ndarray) -> np.ndarray:
     """Linear RGB -> 8-bit sRGB (the standard transfer curve, values clipped to [0, 1])."""
-    x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0), 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    return np.floor(srgb * 255.0 + 0.5).astype(np.uint8)
+    return np.floor(linear_to_srgb(linear) * 255.0 + 0.5).astype(np.uint8)
 
 
 def label_image(instance: np.ndarray, roof_class: np.ndarray) -> np.ndarray:
