@@ -1,0 +1,242 @@
+"""The networks: NAMS (encoder E, decoder D, predictor P) and the direct-regression baseline.
+
+Sizes follow the paper (section 5.3): E, D and P each have two hidden layers of
+1024 and 2048 units, every one followed by BatchNorm, LeakyReLU(0.2) and
+Dropout(0.5); the design embedding z has 10 dimensions. DR has five hidden
+layers of 500 units with BatchNorm and ReLU. Every size is a config option.
+
+Loss reductions (the paper does not state them): BCE and MSE are means over
+all entries, KL is summed over the z dimensions and averaged over the batch,
+so that no term depends on the batch size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Mapping, NamedTuple
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from ..errors import MetaSimError
+
+
+def _from_dict(cls, data: Mapping):
+    """A config dataclass from a plain dict; unknown keys are a user error, not silently dropped."""
+    names = {f.name for f in fields(cls)}
+    unknown = set(data) - names
+    if unknown:
+        raise MetaSimError(f"unknown {cls.__name__} option(s) {', '.join(sorted(unknown))}")
+    return cls(**data)
+
+
+def _check_sizes(config, names: tuple[str, ...]) -> None:
+    # Frozen dataclass: lists (from JSON or a caller) become the tuple the field promises.
+    object.__setattr__(config, "hidden", tuple(int(h) for h in config.hidden))
+    for name in names:
+        if int(getattr(config, name)) < 1:
+            raise MetaSimError(f"{name} must be at least 1, not {getattr(config, name)}")
+    if any(int(h) < 1 for h in config.hidden):
+        raise MetaSimError(f"hidden layer sizes must be at least 1, not {list(config.hidden)}")
+
+
+class MLP(nn.Sequential):
+    """An nn.Sequential that maps (..., in) to (..., out): BatchNorm1d wants 2-D input, and the
+    search feeds (targets, starts, z_dim) tensors."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        lead = x.shape[:-1]
+        return super().forward(x.reshape(-1, x.shape[-1])).reshape(*lead, -1)
+
+
+def mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int, activation: nn.Module, dropout: float) -> MLP:
+    """Linear -> BatchNorm -> activation (-> Dropout) per hidden layer, then a linear output layer."""
+    layers: list[nn.Module] = []
+    width = in_dim
+    for size in hidden:
+        layers += [nn.Linear(width, size), nn.BatchNorm1d(size), activation]
+        if dropout > 0:
+            layers.append(nn.Dropout(dropout))
+        width = size
+    layers.append(nn.Linear(width, out_dim))
+    return MLP(*layers)
+
+
+def soft_clamp(x: torch.Tensor, bound: float) -> torch.Tensor:
+    """``bound * tanh(x / bound)``: the identity for |x| << bound, never beyond it, never a dead gradient."""
+    return bound * torch.tanh(x / bound)
+
+
+def kl_to_standard_normal(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
+    """KL(N(mu, exp(logvar)) || N(0, I)) per row, summed over dimensions.
+
+    ``expm1(lv) - lv`` is ``exp(lv) - 1 - lv`` without the cancellation near lv = 0.
+    """
+    return 0.5 * (mu.square() + torch.expm1(logvar) - logvar).sum(dim=-1)
+
+
+@dataclass(frozen=True)
+class NAMSConfig:
+    design_dim: int
+    feature_dim: int
+    z_dim: int = 10
+    hidden: tuple[int, ...] = (1024, 2048)
+    dropout: float = 0.5
+    negative_slope: float = 0.2
+    lambda_d: float = 1.0
+    lambda_kld: float = 0.0005
+    lambda_p: float = 0.005
+    # mu and log-variance are soft-clamped (NVAE-style) so that KL, exp(logvar)
+    # and the reparameterised z stay finite whatever the encoder weights are.
+    # Both bounds sit far outside what a trained encoder produces.
+    mu_bound: float = 100.0
+    logvar_bound: float = 20.0
+
+    def __post_init__(self):
+        _check_sizes(self, ("design_dim", "feature_dim", "z_dim"))
+        if not 0.0 <= self.dropout < 1.0:
+            raise MetaSimError(f"dropout must be in [0, 1), not {self.dropout}")
+        if min(self.lambda_d, self.lambda_kld, self.lambda_p) < 0:
+            raise MetaSimError("loss weights lambda_d, lambda_kld, lambda_p must not be negative")
+        if not (self.mu_bound > 0 and self.logvar_bound > 0):
+            raise MetaSimError("mu_bound and logvar_bound must be positive")
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["hidden"] = list(self.hidden)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "NAMSConfig":
+        return _from_dict(cls, data)
+
+
+class NAMSOutput(NamedTuple):
+    mu: torch.Tensor
+    logvar: torch.Tensor
+    z: torch.Tensor
+    design_logits: torch.Tensor
+    features: torch.Tensor
+
+
+class NAMS(nn.Module):
+    """E: d -> (mu, logvar); D: z -> design logits; P: z -> (normalised) features.
+
+    ``z_mean`` and ``z_std`` hold the spread of mu(E(d)) over the training
+    designs; the adjoint search draws its starts from them. Training sets them.
+    """
+
+    kind = "nams"
+
+    def __init__(self, config: NAMSConfig):
+        super().__init__()
+        self.config = config
+        c = config
+
+        def net(in_dim: int, out_dim: int) -> MLP:
+            return mlp(in_dim, c.hidden, out_dim, nn.LeakyReLU(c.negative_slope), c.dropout)
+
+        self.encoder = net(c.design_dim, 2 * c.z_dim)
+        self.decoder = net(c.z_dim, c.design_dim)
+        self.predictor = net(c.z_dim, c.feature_dim)
+        self.register_buffer("z_mean", torch.zeros(c.z_dim))
+        self.register_buffer("z_std", torch.ones(c.z_dim))
+        self._design_tables: dict = {}
+
+    # The exhaustive search caches P(mu(E(d))) for every design of a space
+    # (see search.design_table). Anything that may change the weights drops it.
+    def train(self, mode: bool = True):
+        if mode:
+            self._design_tables.clear()
+        return super().train(mode)
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        self._design_tables.clear()
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+
+    def encode(self, designs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mu, logvar = self.encoder(designs).chunk(2, dim=-1)
+        return soft_clamp(mu, self.config.mu_bound), soft_clamp(logvar, self.config.logvar_bound)
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """Design logits; sigmoid gives the [0, 1] design vector."""
+        return self.decoder(z)
+
+    def predict(self, z: torch.Tensor) -> torch.Tensor:
+        return self.predictor(z)
+
+    def forward(self, designs: torch.Tensor, generator: torch.Generator | None = None) -> NAMSOutput:
+        mu, logvar = self.encode(designs)
+        if self.training:
+            eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
+            z = mu + eps * torch.exp(0.5 * logvar)
+        else:
+            z = mu
+        return NAMSOutput(mu, logvar, z, self.decode(z), self.predict(z))
+
+    def loss(self, designs: torch.Tensor, features: torch.Tensor,
+             generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+        """lambda_D * BCE + lambda_KLD * KL + lambda_P * MSE, and the three terms for the history."""
+        out = self(designs, generator)
+        bce = F.binary_cross_entropy_with_logits(out.design_logits, designs)
+        kld = kl_to_standard_normal(out.mu, out.logvar).mean()
+        mse = F.mse_loss(out.features, features)
+        c = self.config
+        total = c.lambda_d * bce + c.lambda_kld * kld + c.lambda_p * mse
+        return total, {"bce": bce.item(), "kld": kld.item(), "mse": mse.item()}
+
+
+@dataclass(frozen=True)
+class DRConfig:
+    feature_dim: int
+    design_dim: int
+    hidden: tuple[int, ...] = (500,) * 5
+
+    def __post_init__(self):
+        _check_sizes(self, ("feature_dim", "design_dim"))
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["hidden"] = list(self.hidden)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "DRConfig":
+        return _from_dict(cls, data)
+
+
+class DirectRegression(nn.Module):
+    """Features -> design vector, trained with MSE against the encoded design (paper section 3.3).
+
+    Regressing a one-hot block with MSE estimates the probability of each
+    choice, so the outputs double as vote shares.
+    """
+
+    kind = "dr"
+
+    def __init__(self, config: DRConfig):
+        super().__init__()
+        self.config = config
+        self.net = mlp(config.feature_dim, config.hidden, config.design_dim, nn.ReLU(), dropout=0.0)
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        return self.net(features)
+
+    def loss(self, designs: torch.Tensor, features: torch.Tensor,
+             generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+        mse = F.mse_loss(self(features), designs)
+        return mse, {"mse": mse.item()}
+
+
+MODELS: dict[str, tuple[type[nn.Module], type]] = {"nams": (NAMS, NAMSConfig), "dr": (DirectRegression, DRConfig)}
+
+
+def build_model(kind: str, config: Mapping | NAMSConfig | DRConfig) -> NAMS | DirectRegression:
+    """A fresh model of ``kind`` ("nams" or "dr") from its config (dataclass or dict)."""
+    if kind not in MODELS:
+        raise MetaSimError(f"unknown model kind {kind!r}; use one of {', '.join(MODELS)}")
+    model_cls, config_cls = MODELS[kind]
+    if not isinstance(config, config_cls):
+        config = config_cls.from_dict(config)
+    return model_cls(config)

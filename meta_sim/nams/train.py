@@ -1,0 +1,285 @@
+"""Training NAMS and the direct-regression baseline on (design, feature) pairs.
+
+``train_nams`` / ``train_dr`` take encoded designs (N, design_dim) and raw
+features (N, feature_dim), and return a ``Fit``: the trained model (eval mode,
+best validation weights restored), the ``FeatureNorm`` fitted on the training
+split (search targets must go through ``norm.apply``) and a history dict of
+plain Python values.
+
+Simulations with NaN/Inf anywhere are dropped here and only here, with a
+warning. Everything random (split, shuffling, initial weights, dropout, the
+reparameterisation noise) follows from ``TrainConfig.seed``; the global torch
+RNG is seeded inside a fork, so the caller's RNG state is left untouched.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+import warnings
+from dataclasses import asdict, dataclass
+from typing import Callable, Mapping, NamedTuple
+
+import torch
+
+from ..errors import MetaSimError
+from .model import DirectRegression, DRConfig, NAMS, NAMSConfig, build_model
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimiser and stopping settings.
+
+    The paper trains NAMS with Adam, batch 64, for 50,000 epochs and gives no
+    learning rate; DR with lr 1e-3, batch 1000 and an 80/20 split. Here both
+    default to lr 1e-3, batch 64, a 10% validation split and early stopping.
+    ``plateau_factor`` > 0 turns on ReduceLROnPlateau on the validation loss.
+    """
+
+    lr: float = 1e-3
+    batch_size: int = 64
+    val_fraction: float = 0.1
+    max_epochs: int = 1000
+    patience: int = 20
+    min_delta: float = 0.0
+    weight_decay: float = 0.0
+    plateau_factor: float = 0.0
+    plateau_patience: int = 10
+    seed: int = 0
+    norm_eps: float = 1e-6
+
+    def __post_init__(self):
+        if not (self.lr > 0 and self.batch_size >= 2 and self.max_epochs >= 1 and self.patience >= 1):
+            raise MetaSimError("lr must be positive, batch_size at least 2, max_epochs and patience at least 1")
+        if not 0.0 <= self.val_fraction < 1.0:
+            raise MetaSimError(f"val_fraction must be in [0, 1), not {self.val_fraction}")
+        if not 0.0 <= self.plateau_factor < 1.0:
+            raise MetaSimError(f"plateau_factor must be in [0, 1) (0 = off), not {self.plateau_factor}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "TrainConfig":
+        unknown = set(data) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise MetaSimError(f"unknown training option(s) {', '.join(sorted(unknown))}")
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class FeatureNorm:
+    """Per-dimension standardisation fitted on the training features.
+
+    A constant dimension gets std 1 (it carries no information and must not
+    blow up a target that differs there); other stds are clamped below by eps.
+    """
+
+    mean: torch.Tensor
+    std: torch.Tensor
+
+    @classmethod
+    def fit(cls, features: torch.Tensor, eps: float = 1e-6) -> "FeatureNorm":
+        x = features.double()
+        mean = x.mean(dim=0)
+        std = x.std(dim=0, unbiased=False).clamp_min(eps)
+        constant = x.amax(dim=0) == x.amin(dim=0)
+        std = torch.where(constant, torch.ones_like(std), std)
+        return cls(mean.float(), std.float())
+
+    def apply(self, features: torch.Tensor) -> torch.Tensor:
+        features = torch.as_tensor(features, dtype=torch.float32)
+        if features.shape[-1] != self.mean.shape[0]:
+            raise MetaSimError(f"features have {features.shape[-1]} dimensions; this model was trained "
+                               f"on {self.mean.shape[0]} (was another feature extractor used?)")
+        return (features - self.mean) / self.std
+
+    def invert(self, normalised: torch.Tensor) -> torch.Tensor:
+        return normalised * self.std + self.mean
+
+    def to_dict(self) -> dict:
+        return {"mean": self.mean.clone(), "std": self.std.clone()}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "FeatureNorm":
+        try:
+            mean = torch.as_tensor(data["mean"], dtype=torch.float32)
+            std = torch.as_tensor(data["std"], dtype=torch.float32)
+        except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+            raise MetaSimError(f"feature normalisation is unreadable ({exc})") from None
+        if mean.ndim != 1 or mean.shape != std.shape:
+            raise MetaSimError("feature normalisation: mean and std must be vectors of one length")
+        if not (torch.isfinite(mean).all() and torch.isfinite(std).all() and (std > 0).all()):
+            raise MetaSimError("feature normalisation has NaN/Inf or non-positive std")
+        return cls(mean, std)
+
+
+class EpochReport(NamedTuple):
+    """What the progress callback gets after each epoch."""
+
+    epoch: int
+    max_epochs: int
+    train_loss: float
+    val_loss: float
+    best_epoch: int
+    lr: float
+
+
+class Fit(NamedTuple):
+    model: NAMS | DirectRegression
+    norm: FeatureNorm
+    history: dict
+
+
+Progress = Callable[[EpochReport], None]
+
+
+def train_nams(designs: torch.Tensor, features: torch.Tensor, model_config: NAMSConfig | None = None,
+               config: TrainConfig = TrainConfig(), progress: Progress | None = None) -> Fit:
+    """Train E, D and P; store the spread of the training embeddings for the search."""
+    designs, features, dropped = _clean(designs, features)
+    model_config = model_config or NAMSConfig(design_dim=designs.shape[1], feature_dim=features.shape[1])
+    return _fit("nams", model_config, designs, features, config, progress, dropped)
+
+
+def train_dr(designs: torch.Tensor, features: torch.Tensor, model_config: DRConfig | None = None,
+             config: TrainConfig = TrainConfig(), progress: Progress | None = None) -> Fit:
+    """Train the direct-regression baseline: normalised features -> design vector, MSE."""
+    designs, features, dropped = _clean(designs, features)
+    model_config = model_config or DRConfig(feature_dim=features.shape[1], design_dim=designs.shape[1])
+    return _fit("dr", model_config, designs, features, config, progress, dropped)
+
+
+def _clean(designs, features) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Float32 2-D tensors of one length, rows with NaN/Inf dropped (the one place that happens)."""
+    designs = torch.as_tensor(designs, dtype=torch.float32)
+    features = torch.as_tensor(features, dtype=torch.float32)
+    if designs.ndim != 2 or features.ndim != 2 or designs.shape[0] != features.shape[0]:
+        raise MetaSimError(f"need designs (N, design_dim) and features (N, feature_dim) with one N; "
+                           f"got {tuple(designs.shape)} and {tuple(features.shape)}")
+    finite = torch.isfinite(designs).all(dim=1) & torch.isfinite(features).all(dim=1)
+    dropped = int((~finite).sum())
+    if dropped:
+        warnings.warn(f"dropped {dropped} of {len(finite)} simulations with NaN/Inf features or designs",
+                      stacklevel=3)
+    if dropped == len(finite):
+        raise MetaSimError("no simulation has finite features and designs; nothing to train on "
+                           "(check the renders and the feature extractor)")
+    return designs[finite], features[finite], dropped
+
+
+def _split(n: int, val_fraction: float, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    order = torch.randperm(n, generator=generator)
+    n_val = max(1, round(n * val_fraction)) if val_fraction > 0 else 0
+    if n - n_val < 2:
+        raise MetaSimError(f"need at least 2 training simulations after the validation split; have {n} "
+                           f"in all (render more, or lower val_fraction)")
+    return order[n_val:], order[:n_val]
+
+
+def _fit(kind: str, model_config, designs: torch.Tensor, features: torch.Tensor, config: TrainConfig,
+         progress: Progress | None, dropped: int) -> Fit:
+    started = time.perf_counter()
+    generator = torch.Generator().manual_seed(config.seed)
+    train_rows, val_rows = _split(len(designs), config.val_fraction, generator)
+    norm = FeatureNorm.fit(features[train_rows], config.norm_eps)
+    features = norm.apply(features)
+    d_train, x_train = designs[train_rows], features[train_rows]
+    d_val, x_val = designs[val_rows], features[val_rows]
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)  # initial weights and dropout masks
+        model = build_model(kind, model_config)
+        optimiser = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        scheduler = (torch.optim.lr_scheduler.ReduceLROnPlateau(
+            optimiser, factor=config.plateau_factor, patience=config.plateau_patience)
+            if config.plateau_factor > 0 else None)
+        history: dict = {"train_loss": [], "val_loss": [], "train_terms": {}, "val_terms": {}}
+        best_loss, best_epoch, best_state, waited = math.inf, 0, copy.deepcopy(model.state_dict()), 0
+        for epoch in range(1, config.max_epochs + 1):
+            train_loss, train_terms = _train_epoch(model, optimiser, d_train, x_train, config, generator, epoch)
+            if len(val_rows):
+                val_loss, val_terms = _evaluate(model, d_val, x_val)
+            else:  # no validation split asked for: stop on the training loss
+                val_loss, val_terms = train_loss, train_terms
+            _append(history, train_loss, train_terms, val_loss, val_terms)
+            if val_loss < best_loss - config.min_delta:
+                best_loss, best_epoch, waited = val_loss, epoch, 0
+                best_state = copy.deepcopy(model.state_dict())
+            else:
+                waited += 1
+            if scheduler is not None:
+                scheduler.step(val_loss)
+            if progress is not None:
+                progress(EpochReport(epoch, config.max_epochs, train_loss, val_loss, best_epoch,
+                                     optimiser.param_groups[0]["lr"]))
+            if waited >= config.patience:
+                break
+    model.load_state_dict(best_state)
+    model.eval()
+    if isinstance(model, NAMS):
+        _store_embedding_stats(model, d_train)
+    history.update(best_epoch=best_epoch, best_val_loss=best_loss, epochs=epoch,
+                   stopped_early=epoch < config.max_epochs, seconds=time.perf_counter() - started,
+                   n_train=len(train_rows), n_val=len(val_rows), n_dropped=dropped,
+                   train_config=config.to_dict())
+    return Fit(model, norm, history)
+
+
+def _train_epoch(model, optimiser, designs, features, config: TrainConfig, generator: torch.Generator,
+                 epoch: int) -> tuple[float, dict]:
+    model.train()
+    order = torch.randperm(len(designs), generator=generator)
+    total, terms_sum, seen = 0.0, {}, 0
+    for start in range(0, len(order), config.batch_size):
+        rows = order[start:start + config.batch_size]
+        if len(rows) < 2:  # BatchNorm cannot normalise one sample; it is reshuffled into the next epoch
+            continue
+        loss, terms = model.loss(designs[rows], features[rows], generator)
+        if not torch.isfinite(loss):
+            raise MetaSimError(f"training diverged (loss {loss.item()}) in epoch {epoch}; "
+                               f"lower the learning rate")
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        optimiser.step()
+        total += loss.item() * len(rows)
+        for name, value in terms.items():
+            terms_sum[name] = terms_sum.get(name, 0.0) + value * len(rows)
+        seen += len(rows)
+    return total / seen, {name: value / seen for name, value in terms_sum.items()}
+
+
+@torch.no_grad()
+def _evaluate(model, designs, features, chunk: int = 4096) -> tuple[float, dict]:
+    """Loss in eval mode (z = mu, no dropout), weighted over chunks."""
+    model.eval()
+    total, terms_sum = 0.0, {}
+    for start in range(0, len(designs), chunk):
+        loss, terms = model.loss(designs[start:start + chunk], features[start:start + chunk])
+        n = len(designs[start:start + chunk])
+        total += loss.item() * n
+        for name, value in terms.items():
+            terms_sum[name] = terms_sum.get(name, 0.0) + value * n
+    n = len(designs)
+    return total / n, {name: value / n for name, value in terms_sum.items()}
+
+
+def _append(history: dict, train_loss: float, train_terms: dict, val_loss: float, val_terms: dict) -> None:
+    history["train_loss"].append(train_loss)
+    history["val_loss"].append(val_loss)
+    for key, terms in (("train_terms", train_terms), ("val_terms", val_terms)):
+        for name, value in terms.items():
+            history[key].setdefault(name, []).append(value)
+
+
+# The search draws its starts uniformly in mean +- k * std of these embeddings;
+# a collapsed dimension keeps a tiny positive std so that k * std stays defined.
+Z_STD_MIN = 1e-6
+
+
+@torch.no_grad()
+def _store_embedding_stats(model: NAMS, designs: torch.Tensor) -> None:
+    mu, _ = model.encode(designs)
+    model.z_mean.copy_(mu.mean(dim=0))
+    model.z_std.copy_(mu.std(dim=0, unbiased=False).clamp_min(Z_STD_MIN))
