@@ -1,0 +1,396 @@
+"""Inference: from normalised target features to designs.
+
+* ``adjoint_search`` is the paper's neural-adjoint search (section 4): M starts
+  per target drawn uniformly in z_mean +- k * z_std, Adam on z through the
+  frozen predictor P, the S lowest-loss starts decoded by D and combined by a
+  majority vote per categorical parameter (mean for continuous ones). All
+  targets and starts run as one (T, M, z_dim) tensor.
+* ``exhaustive_search`` scores every design of a small discrete space through
+  P(mu(E(d))) and takes the argmin; the table of predictions is computed once
+  per model and space.
+* ``search`` picks between them (``auto``: exhaustive when the space is
+  discrete and small enough).
+* ``dr_predict`` and ``uniform_predict`` are the paper's baselines.
+
+Diversify with rejection (paper section 4, eq. for d*; r = 0 for synthetic
+targets, 0.25 for real ones): after the search, each target's design d* is
+independently replaced, with probability r, by a design drawn uniformly from
+the space (u ~ U(0, 1), reject when u < r). It diversifies the population of
+designs that the next synthetic dataset is rendered from; it does not change
+the vote. ``SearchResult.searched_design`` keeps the search's answer and
+``rejected`` says whether ``design`` was replaced.
+
+Targets must be normalised with the checkpoint's ``FeatureNorm``. Every
+result is finite, or the call raises MetaSimError.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, NamedTuple
+
+import torch
+
+from ..design import Categorical, DesignSpace
+from ..errors import MetaSimError
+from .model import DirectRegression, NAMS
+
+MAX_EXHAUSTIVE_DESIGNS = 200_000
+
+
+@dataclass
+class SearchResult:
+    """The answer for one target.
+
+    ``votes`` maps each categorical parameter to {choice id: share}, shares
+    summing to 1, largest first: among the S kept starts (adjoint), among the
+    S best designs (exhaustive), or the regression output (DR). Losses are
+    the search objective in normalised feature units (None for DR).
+    """
+
+    design: dict
+    votes: dict[str, dict[str, float]]
+    best_loss: float | None
+    mean_loss: float | None
+    method: str
+    searched_design: dict
+    rejected: bool = False
+    ranked: list[tuple[dict, float]] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"design": self.design, "votes": self.votes, "best_loss": self.best_loss,
+                "mean_loss": self.mean_loss, "method": self.method, "searched_design": self.searched_design,
+                "rejected": self.rejected, "ranked": [{"design": d, "loss": loss} for d, loss in self.ranked]}
+
+
+# --- shared checks -------------------------------------------------------------------------------
+def _targets(targets, feature_dim: int) -> torch.Tensor:
+    """(T, F) float32 targets, or a MetaSimError saying what is wrong with them."""
+    targets = torch.as_tensor(targets).detach().to(torch.float32)
+    if targets.ndim == 1:
+        targets = targets.unsqueeze(0)
+    if targets.ndim != 2 or targets.shape[0] == 0 or targets.shape[1] != feature_dim:
+        raise MetaSimError(f"targets must be (T, {feature_dim}) normalised feature vectors; got shape "
+                           f"{tuple(targets.shape)} (was another feature extractor used?)")
+    bad = ~torch.isfinite(targets).all(dim=1)
+    if bad.any():
+        rows = bad.nonzero().flatten().tolist()
+        raise MetaSimError(f"target row(s) {rows[:5]}{' ...' if len(rows) > 5 else ''} contain NaN or Inf "
+                           f"(or values beyond float32); check those images and the feature extraction")
+    return targets
+
+
+def _check_space(model, space: DesignSpace) -> None:
+    if space.dim != model.config.design_dim:
+        raise MetaSimError(f"design space {space.name!r} encodes to {space.dim} values; the model was trained "
+                           f"on {model.config.design_dim} (use the space stored in its checkpoint)")
+
+
+def _check_nams(model) -> None:
+    if not isinstance(model, NAMS):
+        raise MetaSimError(f"this search needs a NAMS model, not {type(model).__name__} (use dr_predict for DR)")
+
+
+def _check_common(S: int, r: float) -> None:
+    if S < 1:
+        raise MetaSimError(f"S (results kept for the vote) must be at least 1, not {S}")
+    if not 0.0 <= r <= 1.0:
+        raise MetaSimError(f"r (rejection rate) must be in [0, 1], not {r}")
+
+
+# --- voting --------------------------------------------------------------------------------------
+def _vote(space: DesignSpace, vectors: torch.Tensor) -> list[tuple[dict, dict]]:
+    """Majority vote over ranked design vectors (T, S, dim), best first, per parameter.
+
+    A categorical tie goes to the choice held by the best-ranked start;
+    continuous parameters take the mean of the clipped values.
+    """
+    T, S, _ = vectors.shape
+    winner_vec = torch.zeros(T, space.dim, dtype=torch.float64)
+    shares: list[dict] = [{} for _ in range(T)]
+    ranks = torch.arange(S).expand(T, S)
+    for p, sl in space.blocks():
+        if isinstance(p, Categorical):
+            picks = vectors[..., sl].argmax(dim=-1)  # (T, S)
+            counts = torch.zeros(T, p.width, dtype=torch.long).scatter_add_(1, picks, torch.ones_like(picks))
+            first = torch.full((T, p.width), S).scatter_reduce_(1, picks, ranks, reduce="amin")
+            score = counts * (S + 1) + (S - first)
+            winner_vec[:, sl] = torch.nn.functional.one_hot(score.argmax(dim=1), p.width).double()
+            for t in range(T):
+                present = counts[t].nonzero().flatten().tolist()
+                present.sort(key=lambda c: -int(score[t, c]))
+                shares[t][p.name] = {p.choices[c]: int(counts[t, c]) / S for c in present}
+        else:
+            winner_vec[:, sl.start] = vectors[..., sl.start].double().clamp(0.0, 1.0).mean(dim=1)
+    return [(space.decode(winner_vec[t].numpy()), shares[t]) for t in range(T)]
+
+
+def uniform_predict(space: DesignSpace, n: int, generator: torch.Generator | None = None) -> list[dict]:
+    """``n`` designs drawn uniformly from the space (the paper's Uniform baseline)."""
+    columns = {}
+    for p in space.parameters:
+        if isinstance(p, Categorical):
+            columns[p.name] = [p.choices[i] for i in torch.randint(p.width, (n,), generator=generator).tolist()]
+        else:
+            u = torch.rand(n, generator=generator, dtype=torch.float64).tolist()
+            columns[p.name] = [p.low + v * (p.high - p.low) for v in u]
+    return [{name: columns[name][i] for name in space.names} for i in range(n)]
+
+
+def _diversify(results: list[SearchResult], space: DesignSpace, r: float,
+               generator: torch.Generator | None) -> list[SearchResult]:
+    """Diversify with rejection: with probability r, a target's design is replaced by a uniform draw."""
+    if r == 0.0:
+        return results
+    u = torch.rand(len(results), generator=generator, dtype=torch.float64).tolist()
+    for result, draw in zip(results, u):
+        if draw < r:
+            result.design = uniform_predict(space, 1, generator)[0]
+            result.rejected = True
+    return results
+
+
+# --- neural adjoint ------------------------------------------------------------------------------
+def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: float = 3.0, S: int = 50,
+                   iterations: int = 200, lr: float = 0.01, r: float = 0.0,
+                   generator: torch.Generator | None = None, dtype: torch.dtype = torch.float32,
+                   boundary_weight: float = 0.1, progress: Callable[[int, int], None] | None = None,
+                   max_rows: int = 16384) -> list[SearchResult]:
+    """Neural-adjoint search for every target row; one SearchResult per row.
+
+    The per-start objective is MSE(P(z), target) + boundary_weight *
+    sum_j relu(|z_j - z_mean_j| - k z_std_j) (the Neural-Adjoint boundary
+    loss). Gradients are taken on the sum over starts, and Adam acts per
+    element, so starts are independent. Starts are ranked by the objective
+    recomputed at the final z. ``dtype`` (e.g. torch.bfloat16) is the dtype
+    of the networks' forward passes; z, Adam's state and the losses stay
+    float32. Targets are processed in groups of at most ``max_rows`` starts
+    to bound memory; the answer does not depend on the grouping.
+    """
+    _check_nams(model)
+    _check_space(model, space)
+    _check_common(S, r)
+    if M < 1:
+        raise MetaSimError(f"M (random starts) must be at least 1, not {M}")
+    if S > M:
+        raise MetaSimError(f"S must not exceed M (S={S}, M={M})")
+    if not (k >= 0 and math.isfinite(k)):
+        raise MetaSimError(f"k (start range in latent standard deviations) must be finite and >= 0, not {k}")
+    if iterations < 0:
+        raise MetaSimError(f"iterations must be at least 0, not {iterations}")
+    if not (lr > 0 and boundary_weight >= 0):
+        raise MetaSimError("lr must be positive and boundary_weight non-negative")
+    targets = _targets(targets, model.config.feature_dim)
+
+    # Frozen copies in the search dtype; the caller's model is left as it is.
+    predictor, decoder = (copy.deepcopy(m).eval().requires_grad_(False).to(dtype)
+                          for m in (model.predictor, model.decoder))
+    mean, std = model.z_mean.detach().float(), model.z_std.detach().float()
+    half_width = k * std
+    # All starts are drawn up front, so grouping targets below cannot change them.
+    starts = mean + (2 * torch.rand((len(targets), M, model.config.z_dim), generator=generator) - 1) * half_width
+    per_group = max(1, max_rows // M)
+    groups = [slice(i, i + per_group) for i in range(0, len(targets), per_group)]
+    total_steps = iterations * len(groups)
+    results: list[SearchResult] = []
+    for g, rows in enumerate(groups):
+        z = starts[rows].clone().requires_grad_(True)
+        target = targets[rows]
+        # A huge target would overflow the squared error in float32. Dividing each
+        # target's whole objective by its scale^2 leaves Adam's steps unchanged
+        # (Adam is invariant to a constant gradient scale) and keeps them finite.
+        scale = target.abs().amax(dim=1).clamp_min(1.0)[:, None]
+        target_scaled = (target / scale)[:, None, :]
+
+        def objective(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+            pred = predictor(z.to(dtype)).float() / scale[:, :, None]
+            mse_scaled = (pred - target_scaled).square().mean(dim=-1)
+            boundary = torch.relu((z - mean).abs() - half_width).sum(dim=-1)
+            return mse_scaled, boundary
+
+        optimiser = torch.optim.Adam([z], lr=lr, betas=(0.9, 0.999))
+        for step in range(iterations):
+            mse_scaled, boundary = objective(z)
+            loss = (mse_scaled + boundary_weight * boundary / scale.square()).sum()
+            (grad,) = torch.autograd.grad(loss, z)
+            z.grad = grad
+            optimiser.step()
+            if progress is not None:
+                progress(g * iterations + step + 1, total_steps)
+        with torch.no_grad():
+            mse_scaled, boundary = objective(z)
+            losses = mse_scaled.double() * scale.double().square() + boundary_weight * boundary.double()
+            losses = torch.where(torch.isfinite(losses), losses, torch.full_like(losses, math.inf))
+            if torch.isinf(losses.amin(dim=1)).any():
+                raise MetaSimError("the search diverged (every start's loss is NaN/Inf); lower lr or check "
+                                   "that the checkpoint and targets match")
+            kept_loss, kept = torch.topk(losses, S, dim=1, largest=False, sorted=True)
+            kept_z = torch.gather(z.detach(), 1, kept[:, :, None].expand(-1, -1, z.shape[-1]))
+            vectors = torch.sigmoid(decoder(kept_z.to(dtype)).float())
+        for (design, shares), loss in zip(_vote(space, vectors), kept_loss):
+            results.append(SearchResult(design=design, votes=shares, best_loss=float(loss[0]),
+                                        mean_loss=float(loss.mean()), method="adjoint",
+                                        searched_design=dict(design)))
+    return _diversify(results, space, r, generator)
+
+
+# --- exhaustive ----------------------------------------------------------------------------------
+class DesignTable(NamedTuple):
+    """Every design of a space, encoded, with P(mu(E(d))) and its squared norms (float64)."""
+
+    designs: torch.Tensor
+    features: torch.Tensor
+    sq_norms: torch.Tensor
+
+
+def count_designs(space: DesignSpace) -> int | None:
+    """How many designs a discrete space has; None if it has a continuous parameter."""
+    if not all(isinstance(p, Categorical) for p in space.parameters):
+        return None
+    return math.prod(p.width for p in space.parameters)
+
+
+def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DESIGNS,
+                 batch: int = 4096) -> DesignTable:
+    """P(mu(E(d))) for every design of ``space``, cached on the model until its weights may change."""
+    _check_nams(model)
+    _check_space(model, space)
+    n = count_designs(space)
+    if n is None:
+        raise MetaSimError(f"exhaustive search needs a discrete design space; {space.name!r} has continuous "
+                           f"parameters (use the adjoint search)")
+    if n > limit:
+        raise MetaSimError(f"design space {space.name!r} has {n:,} designs; exhaustive search enumerates at "
+                           f"most {limit:,} (use the adjoint search)")
+    key = (json.dumps(space.to_dict(), sort_keys=True), limit)
+    cached = model._design_tables.get(key)
+    if cached is not None:
+        return cached
+    index = torch.cartesian_prod(*[torch.arange(p.width) for p in space.parameters]).reshape(n, -1)
+    designs = torch.zeros(n, space.dim)
+    rows = torch.arange(n)
+    for column, (_, sl) in enumerate(space.blocks()):
+        designs[rows, sl.start + index[:, column]] = 1.0
+    was_training = model.training
+    model.eval()
+    with torch.no_grad():
+        features = torch.cat([model.predict(model.encode(designs[i:i + batch])[0])
+                              for i in range(0, n, batch)])
+    if not torch.isfinite(features).all():
+        raise MetaSimError("the model predicts NaN/Inf features for some designs; the checkpoint is unusable")
+    table = DesignTable(designs, features, features.double().square().sum(dim=1))
+    if was_training:
+        model.train()
+    else:
+        model._design_tables[key] = table
+    return table
+
+
+def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top: int = 10, r: float = 0.0,
+                      generator: torch.Generator | None = None, batch: int = 16384) -> list[SearchResult]:
+    """The design whose predicted features are nearest (MSE) to each target.
+
+    ``ranked`` lists the ``top`` best designs with their losses; the vote
+    shares are the distribution of each parameter among the ``S`` best
+    designs (at most the number of designs). Distances are computed in
+    float64, ``batch`` designs at a time, for all targets at once.
+    """
+    _check_common(S, r)
+    if top < 1:
+        raise MetaSimError(f"top must be at least 1, not {top}")
+    table = design_table(model, space)
+    targets = _targets(targets, model.config.feature_dim).double()
+    n, feature_dim = table.features.shape
+    sq_targets = targets.square().sum(dim=1, keepdim=True)
+    losses = torch.cat([
+        (sq_targets - 2 * targets @ table.features[i:i + batch].double().T + table.sq_norms[i:i + batch])
+        for i in range(0, n, batch)], dim=1).clamp_min(0.0) / feature_dim
+    keep = min(max(S, top), n)
+    kept_loss, kept = torch.topk(losses, keep, dim=1, largest=False, sorted=True)
+    s = min(S, n)
+    votes = _vote(space, table.designs[kept[:, :s]])
+    results = []
+    for t, (_, shares) in enumerate(votes):
+        ranked = [(space.decode(table.designs[i].numpy()), float(loss))
+                  for i, loss in zip(kept[t, :top].tolist(), kept_loss[t, :top].tolist())]
+        results.append(SearchResult(design=dict(ranked[0][0]), votes=shares, best_loss=ranked[0][1],
+                                    mean_loss=float(kept_loss[t, :s].mean()), method="exhaustive",
+                                    searched_design=dict(ranked[0][0]), ranked=ranked))
+    return _diversify(results, space, r, generator)
+
+
+# --- entry points --------------------------------------------------------------------------------
+def resolve_method(space: DesignSpace, method: str) -> str:
+    """"auto" becomes "exhaustive" for a discrete space of at most MAX_EXHAUSTIVE_DESIGNS, else "adjoint"."""
+    if method not in ("auto", "adjoint", "exhaustive"):
+        raise MetaSimError(f"unknown search method {method!r}; use auto, adjoint or exhaustive")
+    if method != "auto":
+        return method
+    n = count_designs(space)
+    return "exhaustive" if n is not None and n <= MAX_EXHAUSTIVE_DESIGNS else "adjoint"
+
+
+def search(model: NAMS, targets, space: DesignSpace, method: str = "auto", *, S: int = 50, r: float = 0.0,
+           generator: torch.Generator | None = None, top: int = 10, M: int = 1000, k: float = 3.0,
+           iterations: int = 200, lr: float = 0.01, dtype: torch.dtype = torch.float32,
+           boundary_weight: float = 0.1, progress: Callable[[int, int], None] | None = None) -> list[SearchResult]:
+    """Search designs for the target rows with ``method``; adjoint-only options are ignored by exhaustive."""
+    if resolve_method(space, method) == "exhaustive":
+        return exhaustive_search(model, targets, space, S=S, top=top, r=r, generator=generator)
+    return adjoint_search(model, targets, space, M=M, k=k, S=S, iterations=iterations, lr=lr, r=r,
+                          generator=generator, dtype=dtype, boundary_weight=boundary_weight, progress=progress)
+
+
+@torch.no_grad()
+def dr_predict(model: DirectRegression, targets, space: DesignSpace) -> list[SearchResult]:
+    """The direct-regression baseline: one forward pass, argmax per categorical block.
+
+    Vote shares are the regression outputs of each block clipped at 0 and
+    normalised (MSE regression onto a one-hot block estimates its choice
+    probabilities).
+    """
+    if not isinstance(model, DirectRegression):
+        raise MetaSimError(f"dr_predict needs a DirectRegression model, not {type(model).__name__}")
+    _check_space(model, space)
+    targets = _targets(targets, model.config.feature_dim)
+    was_training = model.training
+    model.eval()
+    out = model(targets).double()
+    model.train(was_training)
+    if not torch.isfinite(out).all():
+        raise MetaSimError("the DR model predicts NaN/Inf for these targets; the checkpoint is unusable")
+    results = []
+    for row in out:
+        shares = {}
+        for p, sl in space.blocks():
+            if isinstance(p, Categorical):
+                weights = row[sl].clamp_min(0.0)
+                if weights.sum() <= 0:  # nothing positive: all weight on the argmax
+                    weights = torch.nn.functional.one_hot(row[sl].argmax(), p.width).double()
+                weights = weights / weights.sum()
+                order = torch.argsort(weights, descending=True, stable=True).tolist()
+                shares[p.name] = {p.choices[c]: float(weights[c]) for c in order if weights[c] > 0}
+        design = space.decode(row.numpy())
+        results.append(SearchResult(design=design, votes=shares, best_loss=None, mean_loss=None, method="dr",
+                                    searched_design=dict(design)))
+    return results
+
+
+def time_search(model: NAMS, space: DesignSpace, method: str = "auto", n_targets: int = 1, seed: int = 0,
+                **options) -> float:
+    """Wall seconds per target of ``search`` on random normalised targets.
+
+    The exhaustive design table is built before the clock starts: it is paid
+    once per model, not per target.
+    """
+    targets = torch.randn(n_targets, model.config.feature_dim, generator=torch.Generator().manual_seed(seed))
+    method = resolve_method(space, method)
+    if method == "exhaustive":
+        design_table(model, space)
+    started = time.perf_counter()
+    search(model, targets, space, method, generator=torch.Generator().manual_seed(seed), **options)
+    return (time.perf_counter() - started) / n_targets
