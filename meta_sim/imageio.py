@@ -69,7 +69,14 @@ def _read_pixels(path: Path, fmt) -> tuple[np.ndarray, tuple, str]:
     config.attribute("oiio:UnassociatedAlpha", 1)
     image = oiio.ImageInput.open(str(path), config)
     if image is None:
-        raise MetaSimError(f"{path}: not an image OpenImageIO can read ({_first_line(oiio.geterror())})")
+        detail = _first_line(oiio.geterror())
+        recognised = oiio.ImageInput.create(str(path)) is not None  # a reader knows the format from the content
+        oiio.geterror()
+        if recognised:
+            raise MetaSimError(f"{path}: damaged or truncated image, OpenImageIO cannot open it")
+        # The message for an unknown format only repeats the path.
+        known = "could not find a format reader" not in detail
+        raise MetaSimError(f"{path}: not an image OpenImageIO can read" + (f" ({detail})" if known and detail else ""))
     try:
         spec = image.spec()
         pixels = image.read_image(0, 0, 0, spec.nchannels, fmt)
