@@ -14,6 +14,7 @@ texture is the truth itself.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -92,3 +93,138 @@ def write_results(out: Path, results: dict) -> None:
         tmp = out / f".{name}.tmp"
         tmp.write_text(text)
         tmp.replace(out / name)
+
+
+def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, root: Path,
+                   bar=None) -> tuple[list[Job], Path]:
+    """Render (or reuse) the target groups of an experiment; returns the jobs and their tile folder."""
+    from .render import RenderSettings, render_jobs
+    from .render_presets import get_preset
+    from .textures import ensure_default_bank, ensure_heldout_bank
+
+    space = DesignSpace.load()
+    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    jobs = target_jobs(experiment, space, heldout, n, seed)
+    folder = Path(root) / "targets" / f"{experiment}-n{n}-t{tiles}-s{seed}-{preset}"
+    settings = RenderSettings(space=space, banks=[bank, heldout], preset=get_preset(preset), out_dir=folder,
+                              n_tiles=tiles)
+    render_jobs(jobs, settings, bar(f"render {experiment} targets", n * tiles) if bar else None)
+    return jobs, folder
+
+
+@dataclass(frozen=True)
+class EvalSettings:
+    targets: int = 20
+    tiles: int | None = None  # default: the training set's tiles per design
+    seed: int = 1
+    preset: str | None = None  # default: the training set's render preset
+    M: int = 1000
+    k: float = 3.0
+    S: int = 50
+    iterations: int = 200
+    lr: float = 0.01
+    r: float = 0.0
+    sheet_rows: int = 6
+
+
+def run_eval(experiment: str, out: Path, dataset, models_settings, settings: EvalSettings = EvalSettings(),
+             root: Path | None = None, bar=None) -> dict:
+    """Build or reuse the training set and models, render targets, score every method."""
+    import shutil
+    import time
+
+    import torch
+
+    from .dataset import job_tiles
+    from .features import features_for_groups, make_extractor
+    from .imageio import read_image
+    from .nams import dr_predict, exhaustive_search, adjoint_search, load_checkpoint, uniform_predict
+    from .textures import ensure_default_bank, ensure_heldout_bank
+    from .workflow import cache_root, ensure_models
+
+    root = Path(root or cache_root())
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    models = ensure_models(dataset, models_settings, root, bar)
+    nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
+    tiles = settings.tiles or dataset.tiles
+    jobs, folder = render_targets(experiment, settings.targets, tiles, settings.seed,
+                                  settings.preset or dataset.preset, root, bar)
+    extractor = make_extractor(models_settings.extractor,
+                               Path(models_settings.weights) if models_settings.weights else None)
+    started = time.perf_counter()
+    groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job in jobs]
+    feats = features_for_groups(groups, extractor, models_settings.views)
+    feature_seconds = (time.perf_counter() - started) / len(jobs)
+
+    space = nams.space
+    generator = torch.Generator().manual_seed(settings.seed)
+    adjoint = {"M": settings.M, "k": settings.k, "S": settings.S, "iterations": settings.iterations,
+               "lr": settings.lr, "r": settings.r}
+    runs = {
+        "uniform": lambda: uniform_predict(space, len(jobs), generator),
+        "dr": lambda: [r.design for r in dr_predict(dr.model, dr.feature_norm.apply(feats), space)],
+        "nams_adjoint": lambda: [r.design for r in adjoint_search(
+            nams.model, nams.feature_norm.apply(feats), space, generator=generator, **adjoint)],
+        "nams_exhaustive": lambda: [r.design for r in exhaustive_search(
+            nams.model, nams.feature_norm.apply(feats), space, S=settings.S)],
+    }
+    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    ranks = rankings(experiment, bank, heldout)
+    methods, predictions = {}, {}
+    for name, run in runs.items():
+        started = time.perf_counter()
+        designs = run()
+        seconds = (time.perf_counter() - started) / len(jobs)
+        predictions[name] = designs
+        rows = [score(p, job.design, ranks) for p, job in zip(designs, jobs)]
+        methods[name] = {**mean_scores(rows), "seconds_per_target": seconds}
+    results = {"experiment": experiment, "targets": len(jobs), "tiles_per_target": tiles,
+               "feature_seconds_per_target": feature_seconds, "methods": methods,
+               "adjoint": adjoint, "training": {"designs": dataset.designs, "tiles": dataset.tiles,
+                                                "preset": dataset.preset, "seconds": models.seconds},
+               "model_id": nams.model_id,
+               "targets_detail": [{"name": j.name, "truth": j.design,
+                                   "predicted": {m: predictions[m][i] for m in predictions}}
+                                  for i, j in enumerate(jobs)]}
+    write_results(out, results)
+    shutil.copy2(models.nams_path, out / "nams.pt")
+    shutil.copy2(models.dr_path, out / "dr.pt")
+    comparison_sheet(out / "sheet.png", jobs[:settings.sheet_rows], folder, predictions["nams_adjoint"],
+                     tiles, settings.preset or dataset.preset, root)
+    return results
+
+
+def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted: list[dict], tiles: int,
+                     preset: str, root: Path) -> None:
+    """Each target's first tile beside the same city rendered with the inferred design, and the textures."""
+    from .dataset import job_tiles
+    from .imageio import read_image
+    from .render import RenderSettings, render_jobs
+    from .render_presets import get_preset
+    from .textures import ensure_default_bank, ensure_heldout_bank
+    from .textures.pngio import write_png
+    from .textures.sheet import render_sheet
+
+    space = DesignSpace.load()
+    banks = [ensure_default_bank(), ensure_heldout_bank()]
+    inferred = [Job(design, job.city_seed, f"{job.name}-inferred") for job, design in zip(jobs, predicted)]
+    folder = Path(root) / "targets" / "inferred"
+    render_jobs(inferred, RenderSettings(space=space, banks=banks, preset=get_preset(preset), out_dir=folder,
+                                         n_tiles=tiles))
+
+    def srgb8(path):
+        return np.floor(read_image(path) * 255 + 0.5).astype(np.uint8)
+
+    def swatch(texture_id):
+        return next(b for b in banks if b.contains(texture_id)).load_image(texture_id)
+
+    rows = []
+    for job, guess in zip(jobs, inferred):
+        row = [("TARGET", srgb8(job_tiles(target_folder, job.name, tiles)[0])),
+               ("INFERRED", srgb8(job_tiles(folder, guess.name, tiles)[0]))]
+        for param in space.names:
+            kind = KIND_OF[param][0].upper()
+            row += [(f"{kind} TRUE", swatch(job.design[param])), (f"{kind} NAMS", swatch(guess.design[param]))]
+        rows.append(row)
+    write_png(path, render_sheet(rows, 160, len(rows[0])))

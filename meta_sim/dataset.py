@@ -1,0 +1,136 @@
+"""Training sets: random designs rendered through the simulator, and their cached features.
+
+A training set lives in one folder: ``tiles/`` (the EXR tiles and their
+``designs.json``, resumable like any render) and one feature cache per
+extractor and view count, ``features-<key>.pt``, holding the design ids, the
+encoded designs, the design-space spec, the extractor id and one averaged
+feature vector per design. Rendering needs ``bpy``; everything after the
+cache (training, search) needs only torch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import torch
+
+from .design import DesignSpace
+from .errors import MetaSimError
+
+CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """What a training set is made of. The default fits a 2-core machine in a few minutes;
+    ``paper()`` is the paper's scale (1,700 designs x 9 tiles)."""
+
+    designs: int = 300
+    tiles: int = 4
+    seed: int = 1
+    cities: int = 8
+    preset: str = "fast"
+    space: str = "rooftops-v1"
+    tile_px: int = 384
+    pixel_size_m: float = 0.3
+
+    @classmethod
+    def paper(cls, **overrides) -> "DatasetConfig":
+        return cls(**{"designs": 1700, "tiles": 9, **overrides})
+
+    def key(self) -> str:
+        return hashlib.sha256(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:12]
+
+
+@dataclass
+class FeatureSet:
+    names: list[str]
+    designs: list[dict]
+    encoded: torch.Tensor  # (N, design_dim) float32
+    features: torch.Tensor  # (N, feature_dim) float32
+    space: DesignSpace
+    extractor_id: str
+    views: int
+
+
+def render_training_set(root: Path, config: DatasetConfig, progress: Callable[[int], None] | None = None):
+    """Render (or finish rendering) the tiles; returns the render jobs."""
+    from .render import RenderSettings, design_jobs, render_jobs, sample_designs
+    from .render_presets import get_preset
+    from .textures import ensure_default_bank
+
+    space = DesignSpace.load(config.space)
+    jobs = design_jobs(space, sample_designs(space, config.designs, config.seed), config.seed, config.cities)
+    settings = RenderSettings(space=space, banks=[ensure_default_bank()], preset=get_preset(config.preset),
+                              out_dir=Path(root) / "tiles", n_tiles=config.tiles, tile_px=config.tile_px,
+                              pixel_size_m=config.pixel_size_m)
+    render_jobs(jobs, settings, progress)
+    return jobs
+
+
+def job_tiles(tile_dir: Path, name: str, n_tiles: int) -> list[Path]:
+    return [Path(tile_dir) / f"{name}_t{j:02d}.exr" for j in range(n_tiles)]
+
+
+def group_features_of_paths(paths: list[Path], extractor, views: int) -> torch.Tensor:
+    """One feature vector for a group of image files: all tiles x views averaged."""
+    from .features import group_feature
+    from .imageio import read_image
+
+    return group_feature([read_image(p) for p in paths], extractor, n_views=views)
+
+
+def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
+                   progress: Callable[[int], None] | None = None) -> FeatureSet:
+    """Features of every design of the training set, computing only what the cache lacks."""
+    from .render import sample_designs
+
+    root = Path(root)
+    space = DesignSpace.load(config.space)
+    designs = sample_designs(space, config.designs, config.seed)
+    names = [f"d{k:05d}" for k in range(len(designs))]
+    key = hashlib.sha256(f"{extractor.id}|{views}".encode()).hexdigest()[:10]
+    cache_path = root / f"features-{key}.pt"
+    cached = _load_cache(cache_path, extractor.id, views)
+    rows = []
+    for name in names:
+        if name not in cached:
+            paths = job_tiles(root / "tiles", name, config.tiles)
+            missing = [p for p in paths if not p.is_file()]
+            if missing:
+                raise MetaSimError(f"training tile {missing[0]} is missing; run `meta-sim dataset` to render it")
+            cached[name] = group_features_of_paths(paths, extractor, views)
+            if progress:
+                progress(1)
+        rows.append(cached[name])
+    _save_cache(cache_path, cached, extractor.id, views, space)
+    return FeatureSet(names=names, designs=designs, encoded=torch.stack([torch.from_numpy(space.encode(d))
+                                                                         for d in designs]),
+                      features=torch.stack(rows).float(), space=space, extractor_id=extractor.id, views=views)
+
+
+def _load_cache(path: Path, extractor_id: str, views: int) -> dict:
+    if not path.is_file():
+        return {}
+    try:
+        data = torch.load(path, weights_only=True)
+    except Exception:  # a damaged cache is recomputed, never trusted
+        return {}
+    if data.get("version") != CACHE_VERSION or data.get("extractor_id") != extractor_id or data.get("views") != views:
+        return {}
+    return dict(zip(data["names"], data["features"]))
+
+
+def _save_cache(path: Path, cached: dict, extractor_id: str, views: int, space: DesignSpace) -> None:
+    names = sorted(cached)
+    data = {"version": CACHE_VERSION, "extractor_id": extractor_id, "views": views,
+            "space": json.dumps(space.to_dict()), "names": names,
+            "features": torch.stack([cached[n] for n in names]) if names else torch.zeros(0)}
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    torch.save(data, tmp)
+    os.replace(tmp, path)

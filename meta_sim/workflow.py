@@ -1,0 +1,114 @@
+"""Training set -> features -> NAMS and DR checkpoints, cached by what went in.
+
+`meta-sim train`, `meta-sim eval` and `make demo` share this path. A cached
+model is reused only when the dataset configuration, the extractor, the view
+count and the training settings are all unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import torch
+
+from .dataset import DatasetConfig, FeatureSet, build_features, render_training_set
+from .errors import MetaSimError
+
+
+@dataclass(frozen=True)
+class ModelSettings:
+    extractor: str = "colour-texture"
+    weights: str | None = None
+    views: int = 8
+    nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
+    train: dict = field(default_factory=dict)  # TrainConfig overrides
+    seed: int = 0
+
+    def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
+        blob = json.dumps({"dataset": asdict(dataset), "extractor": extractor_id, "views": self.views,
+                           "nams": self.nams, "train": self.train, "seed": self.seed}, sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()[:12]
+
+
+@dataclass
+class Models:
+    nams_path: Path
+    dr_path: Path
+    features: FeatureSet
+    seconds: dict
+
+
+def cache_root() -> Path:
+    from .textures import cache_root as root
+
+    return root()
+
+
+def dataset_dir(config: DatasetConfig, root: Path | None = None) -> Path:
+    return Path(root or cache_root()) / "datasets" / config.key()
+
+
+def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
+                     bar: Callable[[str, int], Callable[[int], None]] | None = None) -> tuple[FeatureSet, dict]:
+    """Render what is missing of the training set and compute what is missing of its features."""
+    from .features import make_extractor
+
+    folder = dataset_dir(config, root)
+    seconds = {}
+    started = time.perf_counter()
+    render_training_set(folder, config, bar("render training set", config.designs * config.tiles) if bar else None)
+    seconds["render"] = time.perf_counter() - started
+    extractor = make_extractor(settings.extractor, Path(settings.weights) if settings.weights else None)
+    started = time.perf_counter()
+    features = build_features(folder, config, extractor, settings.views,
+                              bar("features", config.designs) if bar else None)
+    seconds["features"] = time.perf_counter() - started
+    return features, seconds
+
+
+def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, dataset: DatasetConfig,
+                 bar: Callable[[str, int], Callable[[int], None]] | None = None) -> dict:
+    """Train NAMS and the DR baseline on a feature set; write ``nams.pt`` and ``dr.pt``."""
+    from .nams import NAMSConfig, TrainConfig, save_checkpoint, train_dr, train_nams
+
+    torch.manual_seed(settings.seed)
+    train_config = TrainConfig.from_dict({"seed": settings.seed, **settings.train})
+    nams_config = NAMSConfig.from_dict({"design_dim": features.encoded.shape[1],
+                                        "feature_dim": features.features.shape[1], **settings.nams})
+    seconds = {}
+    out_dir = Path(out_dir)
+    for kind, trainer, config in (("nams", train_nams, nams_config), ("dr", train_dr, None)):
+        update = bar(f"train {kind}", train_config.max_epochs) if bar else None
+        started = time.perf_counter()
+        fit = trainer(features.encoded, features.features, config, train_config,
+                      (lambda report: update(1)) if update else None)
+        seconds[f"train_{kind}"] = time.perf_counter() - started
+        save_checkpoint(out_dir / f"{kind}.pt", kind, fit.model, fit.model.config, features.space.to_dict(),
+                        fit.norm, features.extractor_id,
+                        extra={"designs": len(features.names), "views": features.views,
+                               "extractor_spec": settings.extractor, "seconds": seconds[f"train_{kind}"],
+                               "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m,
+                               "dataset": asdict(dataset)},
+                        history=fit.history)
+    return seconds
+
+
+def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
+                  bar: Callable[[str, int], Callable[[int], None]] | None = None) -> Models:
+    """The cached NAMS and DR checkpoints for these inputs, trained first if they are missing."""
+    from .nams import load_checkpoint
+
+    features, seconds = prepare_features(config, settings, root, bar)
+    folder = Path(root or cache_root()) / "models" / settings.key(config, features.extractor_id)
+    paths = {kind: folder / f"{kind}.pt" for kind in ("nams", "dr")}
+    try:
+        for kind, path in paths.items():
+            load_checkpoint(path, kind)
+    except MetaSimError:
+        seconds.update(train_models(features, folder, settings, config, bar))
+    return Models(paths["nams"], paths["dr"], features, seconds)
