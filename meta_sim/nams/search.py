@@ -257,7 +257,12 @@ def count_designs(space: DesignSpace) -> int | None:
 
 def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DESIGNS,
                  batch: int = 4096) -> DesignTable:
-    """P(mu(E(d))) for every design of ``space``, cached on the model until its weights may change."""
+    """P(mu(E(d))) for every design of ``space``.
+
+    Cached on the model (an eval-mode model only); ``model.train()`` and
+    ``model.load_state_dict()`` drop the cache. Edit weights in place any
+    other way and the cache is stale: call ``model.train()`` first.
+    """
     _check_nams(model)
     _check_space(model, space)
     n = count_designs(space)

@@ -32,8 +32,10 @@ class TrainConfig:
     """Optimiser and stopping settings.
 
     The paper trains NAMS with Adam, batch 64, for 50,000 epochs and gives no
-    learning rate; DR with lr 1e-3, batch 1000 and an 80/20 split. Here both
-    default to lr 1e-3, batch 64, a 10% validation split and early stopping.
+    learning rate; DR with lr 1e-3, batch 1000, an 80/20 split and a
+    "regularizer strength of 0.5" it does not define (``weight_decay`` is
+    there for it; 0 by default). Here both default to lr 1e-3, batch 64, a
+    10% validation split and early stopping.
     ``plateau_factor`` > 0 turns on ReduceLROnPlateau on the validation loss.
     """
 
