@@ -28,6 +28,7 @@ from typing import Protocol
 import numpy as np
 import torch
 import torch.nn.functional as F
+from tqdm import tqdm
 
 from .errors import MetaSimError
 from .imageio import MIN_TILE_PX
@@ -323,7 +324,8 @@ def _torchvision_backbone(name: str, weights: Path | None, input_size: int) -> B
         import torchvision
     except Exception:  # a build mismatch raises more than ImportError
         raise MetaSimError("torchvision is not importable beside this torch build; export your model with "
-                           "torch.export.save (or torch.jit.save) and use export:FILE (or torchscript:FILE)") from None
+                           "torch.export.save (or torch.jit.save) and use export:FILE (or torchscript:FILE)"
+                           ) from None
     if weights is None:
         raise MetaSimError(f"torchvision:{name} needs its weights: pass --weights FILE (a state dict)")
     path = _existing(Path(weights), "weights file")
@@ -413,8 +415,6 @@ def features_for_groups(groups: list[list[np.ndarray]], extractor: Extractor, n_
     n_run = 1 if getattr(extractor, "dihedral_invariant", False) else n_views
     sums = torch.zeros(len(groups), extractor.dim, dtype=torch.float64)
     counts = torch.zeros(len(groups), dtype=torch.float64)
-    from tqdm import tqdm
-
     with tqdm(total=sum(len(t) for t in groups), unit="tile", disable=not progress) as bar:
         for items in by_shape.values():
             for start in range(0, len(items), batch_size):
