@@ -5,6 +5,10 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 DEMO := out/demo
 DEMO_DESIGN := flat_roof=flat-membrane-white-tpo,sloped_roof=sloped-clay-terracotta
+DEMO_HIDDEN := flat_roof=flat-gravel-dark,sloped_roof=sloped-seam-green
+DEMO_TARGETS := 12
+DEMO_STARTS := 256
+DEMO_ITERATIONS := 100
 
 .PHONY: setup demo test test-all bench-render clean
 
@@ -16,12 +20,18 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# The main job on its embedded defaults: build the texture bank, render a 3x3-tile city with one design.
+# The main job on its embedded defaults: build the texture bank, render a training set, train NAMS and the
+# DR baseline, run E1, then infer the design of a target city rendered with a design the model is not told.
 demo: setup
 	$(BIN)/meta-sim textures build
 	$(BIN)/meta-sim textures sheet --out $(DEMO)/texture-bank.png
-	$(BIN)/meta-sim render --design $(DEMO_DESIGN) --seed 1 --tiles 9 --preset fast --out $(DEMO) --preview
-	@echo "Tiles, previews and the city mosaic are in $(DEMO)/"
+	$(BIN)/meta-sim render --design $(DEMO_DESIGN) --seed 1 --tiles 9 --preset fast --out $(DEMO)/city --preview
+	$(BIN)/meta-sim eval e1 --out $(DEMO)/e1 --targets $(DEMO_TARGETS) -M $(DEMO_STARTS) --iterations $(DEMO_ITERATIONS)
+	$(BIN)/meta-sim render --design $(DEMO_HIDDEN) --seed 4242 --tiles 9 --preset fast --out $(DEMO)/target
+	$(BIN)/meta-sim infer $(DEMO)/target --model $(DEMO)/e1/nams.pt --out $(DEMO)/infer
+	@echo "The hidden design was $(DEMO_HIDDEN)"
+	@cat $(DEMO)/e1/results.md
+	@echo "Look at $(DEMO)/city/*_mosaic.png, $(DEMO)/e1/sheet.png and $(DEMO)/infer/report.png"
 
 # The fast default set plus one real end-to-end run (slow-marked tests run in `test-all`).
 test: setup

@@ -168,6 +168,8 @@ def _dataset_options(command):
         click.option("--dataset-seed", type=int, default=1, show_default=True, help="design sampling and city seed"),
         click.option("--cities", type=int, default=8, show_default=True, help="cities the designs are spread over"),
         click.option("--preset", default="fast", show_default=True, help="render preset of the training tiles"),
+        click.option("--tile-px", type=int, default=384, show_default=True, help="training tile size in pixels"),
+        click.option("--gsd", type=float, default=0.3, show_default=True, help="training tiles' metres per pixel"),
         click.option("--extractor", default="colour-texture", show_default=True,
                      help="features: colour-texture, torchscript:FILE, export:FILE or torchvision:NAME"),
         click.option("--weights", type=click.Path(path_type=Path), default=None,
@@ -190,7 +192,7 @@ def _configs(o):
     base = DatasetConfig.paper() if o["paper_scale"] else DatasetConfig()
     overrides = {k: v for k, v in (("designs", o["designs"]), ("tiles", o["tiles"])) if v is not None}
     dataset = DatasetConfig(**{**base.__dict__, **overrides, "seed": o["dataset_seed"], "cities": o["cities"],
-                               "preset": o["preset"]})
+                               "preset": o["preset"], "tile_px": o["tile_px"], "pixel_size_m": o["gsd"]})
     nams = {}
     if o["hidden"]:
         try:
@@ -277,7 +279,7 @@ def infer_command(target_dir, model, out, group_size, gsd, views, weights, seed,
     for s in report["skipped"]:
         click.echo(f"skipped {s['path']}: {s['reason']}", err=True)
     click.echo((out / "report.md").read_text())
-    click.echo(f"{report['groups']} presets in {out / 'presets'}, population in {out / 'population.json'}")
+    click.echo(f"{report['group_count']} presets in {out / 'presets'}, population in {out / 'population.json'}")
 
 
 @main.command("eval")

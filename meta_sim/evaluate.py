@@ -96,7 +96,7 @@ def write_results(out: Path, results: dict) -> None:
 
 
 def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, root: Path,
-                   bar=None) -> tuple[list[Job], Path]:
+                   tile_px: int = 384, pixel_size_m: float = 0.3, bar=None) -> tuple[list[Job], Path]:
     """Render (or reuse) the target groups of an experiment; returns the jobs and their tile folder."""
     from .render import RenderSettings, render_jobs
     from .render_presets import get_preset
@@ -105,9 +105,9 @@ def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, 
     space = DesignSpace.load()
     bank, heldout = ensure_default_bank(), ensure_heldout_bank()
     jobs = target_jobs(experiment, space, heldout, n, seed)
-    folder = Path(root) / "targets" / f"{experiment}-n{n}-t{tiles}-s{seed}-{preset}"
+    folder = Path(root) / "targets" / f"{experiment}-n{n}-t{tiles}-s{seed}-{preset}-{tile_px}px-{pixel_size_m}m"
     settings = RenderSettings(space=space, banks=[bank, heldout], preset=get_preset(preset), out_dir=folder,
-                              n_tiles=tiles)
+                              n_tiles=tiles, tile_px=tile_px, pixel_size_m=pixel_size_m)
     render_jobs(jobs, settings, bar(f"render {experiment} targets", n * tiles) if bar else None)
     return jobs, folder
 
@@ -139,6 +139,8 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     from .features import features_for_groups, make_extractor
     from .imageio import read_image
     from .nams import dr_predict, exhaustive_search, adjoint_search, load_checkpoint, uniform_predict
+    from .render import RenderSettings
+    from .render_presets import get_preset
     from .textures import ensure_default_bank, ensure_heldout_bank
     from .workflow import cache_root, ensure_models
 
@@ -149,7 +151,7 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
     tiles = settings.tiles or dataset.tiles
     jobs, folder = render_targets(experiment, settings.targets, tiles, settings.seed,
-                                  settings.preset or dataset.preset, root, bar)
+                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bar)
     extractor = make_extractor(models_settings.extractor,
                                Path(models_settings.weights) if models_settings.weights else None)
     started = time.perf_counter()
@@ -191,27 +193,25 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     shutil.copy2(models.nams_path, out / "nams.pt")
     shutil.copy2(models.dr_path, out / "dr.pt")
     comparison_sheet(out / "sheet.png", jobs[:settings.sheet_rows], folder, predictions["nams_adjoint"],
-                     tiles, settings.preset or dataset.preset, root)
+                     RenderSettings(space=DesignSpace.load(), banks=[bank, heldout],
+                                    preset=get_preset(settings.preset or dataset.preset),
+                                    out_dir=root / "targets" / "inferred", n_tiles=tiles, tile_px=dataset.tile_px,
+                                    pixel_size_m=dataset.pixel_size_m))
     return results
 
 
-def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted: list[dict], tiles: int,
-                     preset: str, root: Path) -> None:
+def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted: list[dict],
+                     settings) -> None:
     """Each target's first tile beside the same city rendered with the inferred design, and the textures."""
     from .dataset import job_tiles
     from .imageio import read_image
-    from .render import RenderSettings, render_jobs
-    from .render_presets import get_preset
-    from .textures import ensure_default_bank, ensure_heldout_bank
+    from .render import render_jobs
     from .textures.pngio import write_png
     from .textures.sheet import render_sheet
 
-    space = DesignSpace.load()
-    banks = [ensure_default_bank(), ensure_heldout_bank()]
+    space, banks, folder, tiles = settings.space, settings.banks, settings.out_dir, settings.n_tiles
     inferred = [Job(design, job.city_seed, f"{job.name}-inferred") for job, design in zip(jobs, predicted)]
-    folder = Path(root) / "targets" / "inferred"
-    render_jobs(inferred, RenderSettings(space=space, banks=banks, preset=get_preset(preset), out_dir=folder,
-                                         n_tiles=tiles))
+    render_jobs(inferred, settings)
 
     def srgb8(path):
         return np.floor(read_image(path) * 255 + 0.5).astype(np.uint8)

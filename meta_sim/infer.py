@@ -97,7 +97,8 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
         presets.append(preset)
     pop = population(presets, ckpt.space, f"{stem}-population", ckpt.model_id)
     save_preset(out_dir / "population.json", pop)
-    report = {"target_dir": str(target_dir), "images": len(paths), "tiles": len(targets), "groups": len(groups),
+    report = {"target_dir": str(target_dir), "images": len(paths), "tiles": len(targets),
+              "group_count": len(groups),
               "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
               "method": results[0].method if results else settings.method,
               "seconds": {"read_and_features": read_seconds, "search": search_seconds,
@@ -117,7 +118,7 @@ def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
 
     (out_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     lines = [f"# meta-sim infer: {report['target_dir']}", "",
-             f"{report['images']} images, {report['tiles']} tiles, {report['groups']} groups; "
+             f"{report['images']} images, {report['tiles']} tiles, {report['group_count']} groups; "
              f"search `{report['method']}`, {report['seconds']['search_per_group']:.4f} s per group; "
              f"model `{report['model_id']}`.", "", "| group | " + " | ".join(space.names) + " |",
              "|---|" + "---|" * len(space.names)]

@@ -1,0 +1,146 @@
+"""The NAMS loop on real renders at a small scale: dataset -> train -> eval and infer through the CLI."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from meta_sim.cli import main as cli
+from meta_sim.presets import load_preset
+
+REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+# A training set small enough for the default test run: 16 designs x 1 tile of 96 px at 1.2 m/px.
+TINY = ["--designs", 16, "--tiles", 1, "--cities", 2, "--hidden", "64,128", "--max-epochs", 40,
+        "--tile-px", 96, "--gsd", 1.2]
+
+
+def _cli(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def tiny_env(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def evaluated(tiny_env, tmp_path_factory):
+    out = tmp_path_factory.mktemp("e1")
+    result = _cli("eval", "e1", "--out", out, "--targets", 3, "-M", 16, "--iterations", 5, "-S", 4,
+                  "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    return out, result
+
+
+def test_eval_writes_results_sheet_and_checkpoint(evaluated):
+    out, result = evaluated
+    results = json.loads((out / "results.json").read_text())
+    assert results["experiment"] == "e1" and results["targets"] == 3
+    assert set(results["methods"]) == {"uniform", "dr", "nams_adjoint", "nams_exhaustive"}
+    for metrics in results["methods"].values():
+        for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
+            assert 0.0 <= metrics[key] <= 1.0
+        assert metrics["flat_top1"] <= metrics["flat_top10"] and metrics["seconds_per_target"] >= 0
+    assert "| nams_adjoint |" in (out / "results.md").read_text()
+    assert (out / "sheet.png").stat().st_size > 1000
+    assert (out / "nams.pt").is_file() and (out / "dr.pt").is_file()
+
+
+def test_eval_reuses_its_cached_training_set_and_model(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    again = _cli("eval", "e1", "--out", tmp_path, "--targets", 3, "-M", 16, "--iterations", 5, "-S", 4,
+                 "--cache", tiny_env, *TINY)
+    assert again.exit_code == 0
+    assert (tmp_path / "nams.pt").read_bytes() == (out / "nams.pt").read_bytes()
+    first = json.loads((out / "results.json").read_text())["methods"]
+    second = json.loads((tmp_path / "results.json").read_text())["methods"]
+    for method in first:  # same seed, same designs inferred
+        assert {k: v for k, v in first[method].items() if k != "seconds_per_target"} == \
+               {k: v for k, v in second[method].items() if k != "seconds_per_target"}
+
+
+def _target_folder(tmp_path, tiny_env):
+    folder = tmp_path / "targets"
+    result = _cli("render", "--design", "flat_roof=3,sloped_roof=5", "--seed", 777, "--tiles", 4,
+                  "--tile-px", 96, "--gsd", 1.2, "--out", folder)
+    assert result.exit_code == 0, result.output
+    (folder / "designs.json").unlink()
+    return folder
+
+
+def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    (folder / "empty.png").write_bytes(b"")
+    (folder / "notes.txt").write_text("not an image")
+    good = next(folder.glob("*.exr"))
+    (folder / "truncated.exr").write_bytes(good.read_bytes()[:3000])
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "inferred", "--group-size", 2)
+    assert result.exit_code == 0, result.output
+    assert "empty.png" in result.output and "truncated.exr" in result.output
+    presets = sorted((tmp_path / "inferred" / "presets").glob("*.json"))
+    assert len(presets) == 2  # 4 tiles in groups of 2
+    for path in presets:
+        preset = load_preset(path)
+        assert preset.kind == "group" and len(preset.source_images) == 2
+        assert set(preset.design) == {"flat_roof", "sloped_roof"}
+        for param, shares in preset.vote_shares.items():
+            assert abs(sum(shares.values()) - 1.0) < 1e-6
+    population = load_preset(tmp_path / "inferred" / "population.json")
+    assert population.kind == "population" and sum(d["count"] for d in population.designs) == 2
+    report = json.loads((tmp_path / "inferred" / "report.json").read_text())
+    assert report["group_count"] == 2 and len(report["groups"]) == 2 and len(report["skipped"]) == 3
+    assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
+
+
+def test_infer_is_deterministic(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    for name in ("a", "b"):
+        assert _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / name, "--search", "adjoint",
+                    "-M", 32, "--iterations", 10, "-S", 8).exit_code == 0
+    a = sorted((tmp_path / "a" / "presets").glob("*.json"))
+    b = sorted((tmp_path / "b" / "presets").glob("*.json"))
+    assert [p.read_text() for p in a] == [p.read_text() for p in b]
+
+
+@pytest.mark.parametrize("content", ["empty", "junk"])
+def test_infer_without_usable_images_is_an_error(evaluated, tmp_path, content):
+    out, _ = evaluated
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    if content == "junk":
+        (folder / "a.png").write_bytes(b"\x89PNG not really")
+    result = CliRunner().invoke(cli, ["infer", str(folder), "--model", str(out / "nams.pt"),
+                                      "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    assert "no readable images" in result.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_infer_rejects_a_damaged_checkpoint(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    bad = tmp_path / "bad.pt"
+    data = bytearray((out / "nams.pt").read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    result = CliRunner().invoke(cli, ["infer", str(folder), "--model", str(bad), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "corrupt" in result.output
+
+
+@pytest.mark.skipif(not (REALDATA / "kampala").is_dir(), reason="../shared/realdata is not beside the project")
+def test_infer_on_real_aerial_imagery(evaluated, tmp_path):
+    """Real drone tiles of Kampala (0.3 m web-mercator z19 tiles) through the whole infer path."""
+    out, _ = evaluated
+    folder = tmp_path / "kampala"
+    folder.mkdir()
+    for path in sorted((REALDATA / "kampala" / "ramp-data" / "sample_2" / "input").glob("OAM-*-19.png"))[:4]:
+        shutil.copy(path, folder / path.name)  # a copy in the test's temporary folder only
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "inferred", "--group-size", 4)
+    assert result.exit_code == 0, result.output
+    preset = load_preset(next((tmp_path / "inferred" / "presets").glob("*.json")))
+    assert np.isfinite(preset.search["loss"])
