@@ -127,26 +127,34 @@ class EvalSettings:
     sheet_rows: int = 6
 
 
-def run_eval(experiment: str, out: Path, dataset, models_settings, settings: EvalSettings = EvalSettings(),
-             root: Path | None = None, bar=None) -> dict:
-    """Build or reuse the training set and models, render targets, score every method."""
-    import shutil
-    import time
+@dataclass
+class EvalContext:
+    """Everything the methods of one experiment are scored with."""
 
-    import torch
+    experiment: str
+    models: object  # workflow.Models
+    nams: object  # nams.Checkpoint
+    dr: object
+    jobs: list
+    folder: Path
+    tiles: int
+    features: object  # (targets, F) tensor
+    feature_seconds: float
+    ranks: dict
+
+
+def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
+                 bar=None) -> EvalContext:
+    """Build or reuse the training set and models; render the targets and compute their features."""
+    import time
 
     from .dataset import job_tiles
     from .features import features_for_groups, make_extractor
     from .imageio import read_image
-    from .nams import dr_predict, exhaustive_search, adjoint_search, load_checkpoint, uniform_predict
-    from .render import RenderSettings
-    from .render_presets import get_preset
+    from .nams import load_checkpoint
     from .textures import ensure_default_bank, ensure_heldout_bank
-    from .workflow import cache_root, ensure_models
+    from .workflow import ensure_models
 
-    root = Path(root or cache_root())
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     models = ensure_models(dataset, models_settings, root, bar)
     nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
     tiles = settings.tiles or dataset.tiles
@@ -158,46 +166,81 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job in jobs]
     feats = features_for_groups(groups, extractor, models_settings.views)
     feature_seconds = (time.perf_counter() - started) / len(jobs)
+    ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
+    return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, feats, feature_seconds, ranks)
 
-    space = nams.space
-    generator = torch.Generator().manual_seed(settings.seed)
+
+def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
+    """Method name -> a function returning one design per target (searches batched over targets)."""
+    import torch
+
+    from .nams import adjoint_search, dr_predict, exhaustive_search, uniform_predict
+
+    space, feats, n = ctx.nams.space, ctx.features, len(ctx.jobs)
+    generator = torch.Generator().manual_seed(seed)
+    normed = ctx.nams.feature_norm.apply(feats)
+    return {
+        "uniform": lambda: uniform_predict(space, n, generator),
+        "dr": lambda: [r.design for r in dr_predict(ctx.dr.model, ctx.dr.feature_norm.apply(feats), space)],
+        "nams_adjoint": lambda: [r.design for r in adjoint_search(
+            ctx.nams.model, normed, space, generator=generator, **adjoint_settings)],
+        "nams_exhaustive": lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)],
+    }
+
+
+def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
+    """Mean top-1/top-10 rates and seconds per target of one method."""
+    import time
+
+    started = time.perf_counter()
+    designs = run()
+    seconds = (time.perf_counter() - started) / len(ctx.jobs)
+    rows = [score(p, job.design, ctx.ranks) for p, job in zip(designs, ctx.jobs)]
+    return {**mean_scores(rows), "seconds_per_target": seconds}, designs
+
+
+def run_eval(experiment: str, out: Path, dataset, models_settings, settings: EvalSettings = EvalSettings(),
+             root: Path | None = None, bar=None) -> dict:
+    """Build or reuse the training set and models, render targets, score every method."""
+    import shutil
+
+    from .render import RenderSettings
+    from .render_presets import get_preset
+    from .workflow import cache_root
+
+    root = Path(root or cache_root())
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = prepare_eval(experiment, dataset, models_settings, settings, root, bar)
     adjoint = {"M": settings.M, "k": settings.k, "S": settings.S, "iterations": settings.iterations,
                "lr": settings.lr, "r": settings.r}
-    runs = {
-        "uniform": lambda: uniform_predict(space, len(jobs), generator),
-        "dr": lambda: [r.design for r in dr_predict(dr.model, dr.feature_norm.apply(feats), space)],
-        "nams_adjoint": lambda: [r.design for r in adjoint_search(
-            nams.model, nams.feature_norm.apply(feats), space, generator=generator, **adjoint)],
-        "nams_exhaustive": lambda: [r.design for r in exhaustive_search(
-            nams.model, nams.feature_norm.apply(feats), space, S=settings.S)],
-    }
-    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
-    ranks = rankings(experiment, bank, heldout)
     methods, predictions = {}, {}
-    for name, run in runs.items():
-        started = time.perf_counter()
-        designs = run()
-        seconds = (time.perf_counter() - started) / len(jobs)
-        predictions[name] = designs
-        rows = [score(p, job.design, ranks) for p, job in zip(designs, jobs)]
-        methods[name] = {**mean_scores(rows), "seconds_per_target": seconds}
-    results = {"experiment": experiment, "targets": len(jobs), "tiles_per_target": tiles,
-               "feature_seconds_per_target": feature_seconds, "methods": methods,
+    for name, run in method_runs(ctx, settings.seed, adjoint, settings.S).items():
+        methods[name], predictions[name] = score_method(ctx, run)
+    results = {"experiment": experiment, "targets": len(ctx.jobs), "tiles_per_target": ctx.tiles,
+               "feature_seconds_per_target": ctx.feature_seconds, "methods": methods,
                "adjoint": adjoint, "training": {"designs": dataset.designs, "tiles": dataset.tiles,
-                                                "preset": dataset.preset, "seconds": models.seconds},
-               "model_id": nams.model_id,
+                                                "preset": dataset.preset, "seconds": ctx.models.seconds},
+               "model_id": ctx.nams.model_id,
                "targets_detail": [{"name": j.name, "truth": j.design,
                                    "predicted": {m: predictions[m][i] for m in predictions}}
-                                  for i, j in enumerate(jobs)]}
+                                  for i, j in enumerate(ctx.jobs)]}
     write_results(out, results)
-    shutil.copy2(models.nams_path, out / "nams.pt")
-    shutil.copy2(models.dr_path, out / "dr.pt")
-    comparison_sheet(out / "sheet.png", jobs[:settings.sheet_rows], folder, predictions["nams_adjoint"],
-                     RenderSettings(space=DesignSpace.load(), banks=[bank, heldout],
+    shutil.copy2(ctx.models.nams_path, out / "nams.pt")
+    shutil.copy2(ctx.models.dr_path, out / "dr.pt")
+    banks = _banks()
+    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, predictions["nams_adjoint"],
+                     RenderSettings(space=DesignSpace.load(), banks=banks,
                                     preset=get_preset(settings.preset or dataset.preset),
-                                    out_dir=root / "targets" / "inferred", n_tiles=tiles, tile_px=dataset.tile_px,
-                                    pixel_size_m=dataset.pixel_size_m))
+                                    out_dir=root / "targets" / "inferred", n_tiles=ctx.tiles,
+                                    tile_px=dataset.tile_px, pixel_size_m=dataset.pixel_size_m))
     return results
+
+
+def _banks() -> list:
+    from .textures import ensure_default_bank, ensure_heldout_bank
+
+    return [ensure_default_bank(), ensure_heldout_bank()]
 
 
 def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted: list[dict],
