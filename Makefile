@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all bench-render clean
+.PHONY: setup demo test test-all bench-render bench-nams clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,9 @@ test-all: setup
 
 bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
+
+bench-nams: setup
+	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
 
 clean:
 	rm -rf out build dist *.egg-info

@@ -77,3 +77,69 @@ def format_render_table(result: dict) -> str:
                  f"{result['designs_per_city']} designs per city, medians of {result['repeats']} runs, "
                  f"{result['machine']['cpus']} CPUs.")
     return "\n".join(lines)
+
+
+# Adjoint settings swept by bench_nams, paper first: (starts M, iterations).
+ADJOINT_SWEEP = ((1000, 200), (250, 200), (250, 100), (64, 100), (64, 50), (16, 50))
+
+
+def bench_nams(targets: int = 20, seed: int = 1, root: Path | None = None) -> dict:
+    """Training time, feature time per target group, and search time and E1 accuracy per search setting.
+
+    Uses the default training set and model (built or reused from the cache);
+    training is timed on a fresh run into a temporary folder.
+    """
+    import torch
+
+    from .dataset import DatasetConfig
+    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method
+    from .features import make_extractor, time_extractor
+    from .workflow import ModelSettings, cache_root, train_models
+
+    root = Path(root or cache_root())
+    dataset, settings = DatasetConfig(), ModelSettings()
+    result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
+              "targets": targets, "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}}
+    experiments = {}
+    for experiment in ("e1", "e2"):
+        ctx = prepare_eval(experiment, dataset, settings, EvalSettings(targets=targets, seed=seed), root)
+        rows = {}
+        for name in ("uniform", "dr", "nams_exhaustive"):
+            rows[name], _ = score_method(ctx, method_runs(ctx, seed, {})[name])
+        for starts, iterations in ADJOINT_SWEEP:
+            run = method_runs(ctx, seed, {"M": starts, "iterations": iterations})["nams_adjoint"]
+            rows[f"nams_adjoint_M{starts}_it{iterations}"], _ = score_method(ctx, run)
+        experiments[experiment] = rows
+    result["experiments"] = experiments
+    paper = experiments["e1"]["nams_adjoint_M1000_it200"]
+    keeps = [(s, i) for s, i in ADJOINT_SWEEP
+             if all(experiments["e1"][f"nams_adjoint_M{s}_it{i}"][k] >= paper[k] - 0.05
+                    for k in ("flat_top1", "sloped_top1"))]
+    fastest = min(keeps, key=lambda si: experiments["e1"][f"nams_adjoint_M{si[0]}_it{si[1]}"]["seconds_per_target"])
+    result["fastest_adjoint_keeping_e1"] = {"M": fastest[0], "iterations": fastest[1]}
+    result["feature_seconds_per_group"] = round(time_extractor(make_extractor(), dataset.tile_px, 9, 8), 4)
+    with tempfile.TemporaryDirectory() as out:
+        from .workflow import prepare_features
+
+        feature_set, _ = prepare_features(dataset, settings, root)
+        result["train_seconds"] = {k: round(v, 2) for k, v in
+                                   train_models(feature_set, Path(out), settings, dataset).items()}
+    return result
+
+
+def format_nams_table(result: dict) -> str:
+    lines = ["| experiment | method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target |",
+             "|---|---|---|---|---|---|---|"]
+    for experiment, rows in result["experiments"].items():
+        for name, m in rows.items():
+            lines.append(f"| {experiment.upper()} | {name} | {m['flat_top1']:.3f} | {m['flat_top10']:.3f} | "
+                         f"{m['sloped_top1']:.3f} | {m['sloped_top10']:.3f} | {m['seconds_per_target']:.4f} |")
+    t = result["train_seconds"]
+    f = result["fastest_adjoint_keeping_e1"]
+    lines += ["", f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
+              f"({result['dataset']['preset']}); {result['targets']} target groups per experiment. "
+              f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s. "
+              f"Features: {result['feature_seconds_per_group']:.3f} s per group of 9 tiles x 8 views. "
+              f"Fastest adjoint setting within 0.05 of the paper setting's E1 top-1: "
+              f"M={f['M']}, {f['iterations']} iterations."]
+    return "\n".join(lines)
