@@ -144,6 +144,6 @@ def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
         row = [(f"G{preset.name[-3:]}", tile)]
         for name in space.names:
             value = preset.design[name]
-            row.append((f"{name[:6].upper()} {preset.confidence(name):.0%}", swatch(value)))
+            row.append((f"{name.split('_')[0].upper()} {preset.confidence(name):.0%}", swatch(value)))
         rows.append(row)
     write_png(out_dir / "report.png", render_sheet(rows, 160, 1 + len(space.names)))
