@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from meta_sim.errors import MetaSimError
+from .errors import MetaSimError
 
 LAYOUT_VERSION = 1
 TILE_M = 115.2  # 384 px at 0.3 m per pixel

@@ -3,7 +3,7 @@ photo folders, the HSV colour similarity between textures, and contact
 sheets. Pure Python + numpy (OpenImageIO only to read photos); never imports
 bpy or torch."""
 
-from meta_sim.textures.bank import (
+from .bank import (
     BANK_FORMAT,
     BANK_VERSION,
     KINDS,
@@ -23,10 +23,10 @@ from meta_sim.textures.bank import (
     pixel_sha256,
     save_manifest,
 )
-from meta_sim.textures.pngio import read_rgb8, resize_area, write_png
-from meta_sim.textures.procedural import Recipe, generate, recipe_by_id, recipes
-from meta_sim.textures.sheet import contact_sheet
-from meta_sim.textures.similarity import (
+from .pngio import read_rgb8, resize_area, write_png
+from .procedural import Recipe, generate, recipe_by_id, recipes
+from .sheet import contact_sheet
+from .similarity import (
     Similarity,
     bank_similarity,
     hsv_cone_histogram,

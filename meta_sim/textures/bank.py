@@ -32,10 +32,10 @@ from typing import Callable
 
 import numpy as np
 
-from meta_sim.errors import MetaSimError
-from meta_sim.textures import procedural
-from meta_sim.textures.pngio import read_rgb8, resize_area, write_bytes_atomic, write_png
-from meta_sim.textures.similarity import Similarity, hsv_cone_histogram, save_similarity, similarity_matrix
+from ..errors import MetaSimError
+from . import procedural
+from .pngio import read_rgb8, resize_area, write_bytes_atomic, write_png
+from .similarity import Similarity, hsv_cone_histogram, save_similarity, similarity_matrix
 
 BANK_FORMAT = "meta-sim-texture-bank"
 BANK_VERSION = 1

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meta_sim.errors import MetaSimError
+from ..errors import MetaSimError
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> PNG colour type

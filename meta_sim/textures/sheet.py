@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meta_sim.textures.pngio import read_rgb8, resize_area, write_png
+from .pngio import read_rgb8, resize_area, write_png
 
 # 5x7 glyphs, one string of five '#'/'.' per row.
 _GLYPHS = {

@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meta_sim.errors import MetaSimError
-from meta_sim.textures.pngio import read_rgb8, write_bytes_atomic
+from ..errors import MetaSimError
+from .pngio import read_rgb8, write_bytes_atomic
 
 SIMILARITY_FORMAT = "meta-sim-similarity"
 SIMILARITY_VERSION = 1
