@@ -14,6 +14,13 @@ runs inside ``blender -b`` and with the ``bpy`` module.
   anti-aliasing and the per-polygon label colours of ``meshes.label_color``:
   every pixel is one exact instance id and roof class, independent of the
   design, so they are rendered once per city.
+* Two homes for a city. The render worker owns its whole session and starts
+  from an empty file. The add-on works inside a user's file: it passes a
+  collection, the city is built into it and rendered through a private scene,
+  and every datablock the city creates carries ``CITY_TAG`` so `remove_city`
+  deletes it all (no orphans) even after undo or a file reload, when no Python
+  object of the city survives. For the same reason `set_roofs` reads
+  everything it needs from the mesh (metre UVs in a second UV map).
 """
 
 from __future__ import annotations
@@ -35,6 +42,10 @@ from ..render_presets import RenderPreset
 
 LABEL_ATTRIBUTE = "label"
 UV_NAME = "UVMap"
+UV_METRES = "UVMetres"  # the design-independent UVs; a design divides them by its textures' repeat sizes
+CITY_TAG = "meta_sim_city"  # custom property: the key of the city a datablock belongs to
+ROLE_TAG = "meta_sim_role"
+TEXTURE_TAG = "meta_sim_texture"
 
 
 @dataclass(frozen=True)
@@ -53,7 +64,12 @@ def bounding_rect(rects) -> Rect:
                 max(r.x1 for r in rects), max(r.y1 for r in rects))
 
 
-def _new_mesh_object(arrays: meshes.MeshArrays, materials) -> bpy.types.Object:
+def _tagged(datablock, key: str):
+    datablock[CITY_TAG] = key
+    return datablock
+
+
+def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str) -> bpy.types.Object:
     data = arrays.arrays()
     mesh = bpy.data.meshes.new(arrays.name)
     mesh.vertices.add(len(data["vertices"]))
@@ -64,8 +80,9 @@ def _new_mesh_object(arrays: meshes.MeshArrays, materials) -> bpy.types.Object:
     mesh.polygons.foreach_set("loop_start", data["loop_start"])
     mesh.polygons.foreach_set("loop_total", data["loop_total"])
     mesh.polygons.foreach_set("material_index", data["material"])
-    uv = mesh.uv_layers.new(name=UV_NAME)
-    uv.data.foreach_set("uv", data["uv"].ravel())
+    for name in (UV_NAME, UV_METRES):
+        mesh.uv_layers.new(name=name).data.foreach_set("uv", data["uv"].ravel())
+    mesh.uv_layers[UV_NAME].active = mesh.uv_layers[UV_NAME].active_render = True
     label = mesh.color_attributes.new(LABEL_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
     label.data.foreach_set("color", data["label"].ravel())
     mesh.color_attributes.active_color = label
@@ -74,13 +91,14 @@ def _new_mesh_object(arrays: meshes.MeshArrays, materials) -> bpy.types.Object:
     for material in materials:
         mesh.materials.append(material)
     obj = bpy.data.objects.new(arrays.name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
+    collection.objects.link(obj)
+    _tagged(mesh, key)
+    return _tagged(obj, key)
 
 
-def _image_material(name: str, image: bpy.types.Image, roughness: float = 0.85) -> bpy.types.Material:
+def _image_material(name: str, image: bpy.types.Image, key: str, roughness: float = 0.85) -> bpy.types.Material:
     """A diffuse material whose base colour is one image (Workbench shows that image too)."""
-    material = bpy.data.materials.new(name)
+    material = _tagged(bpy.data.materials.new(name), key)
     tree = material.node_tree if material.node_tree else None
     if tree is None:  # Blender < 5 creates node trees only on request
         material.use_nodes = True
@@ -95,17 +113,94 @@ def _image_material(name: str, image: bpy.types.Image, roughness: float = 0.85) 
     return material
 
 
-def _noise_image(name: str, colour, amount: float, seed: int, size: int = 64) -> bpy.types.Image:
+def _noise_image(name: str, colour, amount: float, seed: int, key: str, size: int = 64) -> bpy.types.Image:
     """A small tileable speckle image for ground, roads, walls and trees."""
     rng = np.random.default_rng(seed)
     base = np.asarray(colour, dtype=np.float32)
     noise = rng.normal(0.0, amount, (size, size, 1)).astype(np.float32)
     rgba = np.ones((size, size, 4), dtype=np.float32)
     rgba[..., :3] = np.clip(base * (1.0 + noise), 0.0, 1.0)
-    image = bpy.data.images.new(name, size, size, float_buffer=True)
+    image = _tagged(bpy.data.images.new(name, size, size, float_buffer=True), key)
     image.pixels.foreach_set(rgba.ravel())
     image.pack()
     return image
+
+
+def _texture_material(key: str, entry, image_path: str) -> bpy.types.Material:
+    """The city's material for one bank texture, made on first use (a design switch reuses it)."""
+    for material in bpy.data.materials:
+        if material.get(CITY_TAG) == key and material.get(TEXTURE_TAG) == entry.id:
+            return material
+    try:
+        # Never shared with another city (check_existing=False): removing one city must not
+        # take an image from under another.
+        image = _tagged(bpy.data.images.load(image_path, check_existing=False), key)
+    except RuntimeError:
+        raise MetaSimError(f"cannot read texture image {image_path} (texture {entry.id!r}); "
+                           "rebuild the bank with `meta-sim textures build`") from None
+    try:
+        image.pixels[0]  # force the load now, so a bad file fails here, by name
+    except (RuntimeError, IndexError):
+        bpy.data.images.remove(image)
+        raise MetaSimError(f"cannot read texture image {image_path} (texture {entry.id!r}); "
+                           "rebuild the bank with `meta-sim textures build`") from None
+    material = _image_material(f"roof:{entry.id}", image, key)
+    material[TEXTURE_TAG] = entry.id
+    return material
+
+
+def set_roofs(buildings: bpy.types.Object, textures: dict, placeholders: dict | None = None,
+              drop_unused: bool = False) -> None:
+    """Put a texture on each roof slot of a city's building object: ``{meshes.FLAT_ROOF: (entry, path), ...}``.
+
+    A slot not given gets ``placeholders[slot]`` (a space without that roof kind) or keeps its material.
+    With ``drop_unused``, texture materials of this city that no roof uses any more are removed with
+    their images (the add-on's file must not fill up; the worker keeps them for the next design).
+    """
+    key = buildings[CITY_TAG]
+    mesh = buildings.data
+    slots = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("material_index", slots)
+    totals = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("loop_total", totals)
+    loop_slot = np.repeat(slots, totals)
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    mesh.uv_layers[UV_METRES].data.foreach_get("uv", uv)
+    uv = uv.reshape(-1, 2)
+    for slot in (meshes.FLAT_ROOF, meshes.SLOPED_ROOF):
+        if slot in textures:
+            entry, path = textures[slot]
+            mesh.materials[slot] = _texture_material(key, entry, path)
+            uv[loop_slot == slot] /= float(entry.repeat_m)
+        elif placeholders:
+            mesh.materials[slot] = placeholders[slot]
+    mesh.uv_layers[UV_NAME].data.foreach_set("uv", uv.ravel())
+    mesh.update()
+    if not drop_unused:
+        return
+    unused = [m for m in bpy.data.materials if m.get(CITY_TAG) == key and m.get(TEXTURE_TAG) and not m.users]
+    images = [n.image for m in unused for n in m.node_tree.nodes if n.type == "TEX_IMAGE" and n.image]
+    if unused:
+        bpy.data.batch_remove(unused + images)
+
+
+def city_ids(key: str) -> list:
+    """Every datablock of one city (objects, meshes, materials, images, camera, light, world, scene, collection)."""
+    pools = (bpy.data.objects, bpy.data.meshes, bpy.data.materials, bpy.data.images, bpy.data.cameras,
+             bpy.data.lights, bpy.data.worlds, bpy.data.scenes, bpy.data.collections)
+    return [datablock for pool in pools for datablock in pool if datablock.get(CITY_TAG) == key]
+
+
+def remove_city(key: str) -> int:
+    """Delete every datablock of one city; returns how many."""
+    ids = city_ids(key)
+    bpy.data.batch_remove(ids)
+    return len(ids)
+
+
+def city_buildings(key: str) -> bpy.types.Object | None:
+    """The building object of a city, if it has buildings."""
+    return next((o for o in bpy.data.objects if o.get(CITY_TAG) == key and o.get(ROLE_TAG) == "buildings"), None)
 
 
 @contextlib.contextmanager
@@ -136,18 +231,31 @@ def _quiet(log_path: str):
 
 
 class CityScene:
-    """One city in the current Blender session (the scene is reset on construction)."""
+    """One city in the current Blender session.
 
-    def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0):
+    Without ``collection`` (the render worker) the session is reset and the city fills its
+    scene. With a collection (the add-on) the city is built into it, tagged with ``key``
+    (default: the collection's name), and renders go through a private scene made on first use.
+    """
+
+    def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0,
+                 collection: bpy.types.Collection | None = None, key: str | None = None):
         self.layout = layout
         self.pixel_size_m = pixel_size_m
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        self.scene = bpy.context.scene
-        self._materials: dict[str, bpy.types.Material] = {}
+        if collection is None:
+            bpy.ops.wm.read_factory_settings(use_empty=True)
+            self._scene = bpy.context.scene
+            self.collection = self._scene.collection
+            self.key = key or "worker"
+        else:
+            self._scene = None
+            self.collection = collection
+            self.key = key or collection.name
+            _tagged(collection, self.key)
         self._tmp = tempfile.mkdtemp(prefix="meta-sim-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
         self._build(shadow_margin_m)
-        self._setup_camera_and_light()
+        self._add_camera_and_sun()
 
     # --- construction ------------------------------------------------------
     def _visible(self, items_in_rect, margin: float):
@@ -166,51 +274,64 @@ class CityScene:
         roads = self._visible(lay.roads_in_rect, 0.0)
         trees = self._visible(lay.trees_in_rect, margin)
         region = bounding_rect(self.rects).grown(margin)
-        seed = int(lay.seed)
-        grey = _image_material("wall", _noise_image("wall", (0.45, 0.43, 0.40), 0.05, seed), 0.9)
+        seed, key = int(lay.seed), self.key
+        grey = _image_material("wall", _noise_image("wall", (0.45, 0.43, 0.40), 0.05, seed, key), key, 0.9)
         self._placeholder = {
-            meshes.FLAT_ROOF: _image_material("flat-roof-unset", _noise_image("unset-f", (0.5, 0.5, 0.5), 0.0, 0)),
-            meshes.SLOPED_ROOF: _image_material("sloped-roof-unset", _noise_image("unset-s", (0.5, 0.5, 0.5), 0.0, 0)),
+            meshes.FLAT_ROOF: _image_material(
+                "flat-roof-unset", _noise_image("unset-f", (0.5, 0.5, 0.5), 0.0, 0, key), key),
+            meshes.SLOPED_ROOF: _image_material(
+                "sloped-roof-unset", _noise_image("unset-s", (0.5, 0.5, 0.5), 0.0, 0, key), key),
         }
-        ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1))
-        road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2))
-        tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3))
-        self.n_objects = 0
+        ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1, key), key)
+        road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
+        tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
         self.buildings_obj = None
         if building_arrays.n_polygons:
             self.buildings_obj = _new_mesh_object(
                 building_arrays,
-                [grey, self._placeholder[meshes.FLAT_ROOF], self._placeholder[meshes.SLOPED_ROOF]])
-            data = building_arrays.arrays()
-            self._base_uv = data["uv"].copy()
-            self._loop_slot = np.repeat(data["material"], data["loop_total"])
-        _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1), [ground])
+                [grey, self._placeholder[meshes.FLAT_ROOF], self._placeholder[meshes.SLOPED_ROOF]],
+                self.collection, key)
+            self.buildings_obj[ROLE_TAG] = "buildings"
+        _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1), [ground],
+                         self.collection, key)
         if roads:
-            _new_mesh_object(meshes.road_mesh(roads), [road])
+            _new_mesh_object(meshes.road_mesh(roads), [road], self.collection, key)
         if trees:
-            _new_mesh_object(meshes.tree_mesh(trees), [tree])
+            _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
 
-    def _setup_camera_and_light(self) -> None:
-        scene = self.scene
-        camera = bpy.data.cameras.new("nadir")
+    def _add_camera_and_sun(self) -> None:
+        camera = _tagged(bpy.data.cameras.new("nadir"), self.key)
         camera.type = "ORTHO"
         camera.clip_start, camera.clip_end = 1.0, 2000.0
-        self.camera = bpy.data.objects.new("nadir", camera)
-        scene.collection.objects.link(self.camera)
-        scene.camera = self.camera
+        self.camera = _tagged(bpy.data.objects.new("nadir", camera), self.key)
+        self.collection.objects.link(self.camera)
         # Sun direction from the city seed: elevation 45 +- 15 degrees (Synthinel rules).
         rng = np.random.default_rng([int(self.layout.seed), 7])
-        elevation = math.radians(float(rng.uniform(30.0, 60.0)))
-        azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
-        sun = bpy.data.lights.new("sun", "SUN")
+        self._elevation = math.radians(float(rng.uniform(30.0, 60.0)))
+        self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
+        sun = _tagged(bpy.data.lights.new("sun", "SUN"), self.key)
         sun.energy = 4.0
         sun.angle = math.radians(0.5)
-        sun_obj = bpy.data.objects.new("sun", sun)
-        sun_obj.rotation_euler = (math.pi / 2 - elevation, 0.0, azimuth)
-        scene.collection.objects.link(sun_obj)
-        world = bpy.data.worlds.new("sky")
+        sun_obj = _tagged(bpy.data.objects.new("sun", sun), self.key)
+        sun_obj.rotation_euler = (math.pi / 2 - self._elevation, 0.0, self._azimuth)
+        self.collection.objects.link(sun_obj)
+
+    @property
+    def scene(self) -> bpy.types.Scene:
+        """The scene renders go through: the worker's own, or the add-on's private one, set up on first use."""
+        if self._scene is None:
+            self._scene = _tagged(bpy.data.scenes.new(f"{self.key} (render)"), self.key)
+            self._scene.collection.children.link(self.collection)
+        if self._scene.camera is None:
+            self._setup_render_scene()
+        return self._scene
+
+    def _setup_render_scene(self) -> None:
+        scene, elevation, azimuth = self._scene, self._elevation, self._azimuth
+        scene.camera = self.camera
+        world = _tagged(bpy.data.worlds.new("sky"), self.key)
         world.color = (0.45, 0.5, 0.6)
         scene.world = world
         if world.node_tree is None:
@@ -232,36 +353,13 @@ class CityScene:
         settings.exr_codec = "NONE"
 
     # --- designs -----------------------------------------------------------
-    def _texture_material(self, entry, image_path: str) -> bpy.types.Material:
-        key = f"roof:{entry.id}"
-        if key not in self._materials:
-            try:
-                image = bpy.data.images.load(image_path, check_existing=True)
-                image.pixels[0]  # force the load now, so a bad file fails here, by name
-            except (RuntimeError, IndexError):
-                raise MetaSimError(f"cannot read texture image {image_path} (texture {entry.id!r}); "
-                                   "rebuild the bank with `meta-sim textures build`") from None
-            self._materials[key] = _image_material(key, image)
-        return self._materials[key]
-
     def set_roofs(self, textures: dict) -> None:
         """Put a texture on each roof slot: ``{meshes.FLAT_ROOF: (entry, path), ...}``.
 
         A slot not given keeps a neutral grey (a space without that roof kind).
         """
-        if self.buildings_obj is None:
-            return
-        mesh = self.buildings_obj.data
-        uv = self._base_uv.copy()
-        for slot in (meshes.FLAT_ROOF, meshes.SLOPED_ROOF):
-            if slot in textures:
-                entry, path = textures[slot]
-                mesh.materials[slot] = self._texture_material(entry, path)
-                uv[self._loop_slot == slot] /= float(entry.repeat_m)
-            else:
-                mesh.materials[slot] = self._placeholder[slot]
-        mesh.uv_layers[UV_NAME].data.foreach_set("uv", uv.ravel())
-        mesh.update()
+        if self.buildings_obj is not None:
+            set_roofs(self.buildings_obj, textures, self._placeholder)
 
     # --- rendering ---------------------------------------------------------
     def _frame(self, rect: Rect) -> tuple[int, int]:
@@ -280,7 +378,7 @@ class CityScene:
         path = os.path.join(self._tmp, f"{name}.exr")
         self.scene.render.filepath = path
         with _quiet(os.path.join(self._tmp, "blender.log")):
-            bpy.ops.render.render(write_still=True)
+            bpy.ops.render.render(write_still=True, scene=self.scene.name)
         image = oiio.ImageInput.open(path)
         if image is None:
             raise RuntimeError(f"Blender wrote no readable image: {oiio.geterror()}")
@@ -339,6 +437,7 @@ class CityScene:
         return self._render_to_array(rect, "rgb")[..., :3]
 
     def close(self) -> None:
+        """Remove the temporary files (the city itself stays; `remove_city` deletes it)."""
         for name in os.listdir(self._tmp):
             os.remove(os.path.join(self._tmp, name))
         os.rmdir(self._tmp)
