@@ -1,0 +1,206 @@
+"""The add-on's city in the user's file: generate, put a design on it, preview a tile, export a farm job.
+
+Pure bpy work without UI; operators call these and report MetaSimError to the user.
+The city is one collection; every datablock it made carries its key (see
+``meta_sim.blender.scene``), so regenerating removes the old one completely.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import uuid
+from pathlib import Path
+
+import bpy
+
+from ..meta_sim import meshes
+from ..meta_sim.blender.scene import CITY_TAG, CityScene, city_buildings, remove_city, set_roofs
+from ..meta_sim.errors import MetaSimError
+from ..meta_sim.layout import LayoutParams, layout_for_tiles
+from ..meta_sim.preview import label_image, to_srgb8
+from ..meta_sim.render import resolve_textures
+from ..meta_sim.render_presets import get_preset
+from ..meta_sim.textures import write_png
+from ..meta_sim.worker import RENDER_OPTIONS
+from . import library as libraries
+from . import previews
+
+COLLECTION_NAME = "Meta-Sim City"
+PARAMS_TAG = "meta_sim_params"  # on the city collection: the knobs it was generated with (JSON)
+PREVIEW_IMAGES = ("Meta-Sim Preview", "Meta-Sim Preview Labels")
+JOB_FORMAT = "meta-sim-render-request"
+JOB_FILE = "render-job.json"
+
+
+def knobs(settings) -> dict:
+    return {"seed": settings.seed, "tiles": settings.city_tiles, "tile_px": settings.tile_px,
+            "gsd": round(settings.gsd, 6), "building_density": round(settings.building_density, 6),
+            "sloped_share": round(settings.sloped_share, 6), "tree_density": round(settings.tree_density, 6)}
+
+
+def _layout(library, params: dict, tiles: list[int] | None = None):
+    """Layout and tile rectangles for the knobs; the space's fixed overrides win (a flat-only bank)."""
+    fields = {name: params[name] for name in ("building_density", "sloped_share", "tree_density")}
+    layout_params = LayoutParams(**{**fields, **library.space.layout})
+    layout, rects = layout_for_tiles(params["seed"], params["tiles"], params["tile_px"] * params["gsd"],
+                                     layout_params)
+    return layout, rects if tiles is None else [rects[j] for j in tiles]
+
+
+def find(settings) -> bpy.types.Collection | None:
+    key = settings.city_key
+    return next((c for c in bpy.data.collections if key and c.get(CITY_TAG) == key), None)
+
+
+def city_knobs(settings) -> dict | None:
+    collection = find(settings)
+    return json.loads(collection[PARAMS_TAG]) if collection is not None else None
+
+
+def design(settings, library) -> dict:
+    """The design the roof pickers show, validated against the bank's space."""
+    raw = {}
+    for kind, value in (("flat", settings.flat_roof), ("sloped", settings.sloped_roof)):
+        parameter = library.texture_parameter(kind)
+        if parameter is not None:
+            raw[parameter.name] = value
+    return library.space.validate(raw)
+
+
+def set_design(settings, library, chosen: dict) -> None:
+    """Point the roof pickers at a (validated) design."""
+    for kind, prop in (("flat", "flat_roof"), ("sloped", "sloped_roof")):
+        parameter = library.texture_parameter(kind)
+        if parameter is not None:
+            setattr(settings, prop, chosen[parameter.name])
+
+
+def generate(scene: bpy.types.Scene, settings, library) -> dict:
+    """Replace the scene's city with a new one from the panel's knobs, wearing the pickers' design."""
+    chosen = design(settings, library)
+    remove(settings)
+    params = knobs(settings)
+    layout, rects = _layout(library, params)
+    key = f"meta-sim-{uuid.uuid4().hex[:12]}"
+    collection = bpy.data.collections.new(COLLECTION_NAME)
+    scene.collection.children.link(collection)
+    city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
+    city.close()
+    collection[PARAMS_TAG] = json.dumps(params)
+    settings.city_key = key
+    apply_design(settings, library, chosen)
+    return {"buildings": len(city.buildings), "trees": city.n_trees, "size_m": layout.width_m}
+
+
+def remove(settings) -> int:
+    """Delete the generated city; returns how many datablocks went."""
+    count = remove_city(settings.city_key) if settings.city_key else 0
+    settings.city_key = ""
+    return count
+
+
+def apply_design(settings, library, chosen: dict) -> bool:
+    """Put a design's roof textures on the city; False when there is no city (or it has no buildings)."""
+    textures = resolve_textures(library.space, chosen, [library.bank])
+    buildings = city_buildings(settings.city_key) if settings.city_key else None
+    if buildings is None:
+        return False
+    set_roofs(buildings, textures, drop_unused=True)
+    return True
+
+
+def roof_images(settings) -> dict:
+    """Roof slot -> image file path of the texture on it (for the panel and tests)."""
+    buildings = city_buildings(settings.city_key) if settings.city_key else None
+    out = {}
+    if buildings is not None:
+        for slot in (meshes.FLAT_ROOF, meshes.SLOPED_ROOF):
+            material = buildings.data.materials[slot]
+            images = [n.image for n in material.node_tree.nodes if n.type == "TEX_IMAGE" and n.image]
+            if images and images[0].filepath:
+                out[slot] = bpy.path.abspath(images[0].filepath)
+    return out
+
+
+def render_preview(settings, library) -> tuple[bpy.types.Image, bpy.types.Image]:
+    """Render one tile of the city (or of the panel's knobs before a city exists), as the farm would.
+
+    The tile is rebuilt in a private, temporary collection and removed afterwards;
+    the results go to two images (RGB and the colour-coded label pass), PNGs in the
+    extension's user folder.
+    """
+    params = city_knobs(settings) or knobs(settings)
+    tile = min(settings.preview_tile, params["tiles"] - 1)
+    chosen = design(settings, library)
+    textures = resolve_textures(library.space, chosen, [library.bank])
+    layout, rects = _layout(library, params, [tile])
+    key = f"meta-sim-preview-{uuid.uuid4().hex[:8]}"
+    collection = bpy.data.collections.new("Meta-Sim Preview Tile")
+    city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
+    try:
+        city.set_roofs(textures)
+        instance, roof_class = city.render_labels(city.rects[0])
+        rgb = city.render_rgb(city.rects[0], get_preset(settings.render_preset))
+    finally:
+        city.close()
+        remove_city(key)
+    folder = libraries.user_dir("preview")
+    paths = (folder / "preview.png", folder / "preview_labels.png")
+    write_png(paths[0], to_srgb8(rgb))
+    write_png(paths[1], label_image(instance, roof_class))
+    return tuple(_show(name, path) for name, path in zip(PREVIEW_IMAGES, paths))
+
+
+def _show(name: str, path: Path) -> bpy.types.Image:
+    """The named image, (re)loaded from ``path``; its thumbnail refreshed for the panel."""
+    image = bpy.data.images.get(name)
+    if image is None:
+        image = bpy.data.images.load(str(path))
+        image.name = name
+    else:
+        image.filepath = str(path)
+        image.reload()
+    previews.icon_for_file(str(path), reload=True)
+    return image
+
+
+def export_job(settings, library, job_dir: Path) -> Path:
+    """Write ``render-job.json`` (and the design space with the city's layout) for the render worker.
+
+    The worker has no options for the city knobs, but a design space may fix layout
+    fields: the job's ``design-space.json`` is the bank's space with this city's knobs,
+    so the farm renders the same city the artist sees.
+    """
+    params = city_knobs(settings)
+    if params is None:
+        raise MetaSimError("generate a city first: the job renders the current city")
+    chosen = design(settings, library)
+    job_dir = Path(job_dir)
+    try:
+        job_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise MetaSimError(f"cannot create job folder {job_dir}: {exc.strerror}; choose another") from None
+    space = library.space.to_dict()
+    space["name"] = f"{library.space.name}+city-s{params['seed']}"
+    space["layout"] = {**{name: params[name] for name in ("building_density", "sloped_share", "tree_density")},
+                       **space["layout"]}
+    space_path = job_dir / "design-space.json"
+    options = {"design": library.space.format(chosen), "seed": params["seed"], "tiles": params["tiles"],
+               "preset": settings.render_preset, "out": str(job_dir / "tiles"), "space": str(space_path),
+               "tile_px": params["tile_px"], "gsd": params["gsd"],
+               "bank": None if settings.bank_source == "DEFAULT" else str(library.bank.root)}
+    argv = [item for opt in RENDER_OPTIONS if options.get(opt.dest) is not None
+            for item in (opt.flag, str(options[opt.dest]))]
+    job = {"format": JOB_FORMAT, "version": 1, "options": options, "argv": argv,
+           "command": shlex.join(["python", "-m", "meta_sim.worker", *argv]),
+           "blender_command": shlex.join(["blender", "-b", "--python-exit-code", "1", "--python",
+                                          "jobs/render_tiles.py", "--", *argv]),
+           "design": chosen, "city": params}
+    path = job_dir / JOB_FILE
+    try:
+        space_path.write_text(json.dumps(space, indent=1) + "\n")
+        path.write_text(json.dumps(job, indent=1) + "\n")
+    except OSError as exc:
+        raise MetaSimError(f"cannot write the job into {job_dir}: {exc.strerror}; choose another folder") from None
+    return path

@@ -1,0 +1,93 @@
+"""Where the add-on's textures and designs come from: the texture bank chosen in the panel and its design space.
+
+The default bank is the command line's (`meta-sim textures build`): byte-identical
+on every machine, so presets written by `meta-sim infer` name the same texture
+ids. It lives under ``$META_SIM_CACHE`` when that is set (shared with the
+command line), else in the extension's user folder.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import bpy
+
+from ..meta_sim.design import DesignSpace
+from ..meta_sim.errors import MetaSimError
+from ..meta_sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank
+
+# The extension's root package (``bl_ext.<repository>.meta_sim``): Blender keys user folders by it.
+EXTENSION = __package__.rpartition(".")[0]
+
+
+def user_dir(sub: str = "") -> Path:
+    return Path(bpy.utils.extension_path_user(EXTENSION, path=sub, create=True))
+
+
+def cache_dir() -> Path:
+    env = os.environ.get("META_SIM_CACHE")
+    return Path(env) if env else user_dir()
+
+
+@dataclass(frozen=True)
+class Library:
+    """A loaded texture bank and the design space over its textures."""
+
+    bank: TextureBank
+    space: DesignSpace
+
+    def texture_parameter(self, kind: str):
+        return self.space.texture_parameter(kind)
+
+
+_loaded: dict[str, Library] = {}  # bank folder -> library; banks are immutable once built
+
+
+def _folder(settings) -> Path:
+    if settings.bank_source == "DEFAULT":
+        return default_bank_dir(cache_dir=cache_dir())
+    if not settings.bank_folder.strip():
+        raise MetaSimError("choose a texture bank folder (one written by `meta-sim textures build`)")
+    return Path(bpy.path.abspath(settings.bank_folder)).resolve()
+
+
+def get(settings, build: bool = False) -> Library | None:
+    """The library the settings point at; None if it is not loaded yet and ``build`` is off.
+
+    ``build`` builds the default bank on first use (a few seconds) and reads a user's
+    bank from disk; without it nothing slow happens (panels and enum callbacks call this).
+    """
+    folder = _folder(settings)
+    key = str(folder)
+    if key in _loaded:
+        return _loaded[key]
+    if not build and not (folder / MANIFEST).is_file():
+        return None
+    if settings.bank_source == "DEFAULT":
+        library = Library(ensure_default_bank(cache_dir=cache_dir()), DesignSpace.load())
+    else:
+        bank = load_bank(folder)
+        library = Library(bank, DesignSpace.for_textures(f"bank:{bank.name}", bank.ids("flat"), bank.ids("sloped")))
+    _loaded[key] = library
+    return library
+
+
+def get_quietly(settings) -> Library | None:
+    """`get` for drawing code: a bad folder shows as 'no bank loaded' instead of raising."""
+    try:
+        return get(settings)
+    except MetaSimError:
+        return None
+
+
+def require(settings) -> Library:
+    library = get(settings)
+    if library is None:
+        raise MetaSimError("load a texture bank first (Texture Bank > Load)")
+    return library
+
+
+def clear() -> None:
+    _loaded.clear()

@@ -1,0 +1,136 @@
+"""The Meta-Sim tab of the 3D Viewport sidebar: city, textures, preview and farm job, design presets."""
+
+from __future__ import annotations
+
+import json
+
+import bpy
+
+from . import city, previews
+from . import library as libraries
+
+
+class _MetaSimPanel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Meta-Sim"
+
+
+class META_SIM_PT_city(_MetaSimPanel, bpy.types.Panel):
+    bl_idname = "META_SIM_PT_city"
+    bl_label = "City"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.meta_sim
+        column = layout.column(align=True)
+        for name in ("seed", "city_tiles", "building_density", "sloped_share", "tree_density"):
+            column.prop(settings, name)
+        column = layout.column(align=True)
+        column.prop(settings, "tile_px")
+        column.prop(settings, "gsd")
+        tile_m = settings.tile_px * settings.gsd
+        layout.label(text=f"Tiles of {tile_m:.1f} m", icon="MESH_GRID")
+        row = layout.row(align=True)
+        row.operator("meta_sim.generate_city", icon="FILE_REFRESH")
+        row.operator("meta_sim.remove_city", text="", icon="TRASH")
+        knobs = city.city_knobs(settings)
+        if knobs is not None:
+            layout.label(text=f"Current city: seed {knobs['seed']}, {knobs['tiles']} tiles", icon="CHECKMARK")
+
+
+class META_SIM_PT_textures(_MetaSimPanel, bpy.types.Panel):
+    bl_idname = "META_SIM_PT_textures"
+    bl_label = "Roof Textures"
+    bl_parent_id = "META_SIM_PT_city"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.meta_sim
+        layout.prop(settings, "bank_source", expand=True)
+        if settings.bank_source == "FOLDER":
+            layout.prop(settings, "bank_folder")
+        library = libraries.get_quietly(settings)
+        if library is None:
+            layout.operator("meta_sim.load_bank", icon="IMPORT")
+            return
+        layout.label(text=f"Bank {library.bank.name}: {len(library.bank)} textures")
+        for kind, prop in (("flat", "flat_roof"), ("sloped", "sloped_roof")):
+            if library.texture_parameter(kind) is None:
+                layout.label(text=f"No {kind} textures in this bank: no {kind} roofs", icon="INFO")
+                continue
+            box = layout.box()
+            box.label(text=f"{kind.title()} roofs")
+            box.template_icon_view(settings, prop, show_labels=True, scale=4.0, scale_popup=5.0)
+            box.prop(settings, prop, text="")
+        layout.operator("meta_sim.apply_roofs", icon="MATERIAL")
+
+
+class META_SIM_PT_render(_MetaSimPanel, bpy.types.Panel):
+    bl_idname = "META_SIM_PT_render"
+    bl_label = "Preview and Farm Job"
+    bl_parent_id = "META_SIM_PT_city"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.meta_sim
+        row = layout.row(align=True)
+        row.prop(settings, "render_preset")
+        row.prop(settings, "preview_tile")
+        layout.operator("meta_sim.render_preview", icon="RENDER_STILL")
+        shown = [bpy.data.images.get(name) for name in city.PREVIEW_IMAGES]
+        if all(shown):
+            row = layout.row()
+            for image in shown:
+                column = row.column()
+                column.template_icon(icon_value=previews.icon_for_file(bpy.path.abspath(image.filepath)), scale=6.0)
+                column.label(text=image.name)
+        layout.separator()
+        layout.prop(settings, "job_dir")
+        layout.operator("meta_sim.export_job", icon="EXPORT")
+
+
+class META_SIM_PT_presets(_MetaSimPanel, bpy.types.Panel):
+    bl_idname = "META_SIM_PT_presets"
+    bl_label = "Design Presets"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.meta_sim
+        row = layout.row(align=True)
+        row.prop(settings, "presets_folder", text="")
+        row.operator("meta_sim.load_presets", text="", icon="FILE_REFRESH")
+        layout.template_list("META_SIM_UL_presets", "", settings, "presets", settings, "presets_index", rows=4)
+        if 0 <= settings.presets_index < len(settings.presets):
+            draw_preset_details(layout.box(), settings, settings.presets[settings.presets_index])
+        row = layout.row(align=True)
+        row.operator("meta_sim.apply_preset", icon="CHECKMARK")
+        row.operator("meta_sim.save_preset", icon="FILE_TICK")
+
+
+def draw_preset_details(box, settings, item):
+    """The selected preset: its textures large, vote shares, target; a population's distribution."""
+    if item.error:
+        box.label(text="Cannot apply this preset:", icon="ERROR")
+        box.label(text=item.error)
+        return
+    library = libraries.get_quietly(settings)
+    row = box.row()
+    for kind in ("flat", "sloped"):
+        texture = getattr(item, kind)
+        if texture:
+            column = row.column()
+            column.template_icon(icon_value=previews.texture_icon(library, texture), scale=4.0)
+            column.label(text=texture)
+            column.label(text=f"vote share {getattr(item, f'{kind}_share'):.0%}")
+    box.label(text=f"Target: {item.target}", icon="IMAGE_DATA")
+    if item.distribution:
+        box.label(text="Distribution over the target's groups:")
+        for parameter, choices in json.loads(item.distribution).items():
+            column = box.column(align=True)
+            column.label(text=parameter)
+            for texture, share in choices:
+                column.label(text=f"{share:.0%}  {texture}", icon_value=previews.texture_icon(library, texture))
+
+
+CLASSES = (META_SIM_PT_city, META_SIM_PT_textures, META_SIM_PT_render, META_SIM_PT_presets)

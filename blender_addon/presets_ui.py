@@ -1,0 +1,98 @@
+"""The design presets browser: a folder of `meta-sim infer` presets as list rows, and the list that draws them.
+
+Presets are JSON data read by ``meta_sim.presets`` (never executed, unlike
+Blender's own ``AddPresetBase`` presets). A file that does not load, is from a
+newer meta-sim or names textures the bank lacks becomes a row with its error.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import bpy
+
+from ..meta_sim.errors import MetaSimError
+from ..meta_sim.presets import DesignPreset, load_preset
+from . import library as libraries
+from . import previews
+
+TOP_CHOICES = 3  # of a population's distribution, per parameter
+
+
+def target_of(preset: DesignPreset) -> str:
+    """Where the preset's images came from: their common folder and how many."""
+    images = [str(p) for p in preset.source_images]
+    if not images:
+        return "no target images recorded"
+    common = os.path.commonpath(images) if len(images) > 1 else os.path.dirname(images[0])
+    return f"{len(images)} image{'s' if len(images) != 1 else ''} in {common or '.'}"
+
+
+def read_folder(folder: Path, library) -> list[dict]:
+    """One row per ``*.json`` in the folder (sorted), each validated against the library's design space."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise MetaSimError(f"preset folder {folder} does not exist; choose the --out folder of `meta-sim infer`")
+    rows = [_row(path, library) for path in sorted(folder.glob("*.json"))]
+    if not rows:
+        raise MetaSimError(f"no presets (*.json) in {folder}")
+    return rows
+
+
+def load(path: str, library) -> DesignPreset:
+    """A preset checked against the library (every texture id must be in the bank's space)."""
+    return load_preset(path, library.space)
+
+
+def _row(path: Path, library) -> dict:
+    row = {"name": path.stem, "path": str(path)}
+    try:
+        preset = load(str(path), library)
+    except MetaSimError as exc:
+        return {**row, "error": str(exc).replace(f"{path}: ", "")}
+    names = {kind: library.texture_parameter(kind) for kind in ("flat", "sloped")}
+    row.update(name=preset.name or path.stem, kind=preset.kind, target=target_of(preset))
+    for kind, parameter in names.items():
+        if parameter is not None:
+            row[kind] = str(preset.design[parameter.name])
+            row[f"{kind}_share"] = preset.confidence(parameter.name)
+    if preset.kind == "population":
+        top = {name: sorted(((str(c), float(s)) for c, s in shares.items()), key=lambda cs: -cs[1])[:TOP_CHOICES]
+               for name, shares in preset.distribution.items()}
+        row["distribution"] = json.dumps(top)
+    return row
+
+
+def fill(settings, rows: list[dict]) -> None:
+    settings.presets.clear()
+    for values in rows:
+        item = settings.presets.add()
+        for key, value in values.items():
+            setattr(item, key, value)
+    settings.presets_index = 0
+
+
+class META_SIM_UL_presets(bpy.types.UIList):
+    """Flat and sloped thumbnails, name, vote shares and target of each preset; the error of a bad one."""
+
+    bl_idname = "META_SIM_UL_presets"
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0):
+        if item.error:
+            layout.label(text=f"{item.name}: {item.error}", icon="ERROR")
+            return
+        library = libraries.get_quietly(data)
+        row = layout.row(align=True)
+        for kind in ("flat", "sloped"):
+            texture = getattr(item, kind)
+            if texture:
+                row.label(text="", icon_value=previews.texture_icon(library, texture))
+        row.label(text=item.name, icon="COMMUNITY" if item.kind == "population" else "NONE")
+        shares = [f"{getattr(item, f'{kind}_share'):.0%}" for kind in ("flat", "sloped") if getattr(item, kind)]
+        row.label(text=" / ".join(shares))
+        row.label(text=item.target)
+
+
+CLASSES = (META_SIM_UL_presets,)

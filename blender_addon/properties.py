@@ -1,0 +1,86 @@
+"""Scene properties of the add-on: ``scene.meta_sim`` (city knobs, texture bank, design, preset rows)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import (CollectionProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
+
+from ..meta_sim.layout import LayoutParams
+from ..meta_sim.render_presets import PRESETS
+from . import library, previews
+
+_DEFAULTS = LayoutParams()
+
+
+def _flat_items(self, context):
+    return previews.texture_items(library.get_quietly(self), "flat")
+
+
+def _sloped_items(self, context):
+    return previews.texture_items(library.get_quietly(self), "sloped")
+
+
+class MetaSimPresetRow(bpy.types.PropertyGroup):
+    """One design preset file as the browser shows it (filled by `presets_ui.read_folder`)."""
+
+    path: StringProperty(name="File", subtype="FILE_PATH")
+    kind: StringProperty(name="Kind")
+    target: StringProperty(name="Target", description="The target imagery the design was inferred from")
+    flat: StringProperty(name="Flat Roof")
+    sloped: StringProperty(name="Sloped Roof")
+    flat_share: FloatProperty(name="Flat Vote Share", subtype="FACTOR")
+    sloped_share: FloatProperty(name="Sloped Vote Share", subtype="FACTOR")
+    distribution: StringProperty(name="Distribution", description="Population presets: JSON, parameter -> "
+                                 "[[choice, share], ...] (top choices)")
+    error: StringProperty(name="Error", description="Why this preset cannot be applied")
+
+
+class MetaSimSettings(bpy.types.PropertyGroup):
+    seed: IntProperty(name="Seed", description="City seed: the same seed builds the same city", min=0, default=1)
+    city_tiles: IntProperty(name="City Size", description="Tiles the city covers (a near-square grid), "
+                            "as `--tiles` of the render worker", min=1, max=64, default=4)
+    tile_px: IntProperty(name="Tile Pixels", description="Tile width and height in pixels", min=16, max=4096,
+                         default=384, subtype="PIXEL")
+    gsd: FloatProperty(name="Pixel Size", description="Ground sampling distance: metres per pixel",
+                       min=0.01, max=10.0, default=0.3, precision=2, unit="LENGTH")
+    building_density: FloatProperty(name="Building Density", description="Share of lots built on and how "
+                                    "much of a lot a building fills", min=0.0, max=1.0,
+                                    default=_DEFAULTS.building_density, subtype="FACTOR")
+    sloped_share: FloatProperty(name="Sloped Roofs", description="Share of buildings with gable or hip roofs",
+                                min=0.0, max=1.0, default=_DEFAULTS.sloped_share, subtype="FACTOR")
+    tree_density: FloatProperty(name="Tree Density", description="Street and yard trees", min=0.0, max=1.0,
+                                default=_DEFAULTS.tree_density, subtype="FACTOR")
+    city_key: StringProperty(name="City", description="Key of the generated city's datablocks (internal)",
+                             options={"HIDDEN"})
+
+    bank_source: EnumProperty(name="Texture Bank", items=[
+        ("DEFAULT", "Default", "The built-in procedural bank (built on first use)"),
+        ("FOLDER", "Folder", "A bank folder written by `meta-sim textures build --from PHOTOS`"),
+    ])
+    bank_folder: StringProperty(name="Bank Folder", subtype="DIR_PATH")
+    flat_roof: EnumProperty(name="Flat Roof", description="Texture of every flat roof", items=_flat_items)
+    sloped_roof: EnumProperty(name="Sloped Roof", description="Texture of every sloped roof", items=_sloped_items)
+
+    render_preset: EnumProperty(name="Quality", items=[(p.name, p.name.title(), p.description)
+                                                       for p in PRESETS.values()])
+    preview_tile: IntProperty(name="Tile", description="Which tile of the city to preview (0 = south-west)",
+                              min=0, default=0)
+    job_dir: StringProperty(name="Job Folder", description="Where the render job file goes; the farm "
+                            "writes tiles into its tiles/ subfolder", subtype="DIR_PATH")
+
+    presets_folder: StringProperty(name="Presets", description="A folder of design presets written by "
+                                   "`meta-sim infer`", subtype="DIR_PATH")
+    presets: CollectionProperty(type=MetaSimPresetRow)
+    presets_index: IntProperty(name="Preset", default=0)
+
+
+CLASSES = (MetaSimPresetRow, MetaSimSettings)
+
+
+def register() -> None:
+    bpy.types.Scene.meta_sim = PointerProperty(type=MetaSimSettings)
+
+
+def unregister() -> None:
+    del bpy.types.Scene.meta_sim
