@@ -281,10 +281,13 @@ def test_render_preview_tile_and_its_labels(settings):
     assert after == {**before, "images": before["images"] + 2}
 
 
-def test_exported_job_runs_on_the_render_worker(settings, tmp_path):
+def test_exported_job_runs_on_the_render_worker_and_the_preview_matches_it(settings, tmp_path):
     import bpy
 
+    from meta_sim.textures.pngio import read_rgb8
+
     settings.seed, settings.sloped_share, settings.tree_density = 7, 0.2, 0.0
+    settings.render_preset = "balanced"  # Cycles: the preview's private scene must sample as the farm does
     bpy.ops.meta_sim.generate_city()
     settings.job_dir = str(tmp_path / "job")
     assert bpy.ops.meta_sim.export_job() == {"FINISHED"}
@@ -292,13 +295,17 @@ def test_exported_job_runs_on_the_render_worker(settings, tmp_path):
     assert set(job["options"]) <= {opt.dest for opt in RENDER_OPTIONS}
     assert vars(build_argparser().parse_args(job["argv"]))["seed"] == 7
     assert job["command"].startswith("python -m meta_sim.worker --design ")
-    done = subprocess.run([sys.executable, "-m", "meta_sim.worker", *job["argv"]], cwd=ROOT,
+    done = subprocess.run([sys.executable, "-m", "meta_sim.worker", *job["argv"], "--preview"], cwd=ROOT,
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
-    tile = tiles.read_tile(tmp_path / "job" / "tiles" / next(
-        p.name for p in (tmp_path / "job" / "tiles").glob("*_t00.exr")))
+    first = next((tmp_path / "job" / "tiles").glob("*_t00.exr"))
+    tile = tiles.read_tile(first)
     assert tile.meta["design"] == job["design"] and tile.meta["city_seed"] == 7
-    settings.sloped_share, settings.tree_density = 0.6, 0.4
+    settings.preview_tile = 0
+    bpy.ops.meta_sim.render_preview()
+    preview = bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath)
+    assert (read_rgb8(preview) == read_rgb8(first.with_suffix(".png"))).all()
+    settings.sloped_share, settings.tree_density, settings.render_preset = 0.6, 0.4, "fast"
 
 
 def test_user_errors_are_reported_not_raised_as_tracebacks(settings, tmp_path):

@@ -434,6 +434,9 @@ class CityScene:
             cycles.transparent_max_bounces = 0
             cycles.caustics_reflective = cycles.caustics_refractive = False
             cycles.seed = int(self.layout.seed) % (2**31)
+            # Spelled out: a new scene (the add-on's) would otherwise pick another pattern than the factory one
+            # and its preview would not be the farm's pixels.
+            cycles.sampling_pattern = "TABULATED_SOBOL"
         return self._render_to_array(rect, "rgb")[..., :3]
 
     def close(self) -> None:
