@@ -84,9 +84,14 @@ def generate(scene: bpy.types.Scene, settings, library) -> dict:
     layout, rects = _layout(library, params)
     key = f"meta-sim-{uuid.uuid4().hex[:12]}"
     collection = bpy.data.collections.new(COLLECTION_NAME)
+    collection[CITY_TAG] = key
     scene.collection.children.link(collection)
-    city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
-    city.close()
+    try:
+        city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
+        city.close()
+    except BaseException:
+        remove_city(key)  # a half-built city must not stay behind as orphans
+        raise
     collection[PARAMS_TAG] = json.dumps(params)
     settings.city_key = key
     apply_design(settings, library, chosen)
