@@ -142,13 +142,16 @@ def render_preview(settings, library) -> tuple[bpy.types.Image, bpy.types.Image]
     layout, rects = _layout(library, params, [tile])
     key = f"meta-sim-preview-{uuid.uuid4().hex[:8]}"
     collection = bpy.data.collections.new("Meta-Sim Preview Tile")
-    city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
+    collection[CITY_TAG] = key
+    city = None
     try:
+        city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
         city.set_roofs(textures)
         instance, roof_class = city.render_labels(city.rects[0])
         rgb = city.render_rgb(city.rects[0], get_preset(settings.render_preset))
     finally:
-        city.close()
+        if city is not None:
+            city.close()
         remove_city(key)
     folder = libraries.user_dir("preview")
     paths = (folder / "preview.png", folder / "preview_labels.png")
