@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all bench-render bench-nams clean
+.PHONY: setup demo test test-all addon bench-render bench-nams clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -39,6 +39,10 @@ test: setup
 
 test-all: setup
 	$(BIN)/python -m pytest -q -m ''
+
+# The Blender extension zip (Blender's own validator and builder, from the bpy wheel): dist/meta_sim-0.1.0.zip
+addon: setup
+	$(BIN)/python jobs/build_addon.py --out dist
 
 bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
