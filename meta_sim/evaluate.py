@@ -21,6 +21,7 @@ import numpy as np
 
 from .design import DesignSpace
 from .errors import MetaSimError
+from .fileio import write_text_atomic
 from .render import Job
 
 TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
@@ -87,12 +88,8 @@ def results_markdown(results: dict) -> str:
 
 
 def write_results(out: Path, results: dict) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    for name, text in (("results.json", json.dumps(results, indent=2) + "\n"),
-                       ("results.md", results_markdown(results))):
-        tmp = out / f".{name}.tmp"
-        tmp.write_text(text)
-        tmp.replace(out / name)
+    write_text_atomic(out / "results.json", json.dumps(results, indent=2) + "\n")
+    write_text_atomic(out / "results.md", results_markdown(results))
 
 
 def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, root: Path,

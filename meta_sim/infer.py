@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from .errors import MetaSimError
+from .fileio import write_text_atomic
 from .presets import DesignPreset, population, save_preset
 
 
@@ -116,7 +117,7 @@ def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
     from .textures.pngio import write_png
     from .textures.sheet import render_sheet
 
-    (out_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    write_text_atomic(out_dir / "report.json", json.dumps(report, indent=2) + "\n")
     lines = [f"# meta-sim infer: {report['target_dir']}", "",
              f"{report['images']} images, {report['tiles']} tiles, {report['group_count']} groups; "
              f"search `{report['method']}`, {report['seconds']['search_per_group']:.4f} s per group; "
@@ -130,7 +131,7 @@ def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
     lines += ["", "Population (share of groups per choice):", ""]
     for name, shares in report["population"].items():
         lines.append(f"- {name}: " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items()))
-    (out_dir / "report.md").write_text("\n".join(lines) + "\n")
+    write_text_atomic(out_dir / "report.md", "\n".join(lines) + "\n")
 
     banks = [ensure_default_bank(), ensure_heldout_bank()]
 

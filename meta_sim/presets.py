@@ -21,7 +21,6 @@ Pure Python: no torch, no bpy.
 from __future__ import annotations
 
 import json
-import os
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import Mapping
 
 from .design import DesignSpace
 from .errors import MetaSimError
+from .fileio import write_text_atomic
 
 FORMAT = "meta-sim-design-preset"
 VERSION = 1
@@ -102,12 +102,7 @@ def _mapping(data: Mapping, key: str) -> dict:
 
 def save_preset(path: str | Path, preset: DesignPreset) -> Path:
     """Write atomically (temporary file, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(preset.to_dict(), indent=2, sort_keys=False) + "\n")
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(path, json.dumps(preset.to_dict(), indent=2) + "\n")
 
 
 def load_preset(path: str | Path, space: DesignSpace | None = None, extra: Mapping | None = None) -> DesignPreset:

@@ -14,7 +14,6 @@ skipped, so a rerun resumes an interrupted job.
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -26,6 +25,7 @@ import numpy as np
 from . import meshes, tiles
 from .design import DesignSpace
 from .errors import MetaSimError
+from .fileio import write_text_atomic
 from .layout import LayoutParams, layout_for_tiles
 from .preview import write_mosaic, write_previews
 from .render_presets import RenderPreset
@@ -247,7 +247,4 @@ def write_job_manifest(out_dir: Path, jobs: list[Job], settings: RenderSettings)
                              "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m,
                              "tiles": [tile_path(out_dir, job, j).name for j in range(settings.n_tiles)]}
     data = {"format": "meta-sim-render-job", "version": 1, "jobs": [entries[k] for k in sorted(entries)]}
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=1) + "\n")
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(path, json.dumps(data, indent=1) + "\n")

@@ -34,7 +34,8 @@ import numpy as np
 
 from ..errors import MetaSimError
 from . import procedural
-from .pngio import read_rgb8, resize_area, write_bytes_atomic, write_png
+from ..fileio import write_bytes_atomic
+from .pngio import read_rgb8, resize_area, write_png
 from .similarity import Similarity, hsv_cone_histogram, save_similarity, similarity_matrix
 
 BANK_FORMAT = "meta-sim-texture-bank"

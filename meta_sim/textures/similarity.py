@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MetaSimError
-from .pngio import read_rgb8, write_bytes_atomic
+from ..fileio import write_bytes_atomic
+from .pngio import read_rgb8
 
 SIMILARITY_FORMAT = "meta-sim-similarity"
 SIMILARITY_VERSION = 1
