@@ -14,6 +14,7 @@ skipped, so a rerun resumes an interrupted job.
 from __future__ import annotations
 
 import json
+import tempfile
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -35,11 +36,18 @@ BLOCK_TILES = 3  # tiles per block side: a 1152 px render amortises Blender's pe
 
 @dataclass(frozen=True)
 class Job:
-    """One design to render in one city: tiles ``{name}_t{j:02d}.exr``."""
+    """One design to render in one city: tiles ``{name}_t{j:02d}.exr``.
+
+    ``tiles`` restricts the job to some tile indices (a farm task); None means all of them.
+    """
 
     design: dict
     city_seed: int
     name: str
+    tiles: tuple | None = None
+
+    def tile_indices(self, n_tiles: int) -> tuple:
+        return tuple(range(n_tiles)) if self.tiles is None else tuple(self.tiles)
 
 
 @dataclass
@@ -71,7 +79,8 @@ def tile_path(out_dir: Path, job: Job, index: int) -> Path:
     return Path(out_dir) / f"{job.name}_t{index:02d}.exr"
 
 
-def _expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
+def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
+    """The metadata a valid tile of ``job`` carries (``tiles.is_valid_tile`` compares it)."""
     return {"design": job.design, "design_space": settings.space.name, "city_seed": job.city_seed,
             "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
             "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
@@ -121,8 +130,12 @@ def _layout_params(space: DesignSpace, design: dict) -> LayoutParams:
 
 
 def render_jobs(jobs: list[Job], settings: RenderSettings,
-                progress: Callable[[int], None] | None = None) -> RenderSummary:
-    """Render every missing tile of every job; returns counts and stage timings."""
+                progress: Callable[[int], None] | None = None, record: bool = True) -> RenderSummary:
+    """Render every missing tile of every job; returns counts and stage timings.
+
+    ``record`` writes ``designs.json`` beside the tiles; a farm turns it off, since its
+    manifest lists the folder's jobs and concurrent workers would race on that file.
+    """
     from .blender.scene import CityScene, Rect, bounding_rect  # bpy only when rendering
 
     out_dir = Path(settings.out_dir)
@@ -132,14 +145,16 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
     for job in jobs:
         params = _layout_params(settings.space, job.design)
         textures = resolve_textures(settings.space, job.design, settings.banks)  # fail early
-        pending = [j for j in range(settings.n_tiles)
-                   if not tiles.is_valid_tile(tile_path(out_dir, job, j), _expected_meta(settings, job, j))]
-        summary.skipped += settings.n_tiles - len(pending)
-        if progress and settings.n_tiles - len(pending):
-            progress(settings.n_tiles - len(pending))
+        wanted = job.tile_indices(settings.n_tiles)
+        pending = [j for j in wanted
+                   if not tiles.is_valid_tile(tile_path(out_dir, job, j), expected_meta(settings, job, j))]
+        summary.skipped += len(wanted) - len(pending)
+        if progress and len(wanted) - len(pending):
+            progress(len(wanted) - len(pending))
         if pending:
             by_city[(job.city_seed, params)].append((job, textures, pending))
-    write_job_manifest(out_dir, jobs, settings)
+    if record:
+        write_job_manifest(out_dir, jobs, settings)
 
     for (city_seed, params), work in by_city.items():
         clock = time.perf_counter()
@@ -208,9 +223,8 @@ def _cut(block, tile, settings: RenderSettings):
 def _check_writable(out_dir: Path) -> None:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-        probe = out_dir / ".meta-sim-write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
+        with tempfile.TemporaryFile(dir=out_dir):  # a unique name: concurrent workers share the folder
+            pass
     except OSError as exc:
         raise MetaSimError(f"cannot write to output folder {out_dir}: {exc.strerror}; "
                            "choose another --out") from None

@@ -2,6 +2,7 @@
 
     python -m meta_sim.worker --design flat_roof=3,sloped_roof=7 --seed 1 --tiles 9 --out DIR
     blender -b --python-exit-code 1 --python jobs/render_tiles.py -- --design ... --out DIR
+    python -m meta_sim.worker --job job.json [--shard 0/4]   # the tasks of a farm job manifest
 
 Blender's own Python has neither click nor tqdm, so the options are declared
 once here as data; argparse reads them in a worker and the click CLI builds
@@ -57,6 +58,9 @@ def build_argparser() -> argparse.ArgumentParser:
             parser.add_argument(opt.flag, action="store_true", help=opt.help)
         else:
             parser.add_argument(opt.flag, type=opt.type, default=opt.default, help=opt.help)
+    parser.add_argument("--job", type=Path, default=None,
+                        help="render the tasks of a job manifest (`meta-sim jobs plan`) instead of the options above")
+    parser.add_argument("--shard", default=None, help="with --job: only the i-th of n shards of its tasks, e.g. 0/4")
     return parser
 
 
@@ -108,7 +112,33 @@ def run(options: dict, progress=None):
     return render_jobs(jobs, settings, progress), len(jobs) * settings.n_tiles
 
 
+def run_job(path: Path, shard: str | None = None, progress=None) -> list[tuple[str, str]]:
+    """Render every task of a job manifest (or of one shard), each task on its own so a task
+    that cannot render (a missing texture, ...) is reported while the others still render.
+
+    Returns the failed tasks as (name, message).
+    """
+    from .farm import manifest as farm
+    from .render import render_jobs
+
+    manifest = farm.load(path)
+    if shard is not None:
+        manifest = manifest.shard(*farm.parse_shard(shard))
+    jobs, settings = farm.render_setup(manifest)
+    failures = []
+    for job in jobs:
+        try:
+            render_jobs([job], settings, progress, record=False)
+        except MetaSimError as exc:
+            failures.append((job.name, str(exc)))
+            print(f"meta-sim worker: task {job.name} failed: {exc}", file=sys.stderr, flush=True)
+        else:
+            print(f"meta-sim worker: task {job.name} done", flush=True)
+    return failures
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Exit code 0 when everything rendered, 1 when some job tasks failed, 2 on bad input."""
     args = build_argparser().parse_args(argv)
     started = time.perf_counter()
     done = [0]
@@ -118,6 +148,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"meta-sim worker: {done[0]} tiles done", flush=True)
 
     try:
+        if args.job is not None:
+            if args.design is not None or args.random_designs is not None or args.out is not None:
+                raise MetaSimError("--job takes its designs and output folder from the manifest; "
+                                   "drop --design, --random-designs and --out")
+            failures = run_job(args.job, args.shard, progress)
+            print(f"meta-sim worker: {done[0]} tiles done, {len(failures)} tasks failed "
+                  f"in {time.perf_counter() - started:.1f} s", flush=True)
+            return 1 if failures else 0
+        if args.shard is not None:
+            raise MetaSimError("--shard needs --job")
         summary, total = run(vars(args), progress)
     except MetaSimError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -1,0 +1,249 @@
+"""Job manifests: the tasks of a render job, planned once and run anywhere.
+
+A manifest is one versioned JSON file. It holds the render settings shared by
+all tasks (design space, texture bank, preset, tile size, pixel size, tiles
+per design) and the tasks; a task is one design in one city, with its tile
+indices and output file names. A task's name is a hash of its content, so
+its outputs are a pure function of what it renders and planning twice gives
+the same file, byte for byte.
+
+Tiles go to ``out_dir``, stored relative to the manifest when it lies inside
+the manifest's folder, so a job on shared storage reads the same from any
+mount point. Pure Python: Blender's own Python loads manifests (farm shards).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from ..errors import MetaSimError
+from ..fileio import write_text_atomic
+
+FORMAT = "meta-sim-farm-job"
+VERSION = 1
+TASK_KEYS = ("name", "design", "city_seed", "tiles", "outputs")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One design in one city: tiles ``outputs[k]`` for tile indices ``tiles[k]``."""
+
+    name: str
+    design: dict
+    city_seed: int
+    tiles: tuple
+    outputs: tuple
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "design": self.design, "city_seed": self.city_seed,
+                "tiles": list(self.tiles), "outputs": list(self.outputs)}
+
+    @classmethod
+    def from_dict(cls, data) -> "Task":
+        if not isinstance(data, dict) or any(k not in data for k in TASK_KEYS):
+            raise MetaSimError(f"a manifest task needs the keys {', '.join(TASK_KEYS)}")
+        return cls(str(data["name"]), dict(data["design"]), int(data["city_seed"]),
+                   tuple(int(j) for j in data["tiles"]), tuple(str(p) for p in data["outputs"]))
+
+
+@dataclass(frozen=True)
+class Manifest:
+    space: dict  # the design space, as DesignSpace.to_dict()
+    bank: str | None  # texture bank folder; None: the default bank of each machine's cache
+    preset: str
+    n_tiles: int
+    tile_px: int
+    pixel_size_m: float
+    out_dir: Path  # absolute in memory
+    tasks: tuple = field(default_factory=tuple)
+
+    @property
+    def n_outputs(self) -> int:
+        return sum(len(t.tiles) for t in self.tasks)
+
+    def to_dict(self, relative_to: Path | None = None) -> dict:
+        out_dir = Path(self.out_dir)
+        if relative_to is not None and out_dir.is_relative_to(relative_to):
+            out_dir = out_dir.relative_to(relative_to)
+        return {"format": FORMAT, "version": VERSION, "space": self.space, "bank": self.bank,
+                "preset": self.preset, "n_tiles": self.n_tiles, "tile_px": self.tile_px,
+                "pixel_size_m": self.pixel_size_m, "out_dir": str(out_dir),
+                "tasks": [t.to_dict() for t in self.tasks]}
+
+    @classmethod
+    def from_dict(cls, data, base: Path) -> "Manifest":
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise MetaSimError(f"not a meta-sim job manifest (expected \"format\": \"{FORMAT}\"); "
+                               "write one with `meta-sim jobs plan`")
+        if data.get("version") != VERSION:
+            raise MetaSimError(f"job manifest version {data.get('version')!r} is not supported "
+                               f"(this meta-sim reads {VERSION}); plan the job again")
+        try:
+            return cls(space=dict(data["space"]), bank=data["bank"], preset=str(data["preset"]),
+                       n_tiles=int(data["n_tiles"]), tile_px=int(data["tile_px"]),
+                       pixel_size_m=float(data["pixel_size_m"]), out_dir=Path(base) / data["out_dir"],
+                       tasks=tuple(Task.from_dict(t) for t in data["tasks"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise MetaSimError(f"damaged job manifest ({exc!r}); plan the job again") from None
+
+    def subset(self, tasks) -> "Manifest":
+        return replace(self, tasks=tuple(tasks))
+
+    def shard(self, index: int, count: int) -> "Manifest":
+        """The ``index``-th of ``count`` shards: every count-th task, so shards are balanced."""
+        if not (count >= 1 and 0 <= index < count):
+            raise MetaSimError(f"shard {index}/{count}: write i/n with 0 <= i < n, e.g. 0/4")
+        return self.subset(self.tasks[index::count])
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    match = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text or "")
+    if not match:
+        raise MetaSimError(f"--shard {text!r}: write i/n, e.g. 0/4 for the first of four shards")
+    return int(match[1]), int(match[2])
+
+
+def task_name(design: dict, city_seed: int, settings: dict) -> str:
+    """Readable design ids plus a hash of everything that decides the task's pixels."""
+    content = json.dumps({"design": design, "city_seed": city_seed, **settings}, sort_keys=True)
+    digest = hashlib.sha256(content.encode()).hexdigest()[:12]
+    readable = re.sub(r"[^A-Za-z0-9.+-]", "_", "+".join(str(v) for v in design.values()))[:80]
+    return f"{readable}_s{city_seed}_{digest}"
+
+
+def plan(options: dict, out_dir: Path) -> Manifest:
+    """A manifest from the render options of `meta-sim render` (``--design`` or ``--random-designs``).
+
+    Designs are validated and the banks built here (via the worker's own planning), so a
+    planned job fails on bad input now rather than on the farm. Duplicate tasks (a random
+    design drawn twice for one city) are planned once.
+    """
+    from ..render import tile_path
+    from ..worker import plan as plan_render
+
+    jobs, settings = plan_render({**options, "out": out_dir, "preview": False})
+    shared = {"space": settings.space.name, "preset": settings.preset.name, "n_tiles": settings.n_tiles,
+              "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m}
+    tasks = {}
+    for job in jobs:
+        name = task_name(job.design, job.city_seed, shared)
+        indices = job.tile_indices(settings.n_tiles)
+        outputs = tuple(tile_path(Path(), replace(job, name=name), j).name for j in indices)
+        tasks.setdefault(name, Task(name, job.design, job.city_seed, indices, outputs))
+    bank = options.get("bank")
+    return Manifest(space=settings.space.to_dict(), bank=str(Path(bank).resolve()) if bank else None,
+                    preset=settings.preset.name, n_tiles=settings.n_tiles, tile_px=settings.tile_px,
+                    pixel_size_m=settings.pixel_size_m, out_dir=Path(out_dir).resolve(),
+                    tasks=tuple(tasks.values()))
+
+
+def default_out_dir(manifest_path: Path) -> Path:
+    """Tiles of ``job.json`` go to ``job-tiles/`` beside it."""
+    path = Path(manifest_path)
+    return path.with_name(f"{path.stem}-tiles")
+
+
+def save(manifest: Manifest, path: Path) -> Path:
+    """Write atomically (a reader sees the old manifest or the new one)."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        data = manifest.to_dict(relative_to=path.parent.resolve())
+        write_text_atomic(path, json.dumps(data, indent=1, sort_keys=True) + "\n")
+    except OSError as exc:
+        raise MetaSimError(f"cannot write the manifest {path}: {exc.strerror}; choose another --out") from None
+    return path
+
+
+def load(path: Path) -> Manifest:
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise MetaSimError(f"job manifest {path} not found; write one with `meta-sim jobs plan`") from None
+    except (OSError, ValueError) as exc:
+        raise MetaSimError(f"{path}: not a readable job manifest ({exc}); plan the job again") from None
+    return Manifest.from_dict(data, path.parent.resolve())
+
+
+def render_setup(manifest: Manifest, with_banks: bool = True):
+    """(jobs, RenderSettings) for the manifest's tasks. Without banks the settings serve only
+    to check tiles (their expected metadata), which needs no texture images."""
+    from ..design import DesignSpace
+    from ..render import Job, RenderSettings
+    from ..render_presets import get_preset
+
+    banks = []
+    if with_banks:
+        from ..textures import ensure_default_bank, ensure_heldout_bank, load_bank
+
+        banks = [load_bank(manifest.bank) if manifest.bank else ensure_default_bank(), ensure_heldout_bank()]
+    settings = RenderSettings(space=DesignSpace.from_dict(manifest.space), banks=banks,
+                              preset=get_preset(manifest.preset), out_dir=Path(manifest.out_dir),
+                              n_tiles=manifest.n_tiles, tile_px=manifest.tile_px,
+                              pixel_size_m=manifest.pixel_size_m)
+    jobs = [Job(t.design, t.city_seed, t.name, t.tiles) for t in manifest.tasks]
+    return jobs, settings
+
+
+DONE, MISSING, CORRUPT = "done", "missing", "corrupt"
+
+
+@dataclass
+class Status:
+    """Each task's tile states (done / missing / corrupt) and leftover temporary files."""
+
+    states: dict  # task name -> list of (path, state)
+    temporaries: list
+
+    def count(self, state: str) -> int:
+        return sum(1 for tiles in self.states.values() for _, state_ in tiles if state_ == state)
+
+    @property
+    def complete_tasks(self) -> set:
+        return {name for name, tiles in self.states.items() if all(s == DONE for _, s in tiles)}
+
+    def paths(self, state: str) -> list:
+        return [path for tiles in self.states.values() for path, s in tiles if s == state]
+
+
+def check(manifest: Manifest, threads: int = 8) -> Status:
+    """Validate every output as the worker does (readable EXR, channels, size, metadata).
+
+    Tiles are read in threads: OpenImageIO decodes without holding the GIL.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .. import tiles
+    from ..render import expected_meta, tile_path
+
+    jobs, settings = render_setup(manifest, with_banks=False)
+    items = [(job, j, tile_path(settings.out_dir, job, j)) for job in jobs for j in job.tiles]
+
+    def state(item):
+        job, j, path = item
+        if not path.is_file():
+            return MISSING
+        return DONE if tiles.is_valid_tile(path, expected_meta(settings, job, j)) else CORRUPT
+
+    with ThreadPoolExecutor(threads) as pool:
+        found = list(pool.map(state, items))
+    states = {job.name: [] for job in jobs}
+    for (job, _, path), s in zip(items, found):
+        states[job.name].append((path, s))
+    return Status(states, temporaries(manifest))
+
+
+def temporaries(manifest: Manifest) -> list[Path]:
+    """Half-written tiles a killed worker left (``.NAME_tNN.tmpPID.exr``); never read as tiles."""
+    out_dir = Path(manifest.out_dir)
+    if not out_dir.is_dir():
+        return []
+    names = {t.name for t in manifest.tasks}
+    pattern = re.compile(r"\.(.+)_t\d+\.tmp\d+\.exr")
+    return sorted(p for p in out_dir.glob(".*.tmp*.exr")
+                  if (m := pattern.fullmatch(p.name)) and m[1] in names)
