@@ -44,8 +44,8 @@ def test_round_trip_loads_with_weights_only(tmp_path):
     assert list(tmp_path.joinpath("sub").iterdir()) == [path]  # no temporary file left behind
 
     raw = torch.load(path, weights_only=True)
-    assert raw["format_version"] == 1 and raw["kind"] == "nams" and raw["extractor_id"] == "colour-stats-v1"
-    assert {"z_mean", "z_std"} <= set(raw["state_dict"])
+    assert raw["format_version"] == 2 and raw["kind"] == "nams" and raw["extractor_id"] == "colour-stats-v1"
+    assert {"z_mean", "z_std", "feature_scale"} <= set(raw["state_dict"])
     assert set(raw) == {"format", "format_version", "kind", "model_config", "state_dict", "space",
                         "feature_norm", "extractor_id", "history", "extra", "digest"}
 
@@ -113,8 +113,8 @@ def _rewrite(path, **changes):
 def test_wrong_format_version_and_edited_contents(tmp_path):
     path = tmp_path / "nams.pt"
     _save(path)
-    _rewrite(path, format_version=2)
-    with pytest.raises(MetaSimError, match="format version 2"):
+    _rewrite(path, format_version=1)
+    with pytest.raises(MetaSimError, match="format version 1"):
         load_checkpoint(path)
     _save(path)
     _rewrite(path, extractor_id="someone-else")

@@ -10,6 +10,7 @@ from meta_sim.errors import MetaSimError
 from meta_sim.nams import (DRConfig, FeatureNorm, NAMS, NAMSConfig, TrainConfig, build_model, train_dr,
                            train_nams)
 from meta_sim.nams.model import kl_to_standard_normal
+from meta_sim.nams.train import FEATURE_SCALE_MIN
 
 SMALL = (32, 64)
 
@@ -117,13 +118,27 @@ def test_feature_norm_handles_constant_and_near_constant_dimensions():
     assert torch.all(normalised[:, 1] == 0)
     target = torch.tensor([[0.0, 1e30, -1e30, 3.0]])
     assert torch.isfinite(norm.apply(target)).all()
-    torch.testing.assert_close(norm.invert(norm.apply(features)), features, rtol=1e-5, atol=1e-3)
+    torch.testing.assert_close(normalised * norm.std + norm.mean, features, rtol=1e-5, atol=1e-3)
     again = FeatureNorm.from_dict(norm.to_dict())
     assert torch.equal(again.mean, norm.mean) and torch.equal(again.std, norm.std)
     with pytest.raises(MetaSimError, match="dimensions"):
         norm.apply(torch.zeros(2, 5))
     with pytest.raises(MetaSimError):
         FeatureNorm.from_dict({"mean": torch.zeros(3), "std": torch.zeros(3)})
+
+
+def test_whitening_gives_uncorrelated_unit_variance_components():
+    g = torch.Generator().manual_seed(0)
+    features = torch.randn(200, 3, generator=g) @ torch.randn(3, 8, generator=g)  # rank 3 in 8 dims
+    norm = FeatureNorm.fit(features, whiten=5)
+    assert norm.dim == 3  # only the directions the training set spans
+    white = norm.apply(features).double()
+    torch.testing.assert_close(white.T @ white / len(white), torch.eye(3, dtype=torch.float64),
+                               rtol=0, atol=1e-3)
+    again = FeatureNorm.from_dict(norm.to_dict())
+    assert torch.equal(again.components, norm.components)
+    fit = train_nams(*_toy(), NAMSConfig(8, 12, hidden=SMALL), _quick(max_epochs=2, whiten=4))
+    assert fit.model.config.feature_dim == fit.norm.dim == 4
 
 
 def _quick(**overrides):
@@ -141,6 +156,20 @@ def test_training_loss_is_finite_and_decreases():
     assert (history["n_train"], history["n_val"], history["n_dropped"]) == (230, 26, 0)
     assert not fit.model.training
     assert torch.all(fit.model.z_std > 0) and torch.isfinite(fit.model.z_mean).all()
+    # feature_scale is P's RMS error per feature over all rows, floored.
+    with torch.no_grad():
+        error = fit.model.predict(fit.model.encode(designs)[0]) - fit.norm.apply(features)
+    expected = error.square().mean(dim=0).sqrt().clamp_min(FEATURE_SCALE_MIN)
+    torch.testing.assert_close(fit.model.feature_scale, expected)
+
+
+def test_early_stopping_can_watch_one_term_of_the_loss():
+    designs, features = _toy()
+    fit = train_nams(designs, features, NAMSConfig(8, 12, hidden=SMALL), _quick(max_epochs=20, monitor="mse"))
+    mse = fit.history["val_terms"]["mse"]
+    assert fit.history["best_val_loss"] == min(mse) == mse[fit.history["best_epoch"] - 1]
+    with pytest.raises(MetaSimError, match="monitor"):
+        TrainConfig(monitor="accuracy")
 
 
 def test_training_is_deterministic_and_leaves_the_global_rng_alone():

@@ -1,5 +1,6 @@
 """Design inference on a fake simulator: recoverability, baselines, and every edge case of the search."""
 
+import copy
 import math
 import time
 
@@ -47,7 +48,8 @@ def toy():
     simulate = FakeSimulator(space)
     rng = np.random.default_rng(0)
     designs, features = simulate(space.sample(rng, 800))
-    config = TrainConfig(max_epochs=60, patience=10, lr=3e-3)
+    # No whitening: the tests address the simulator's feature dimensions one by one.
+    config = TrainConfig(max_epochs=60, patience=10, lr=3e-3, whiten=0)
     nams = train_nams(designs, features, NAMSConfig(space.dim, FEATURES, hidden=(64, 128)), config)
     dr = train_dr(designs, features, DRConfig(FEATURES, space.dim, hidden=(64,) * 3), config)
     truth = space.sample(rng, 40)
@@ -114,6 +116,21 @@ def test_bfloat16_search_is_finite_and_still_recovers(toy):
     _assert_finite(results, toy["space"])
     assert _accuracy(results, toy["truth"][:10]) >= 0.8
     assert next(toy["nams"].parameters()).dtype == torch.float32  # the caller's model is untouched
+
+
+def test_search_measures_errors_in_units_of_the_feature_scale(toy):
+    # Half the features of the targets drowned in noise: with a scale that says so, the
+    # clean half decides; with unit scales the noise does.
+    model = copy.deepcopy(toy["nams"])
+    noisy = toy["targets"].clone()
+    noisy[:, :FEATURES // 2] += 5 * torch.randn(len(noisy), FEATURES // 2, generator=_gen(3))
+    plain = _accuracy(exhaustive_search(model, noisy, toy["space"]), toy["truth"])
+    model.feature_scale[:FEATURES // 2] = 5.0
+    model.train()  # drops the cached design table, which holds scaled predictions
+    model.eval()
+    assert _accuracy(exhaustive_search(model, noisy, toy["space"]), toy["truth"]) >= 0.9 > plain
+    results = adjoint_search(model, noisy[:10], toy["space"], generator=_gen(), **FAST)
+    assert _accuracy(results, toy["truth"][:10]) >= 0.8
 
 
 # --- determinism, grouping, caching -------------------------------------------------------------

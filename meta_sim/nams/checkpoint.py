@@ -5,10 +5,11 @@ values, so it loads with ``torch.load(path, weights_only=True)`` (no pickled
 code is ever executed):
 
     format          "meta-sim-checkpoint"
-    format_version  1
+    format_version  2
     kind            "nams" or "dr"
     model_config    NAMSConfig / DRConfig as a dict
-    state_dict      the model's tensors (NAMS: also the buffers z_mean, z_std)
+    state_dict      the model's tensors (NAMS: also the buffers z_mean, z_std,
+                    feature_scale)
     space           the design space (DesignSpace.to_dict())
     feature_norm    {"mean": tensor, "std": tensor}
     extractor_id    which feature extractor made the training features
@@ -41,7 +42,7 @@ from .model import MODELS, DirectRegression, NAMS, build_model
 from .train import FeatureNorm
 
 FORMAT = "meta-sim-checkpoint"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 
 @dataclass
@@ -144,7 +145,7 @@ def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
         raise MetaSimError(f"{path}: its design space does not match its model")
     norm = FeatureNorm.from_dict(payload["feature_norm"])
     feature_dim = model.config.feature_dim
-    if norm.mean.shape[0] != feature_dim:
+    if norm.dim != feature_dim:
         raise MetaSimError(f"{path}: its feature normalisation does not match its model")
     return Checkpoint(kind=found, model=model, space=space, feature_norm=norm,
                       extractor_id=payload["extractor_id"], history=payload["history"],

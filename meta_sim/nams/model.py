@@ -124,7 +124,11 @@ class NAMS(nn.Module):
     """E: d -> (mu, logvar); D: z -> design logits; P: z -> (normalised) features.
 
     ``z_mean`` and ``z_std`` hold the spread of mu(E(d)) over the training
-    designs; the adjoint search draws its starts from them. Training sets them.
+    designs; the adjoint search draws its starts from them. ``feature_scale``
+    is the RMS error of P(mu(E(d))) per (normalised) feature over the training
+    set: the search measures errors in these units, so that features P cannot
+    predict well (tile-to-tile noise) do not outvote the ones it can. Training
+    sets all three.
     """
 
     kind = "nams"
@@ -142,6 +146,7 @@ class NAMS(nn.Module):
         self.predictor = net(c.z_dim, c.feature_dim)
         self.register_buffer("z_mean", torch.zeros(c.z_dim))
         self.register_buffer("z_std", torch.ones(c.z_dim))
+        self.register_buffer("feature_scale", torch.ones(c.feature_dim))
         self._design_tables: dict = {}
 
     # The exhaustive search caches P(mu(E(d))) for every design of a space

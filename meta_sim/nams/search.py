@@ -163,9 +163,9 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
                    max_rows: int = 16384) -> list[SearchResult]:
     """Neural-adjoint search for every target row; one SearchResult per row.
 
-    The per-start objective is MSE(P(z), target) + boundary_weight *
-    sum_j relu(|z_j - z_mean_j| - k z_std_j) (the Neural-Adjoint boundary
-    loss). Gradients are taken on the sum over starts, and Adam acts per
+    The per-start objective is MSE(P(z), target), measured in units of the
+    model's ``feature_scale``, + boundary_weight * sum_j relu(|z_j - z_mean_j|
+    - k z_std_j) (the Neural-Adjoint boundary loss). Gradients are taken on the sum over starts, and Adam acts per
     element, so starts are independent. Starts are ranked by the objective
     recomputed at the final z. ``dtype`` (e.g. torch.bfloat16) is the dtype
     of the networks' forward passes; z, Adam's state and the losses stay
@@ -191,6 +191,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     predictor, decoder = (copy.deepcopy(m).eval().requires_grad_(False).to(dtype)
                           for m in (model.predictor, model.decoder))
     mean, std = model.z_mean.detach().float(), model.z_std.detach().float()
+    feature_scale = model.feature_scale.detach().float()
     half_width = k * std
     # All starts are drawn up front, so grouping targets below cannot change them.
     starts = mean + (2 * torch.rand((len(targets), M, model.config.z_dim), generator=generator) - 1) * half_width
@@ -200,15 +201,16 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     results: list[SearchResult] = []
     for g, rows in enumerate(groups):
         z = starts[rows].clone().requires_grad_(True)
-        target = targets[rows]
+        target = targets[rows].double() / feature_scale.double()
         # A huge target would overflow the squared error in float32. Dividing each
         # target's whole objective by its scale^2 leaves Adam's steps unchanged
         # (Adam is invariant to a constant gradient scale) and keeps them finite.
-        scale = target.abs().amax(dim=1).clamp_min(1.0)[:, None]
-        target_scaled = (target / scale)[:, None, :]
+        scale64 = target.abs().amax(dim=1).clamp_min(1.0)[:, None]
+        target_scaled = (target / scale64).float()[:, None, :]
+        inv_scale = (1 / scale64).float()
 
         def objective(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-            pred = predictor(z.to(dtype)).float() / scale[:, :, None]
+            pred = predictor(z.to(dtype)).float() / feature_scale * inv_scale[:, :, None]
             mse_scaled = (pred - target_scaled).square().mean(dim=-1)
             boundary = torch.relu((z - mean).abs() - half_width).sum(dim=-1)
             return mse_scaled, boundary
@@ -216,7 +218,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
         optimiser = torch.optim.Adam([z], lr=lr, betas=(0.9, 0.999))
         for step in range(iterations):
             mse_scaled, boundary = objective(z)
-            loss = (mse_scaled + boundary_weight * boundary / scale.square()).sum()
+            loss = (mse_scaled + boundary_weight * boundary * inv_scale.square()).sum()
             (grad,) = torch.autograd.grad(loss, z)
             z.grad = grad
             optimiser.step()
@@ -224,7 +226,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
                 progress(g * iterations + step + 1, total_steps)
         with torch.no_grad():
             mse_scaled, boundary = objective(z)
-            losses = mse_scaled.double() * scale.double().square() + boundary_weight * boundary.double()
+            losses = mse_scaled.double() * scale64.square() + boundary_weight * boundary.double()
             losses = torch.where(torch.isfinite(losses), losses, torch.full_like(losses, math.inf))
             kept_loss, kept = torch.topk(losses, S, dim=1, largest=False, sorted=True)
             if torch.isinf(kept_loss).any():
@@ -241,7 +243,8 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
 
 # --- exhaustive ----------------------------------------------------------------------------------
 class DesignTable(NamedTuple):
-    """Every design of a space, encoded, with P(mu(E(d))) and its squared norms (float64)."""
+    """Every design of a space, encoded, with P(mu(E(d))) in units of the model's ``feature_scale``
+    and its squared norms (float64)."""
 
     designs: torch.Tensor
     features: torch.Tensor
@@ -257,7 +260,7 @@ def count_designs(space: DesignSpace) -> int | None:
 
 def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DESIGNS,
                  batch: int = 4096) -> DesignTable:
-    """P(mu(E(d))) for every design of ``space``.
+    """P(mu(E(d))) / feature_scale for every design of ``space``.
 
     Cached on the model (an eval-mode model only); ``model.train()`` and
     ``model.load_state_dict()`` drop the cache. Edit weights in place any
@@ -285,7 +288,7 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
     model.eval()
     with torch.no_grad():
         features = torch.cat([model.predict(model.encode(designs[i:i + batch])[0])
-                              for i in range(0, n, batch)])
+                              for i in range(0, n, batch)]) / model.feature_scale
     if not torch.isfinite(features).all():
         raise MetaSimError("the model predicts NaN/Inf features for some designs; the checkpoint is unusable")
     table = DesignTable(designs, features, features.double().square().sum(dim=1))
@@ -298,7 +301,7 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
 
 def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top: int = 10, r: float = 0.0,
                       generator: torch.Generator | None = None, batch: int = 16384) -> list[SearchResult]:
-    """The design whose predicted features are nearest (MSE) to each target.
+    """The design whose predicted features are nearest (MSE in units of ``feature_scale``) to each target.
 
     ``ranked`` lists the ``top`` best designs with their losses; the vote
     shares are the distribution of each parameter among the ``S`` best
@@ -309,7 +312,7 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     if top < 1:
         raise MetaSimError(f"top must be at least 1, not {top}")
     table = design_table(model, space)
-    targets = _targets(targets, model.config.feature_dim).double()
+    targets = _targets(targets, model.config.feature_dim).double() / model.feature_scale.double()
     n, feature_dim = table.features.shape
     sq_targets = targets.square().sum(dim=1, keepdim=True)
     losses = torch.cat([
