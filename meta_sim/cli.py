@@ -438,5 +438,21 @@ def bench_nams_command(out, targets, cache):
     click.echo(f"wrote {out}")
 
 
+
+@bench.command("farm")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/farm.json"), show_default=True)
+@click.option("--designs", type=int, default=16, show_default=True, help="tasks of the job (one design each)")
+@click.option("--tiles", type=int, default=4, show_default=True, help="tiles per task")
+def bench_farm_command(out, designs, tiles):
+    """Tiles per second and peak memory per worker: 1 and 2 local workers, and a Dask LocalCluster."""
+    from .farm.bench import bench_farm, format_farm_table
+
+    result = bench_farm(designs=designs, tiles=tiles)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    click.echo(format_farm_table(result))
+    click.echo(f"wrote {out}")
+
+
 if __name__ == "__main__":
     main()
