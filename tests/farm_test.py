@@ -171,12 +171,22 @@ def test_time_out_kills_the_worker_and_fails_the_task(tmp_path, reference):
     assert "timed out after 0.05 s per task (after 2 attempts)" in summary.failed[manifest.tasks[0].name]
 
 
-def test_dask_local_cluster_renders_the_same_tiles(tmp_path, reference):
+def test_dask_local_cluster_and_scheduler_address_render_the_same_tiles(tmp_path, reference):
+    from distributed import LocalCluster
+
     manifest = _plan(tmp_path / "job.json")
     summary = executors.run(manifest, executors.RunOptions(executor="dask", workers=2, **QUIET))
     assert not summary.failed and summary.rendered == 48
     assert {b["tasks"] for b in summary.batches} == {4}  # default recycle: 4 tasks per worker process
     _same_tiles(_pixels(manifest), reference[1])
+    # The code path of a remote cluster: a scheduler reached by its address.
+    remote = _plan(tmp_path / "remote.json")
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                      dashboard_address=None) as cluster:
+        summary = executors.run(remote, executors.RunOptions(executor="dask", scheduler=cluster.scheduler_address,
+                                                             recycle=2, **QUIET))
+    assert not summary.failed and summary.rendered == 48
+    _same_tiles(_pixels(remote), reference[1])
 
 
 def test_shards_and_a_blender_binary_render_the_same_tiles(tmp_path, reference):

@@ -177,7 +177,7 @@ class _DaskPool:
         self.cluster = None
         try:
             if scheduler:
-                self.client = Client(scheduler, timeout="30s")
+                self.client = Client(scheduler, timeout="10s")
             else:
                 self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=False,
                                             dashboard_address=None)
