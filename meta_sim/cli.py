@@ -366,7 +366,8 @@ def jobs_status(manifest_path, show):
 @click.argument("manifest_path", type=click.Path(path_type=Path))
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
               help="local worker processes, or dask.distributed (a LocalCluster without --scheduler)")
-@click.option("--workers", type=int, default=2, show_default=True, help="worker processes rendering at once")
+@click.option("--workers", type=int, default=2, show_default=True,
+              help="worker processes rendering at once (with --scheduler: the cluster decides)")
 @click.option("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://HOST:8786")
 @click.option("--blender", default=None,
               help="Blender binary to render with [default: $META_SIM_BLENDER, else the bpy module]")
