@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all addon bench-render bench-nams clean
+.PHONY: setup demo test test-all addon bench-render bench-nams bench-farm clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,9 @@ addon: setup
 
 bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
+
+bench-farm: setup
+	$(BIN)/meta-sim bench farm --out benchmarks/farm.json
 
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
