@@ -107,7 +107,7 @@ def bench_nams(targets: int = 20, seed: int = 1, root: Path | None = None) -> di
         for name in ("uniform", "dr", "nams_exhaustive"):
             rows[name], _ = score_method(ctx, method_runs(ctx, seed, {})[name])
         for starts, iterations in ADJOINT_SWEEP:
-            run = method_runs(ctx, seed, {"M": starts, "iterations": iterations})["nams_adjoint"]
+            run = method_runs(ctx, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
             rows[f"nams_adjoint_M{starts}_it{iterations}"], _ = score_method(ctx, run)
         experiments[experiment] = rows
     result["experiments"] = experiments

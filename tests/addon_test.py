@@ -78,8 +78,8 @@ def test_zip_holds_only_the_addon(zip_path):
 
 @pytest.fixture(scope="module")
 def addon(zip_path, tmp_path_factory, bank, heldout_bank):
+    import bpy  # first: it puts Blender's script modules (addon_utils) on the path
     import addon_utils
-    import bpy
 
     tmp = tmp_path_factory.mktemp("addon")
     saved = os.environ.get("BLENDER_USER_RESOURCES")
