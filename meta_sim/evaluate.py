@@ -22,6 +22,7 @@ import numpy as np
 from .design import DesignSpace
 from .errors import MetaSimError
 from .fileio import write_text_atomic
+from .infer import SearchOptions
 from .render import Job
 
 TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
@@ -110,17 +111,11 @@ def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, 
 
 
 @dataclass(frozen=True)
-class EvalSettings:
+class EvalSettings(SearchOptions):
     targets: int = 20
     tiles: int | None = None  # default: the training set's tiles per design
     seed: int = 1
     preset: str | None = None  # default: the training set's render preset
-    M: int = 1000
-    k: float = 3.0
-    S: int = 50
-    iterations: int = 200
-    lr: float = 0.01
-    r: float = 0.0
     sheet_rows: int = 6
 
 
@@ -209,8 +204,7 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ctx = prepare_eval(experiment, dataset, models_settings, settings, root, bar)
-    adjoint = {"M": settings.M, "k": settings.k, "S": settings.S, "iterations": settings.iterations,
-               "lr": settings.lr, "r": settings.r}
+    adjoint = settings.search_options()
     methods, predictions = {}, {}
     for name, run in method_runs(ctx, settings.seed, adjoint, settings.S).items():
         methods[name], predictions[name] = score_method(ctx, run)

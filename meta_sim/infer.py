@@ -25,22 +25,28 @@ from .presets import DesignPreset, population, save_preset
 
 
 @dataclass(frozen=True)
-class InferSettings:
-    group_size: int = 9
-    method: str = "auto"
+class SearchOptions:
+    """Neural-adjoint settings (the paper's defaults), shared by `infer` and `eval`."""
+
     M: int = 1000
     k: float = 3.0
     S: int = 50
     iterations: int = 200
     lr: float = 0.01
     r: float = 0.0
+
+    def search_options(self) -> dict:
+        return {name: getattr(self, name) for name in ("M", "k", "S", "iterations", "lr", "r")}
+
+
+@dataclass(frozen=True)
+class InferSettings(SearchOptions):
+    group_size: int = 9
+    method: str = "auto"
     seed: int = 0
     gsd: float | None = None
     views: int | None = None  # default: what the model was trained with
     weights: str | None = None  # backbone weights, when the model's extractor needs them
-
-    def search_options(self) -> dict:
-        return {"M": self.M, "k": self.k, "S": self.S, "iterations": self.iterations, "lr": self.lr, "r": self.r}
 
 
 def _slug(text: str) -> str:
