@@ -141,6 +141,46 @@ def test_whitening_gives_uncorrelated_unit_variance_components():
     assert fit.model.config.feature_dim == fit.norm.dim == 4
 
 
+def test_noise_whitening_makes_the_design_residual_white_and_finds_the_design():
+    """Features = design effect + noise that is loud along a few directions: whitened by the
+    total spread those directions still blur the distance, whitened by the noise they do not."""
+    g = torch.Generator().manual_seed(0)
+    designs, _ = _toy(n=400, seed=0)
+    weights = torch.randn(8, 12, generator=g)
+    loud = torch.linalg.qr(torch.randn(12, 12, generator=g))[0][:, :4]
+
+    def noise(n):
+        return 0.3 * torch.randn(n, 12, generator=g) + 3.0 * torch.randn(n, 4, generator=g) @ loud.T
+
+    features = designs @ weights + noise(400)
+    noisy = FeatureNorm.fit(features, whiten=8, designs=designs, shrink=0.0)
+    total = FeatureNorm.fit(features, whiten=8)
+    assert noisy.noise_whitened and not total.noise_whitened
+    again = FeatureNorm.from_dict(noisy.to_dict())
+    assert again.noise_whitened and torch.equal(again.components, noisy.components)
+    # What the designs leave unexplained is white: unit covariance over the residual degrees of freedom.
+    a = torch.cat([designs, torch.ones(400, 1)], 1).double()
+    white = noisy.apply(features).double()
+    residual = white - a @ torch.linalg.lstsq(a, white, driver="gelsd").solution
+    dof = 400 - int(torch.linalg.matrix_rank(a))
+    torch.testing.assert_close(residual.T @ residual / dof, torch.eye(8, dtype=torch.float64), rtol=0, atol=1e-3)
+    # Nearest design under each metric, for fresh noisy renders of every design.
+    table = torch.unique(designs, dim=0)
+    draws = table.repeat(20, 1)
+    probe, truth = draws @ weights + noise(len(draws)), torch.arange(len(table)).repeat(20)
+
+    def hits(norm):
+        nearest = torch.cdist(norm.apply(probe), norm.apply(table @ weights)).argmin(1)
+        return float((nearest == truth).float().mean())
+
+    assert hits(noisy) > 0.97 and hits(noisy) > hits(total) + 0.1
+    # Too few rows for the noise covariance (fewer residual degrees of freedom than components).
+    few = FeatureNorm.fit(features[:12], whiten=6, designs=designs[:12])
+    assert not few.noise_whitened and few.dim == 6
+    with pytest.raises(MetaSimError, match="noise_shrink"):
+        TrainConfig(noise_shrink=1.5)
+
+
 def _quick(**overrides):
     return TrainConfig(**{"max_epochs": 12, "patience": 50, "batch_size": 32, "lr": 3e-3, **overrides})
 
@@ -209,7 +249,7 @@ def test_plateau_schedule_lowers_the_learning_rate():
     designs, features = _toy()
     reports = []
     train_dr(designs, features, DRConfig(12, 8, hidden=SMALL),
-             _quick(max_epochs=15, lr=0.3, plateau_factor=0.5, plateau_patience=1), progress=reports.append)
+             _quick(max_epochs=40, lr=0.3, plateau_factor=0.5, plateau_patience=1), progress=reports.append)
     assert reports[-1].lr < 0.3
 
 

@@ -48,6 +48,10 @@ class TrainConfig:
     10% validation split and early stopping on the validation MSE.
     ``whiten`` > 0 whitens the features onto that many principal components
     (see FeatureNorm); the model's feature_dim follows the normalisation.
+    ``whiten_noise`` then whitens those components by the simulation noise
+    (the spread of the features a design does not explain; see FeatureNorm)
+    rather than by their total spread, with ``noise_shrink`` of the noise
+    covariance's mean variance mixed into its diagonal.
     ``plateau_factor`` > 0 turns on ReduceLROnPlateau on the validation loss.
     """
 
@@ -62,6 +66,8 @@ class TrainConfig:
     plateau_patience: int = 10
     monitor: str = "mse"
     whiten: int = 128
+    whiten_noise: bool = True
+    noise_shrink: float = 0.03
     seed: int = 0
     norm_eps: float = 1e-6
 
@@ -72,6 +78,8 @@ class TrainConfig:
             raise MetaSimError(f"val_fraction must be in [0, 1), not {self.val_fraction}")
         if self.whiten < 0:
             raise MetaSimError(f"whiten (principal components kept, 0 = off) must be >= 0, not {self.whiten}")
+        if not 0.0 <= self.noise_shrink <= 1.0:
+            raise MetaSimError(f"noise_shrink must be in [0, 1], not {self.noise_shrink}")
         if self.monitor not in MONITORS:
             raise MetaSimError(f"monitor must be one of {', '.join(MONITORS)}, not {self.monitor!r}")
         if not 0.0 <= self.plateau_factor < 1.0:
@@ -99,14 +107,30 @@ class FeatureNorm:
     dominated by many correlated, noisy dimensions, while unit-variance
     principal components weigh every independent direction once (E1 top-1 of
     NAMS exhaustive, 300 x 4 tiles: 0.65/0.55 -> 0.91/0.74 with 128 components).
+
+    Noise whitening (``designs`` given) goes one step further: within the
+    components it whitens by the covariance of the simulation noise -- what
+    the city, the tile and the view add to a design's features -- so that
+    the search's squared error is the Mahalanobis distance under that noise
+    and a direction the noise moves a lot counts little. The noise is the
+    residual of an additive least-squares fit of the components to the
+    encoded designs (with an intercept), its covariance taken
+    over the residual degrees of freedom and shrunk by ``shrink`` towards its
+    mean variance. With fewer residual degrees of freedom than components,
+    the covariance cannot be estimated and the total spread is kept
+    (``noise_whitened`` is then False). Measured with the linear fit itself
+    (300 x 4 tiles, 100 E1 targets of 4 tiles, 128 components): top-1
+    flat/sloped 0.91/0.81 whitened by the total spread, 0.95/0.92 by the noise.
     """
 
     mean: torch.Tensor
     std: torch.Tensor
     components: torch.Tensor | None = None  # (k, dim): standardised features -> whitened components
+    noise_whitened: bool = False
 
     @classmethod
-    def fit(cls, features: torch.Tensor, eps: float = 1e-6, whiten: int = 0) -> "FeatureNorm":
+    def fit(cls, features: torch.Tensor, eps: float = 1e-6, whiten: int = 0,
+            designs: torch.Tensor | None = None, shrink: float = 0.03) -> "FeatureNorm":
         x = features.double()
         mean = x.mean(dim=0)
         std = x.std(dim=0, unbiased=False).clamp_min(eps)
@@ -118,7 +142,12 @@ class FeatureNorm:
             spread = singular / math.sqrt(len(x))
             # Directions without spread in the training set cannot be whitened.
             keep = min(whiten, int((spread > eps * spread[0].clamp_min(eps)).sum()))
-            components = (v[:keep] / spread[:keep, None]).float()
+            components = v[:keep] / spread[:keep, None]
+            noise = None if designs is None else _noise_whitening(((x - mean) / std) @ components.T,
+                                                                  designs, shrink)
+            if noise is not None:
+                components = noise @ components
+            return cls(mean.float(), std.float(), components.float(), noise is not None)
         return cls(mean.float(), std.float(), components)
 
     @property
@@ -138,6 +167,7 @@ class FeatureNorm:
         out = {"mean": self.mean.clone(), "std": self.std.clone()}
         if self.components is not None:
             out["components"] = self.components.clone()
+            out["noise_whitened"] = self.noise_whitened
         return out
 
     @classmethod
@@ -157,7 +187,31 @@ class FeatureNorm:
         if components is not None and (components.ndim != 2 or components.shape[1] != mean.shape[0]
                                        or not torch.isfinite(components).all()):
             raise MetaSimError("feature normalisation: the whitening components do not fit the features")
-        return cls(mean, std, components)
+        return cls(mean, std, components, bool(data.get("noise_whitened", False)))
+
+
+# A ridge just big enough to make the one-hot blocks and the intercept (collinear) solvable; a larger
+# one would leave part of the design effect in the residual and count it as noise.
+NOISE_RIDGE = 1e-9
+
+
+def _noise_whitening(components: torch.Tensor, designs: torch.Tensor, shrink: float) -> torch.Tensor | None:
+    """(k, k) matrix W with W C W^T = I for C the (shrunk) covariance of what an additive model
+    of the designs leaves unexplained in ``components`` (n, k); None when it cannot be estimated."""
+    n, k = components.shape
+    a = torch.cat([torch.as_tensor(designs, dtype=torch.float64), torch.ones(n, 1, dtype=torch.float64)], 1)
+    dof = n - int(torch.linalg.matrix_rank(a))
+    if dof < k:
+        return None
+    gram = a.T @ a
+    gram = gram + NOISE_RIDGE * gram.diagonal().mean() * torch.eye(a.shape[1], dtype=torch.float64)
+    residual = components - a @ torch.linalg.solve(gram, a.T @ components)
+    cov = residual.T @ residual / dof
+    cov = (1.0 - shrink) * cov + shrink * cov.diagonal().mean() * torch.eye(k, dtype=torch.float64)
+    values, vectors = torch.linalg.eigh(cov)
+    if not bool(values[0] > 0) or not torch.isfinite(values).all():
+        return None
+    return vectors.T / values.sqrt()[:, None]
 
 
 class EpochReport(NamedTuple):
@@ -228,7 +282,8 @@ def _fit(kind: str, model_config, designs: torch.Tensor, features: torch.Tensor,
     started = time.perf_counter()
     generator = torch.Generator().manual_seed(config.seed)
     train_rows, val_rows = _split(len(designs), config.val_fraction, generator)
-    norm = FeatureNorm.fit(features[train_rows], config.norm_eps, config.whiten)
+    norm = FeatureNorm.fit(features[train_rows], config.norm_eps, config.whiten,
+                           designs[train_rows] if config.whiten_noise else None, config.noise_shrink)
     # With whitening the networks see principal components, as many as the training set has.
     model_config = dataclasses.replace(model_config, feature_dim=norm.dim)
     features = norm.apply(features)
