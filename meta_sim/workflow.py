@@ -21,6 +21,10 @@ from .dataset import DatasetConfig, FeatureSet, build_features, render_training_
 from .errors import MetaSimError
 
 
+# Bumped when training changes in a way no setting shows (e.g. how features are normalised).
+MODEL_CODE_VERSION = 2
+
+
 @dataclass(frozen=True)
 class ModelSettings:
     extractor: str = "colour-texture"
@@ -31,8 +35,15 @@ class ModelSettings:
     seed: int = 0
 
     def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
+        """Names the cached models: every input, with the training and model defaults resolved, so
+        that a change of a default (not only of an override) trains afresh."""
+        from .nams import NAMSConfig, TrainConfig
+
+        nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, **self.nams}).to_dict()
+        train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
         blob = json.dumps({"dataset": asdict(dataset), "extractor": extractor_id, "views": self.views,
-                           "nams": self.nams, "train": self.train, "seed": self.seed}, sort_keys=True)
+                           "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION},
+                          sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:12]
 
 
