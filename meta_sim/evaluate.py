@@ -113,7 +113,7 @@ def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, 
 @dataclass(frozen=True)
 class EvalSettings(SearchOptions):
     targets: int = 20
-    tiles: int | None = None  # default: the training set's tiles per design
+    tiles: int = 9  # per target group, as in the paper (and `meta-sim infer`'s default group size)
     seed: int = 1
     preset: str | None = None  # default: the training set's render preset
     sheet_rows: int = 6
@@ -149,7 +149,7 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
 
     models = ensure_models(dataset, models_settings, root, bar)
     nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
-    tiles = settings.tiles or dataset.tiles
+    tiles = settings.tiles
     jobs, folder = render_targets(experiment, settings.targets, tiles, settings.seed,
                                   settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bar)
     extractor = make_extractor(models_settings.extractor,
