@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all addon bench-render bench-nams bench-farm clean
+.PHONY: setup demo test test-all addon bench-render bench-nams bench-tradeoff bench-farm clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,11 @@ addon: setup
 
 bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
+
+# Every knob that costs time against E1 accuracy, and the fast/balanced/paper profiles (long: the paper
+# profile renders 15,300 tiles). Needs benchmarks/render.json (make bench-render) for the render cost.
+bench-tradeoff: setup
+	$(BIN)/meta-sim bench tradeoff --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png
 
 bench-farm: setup
 	$(BIN)/meta-sim bench farm --out benchmarks/farm.json

@@ -286,7 +286,8 @@ def infer_command(target_dir, model, out, group_size, gsd, views, weights, seed,
 @click.argument("experiment", type=click.Choice(["e1", "e2"]))
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for results and nams.pt")
 @click.option("--targets", type=int, default=20, show_default=True, help="target groups")
-@click.option("--target-tiles", type=int, default=None, help="tiles per target group (default: as trained)")
+@click.option("--target-tiles", type=int, default=9, show_default=True,
+              help="tiles per target group (the paper's groups have 9)")
 @click.option("--seed", type=int, default=1, show_default=True, help="target seed")
 @_dataset_options
 @_search_options
@@ -438,6 +439,34 @@ def bench_nams_command(out, targets, cache):
     click.echo(format_nams_table(result))
     click.echo(f"wrote {out}")
 
+
+
+@bench.command("tradeoff")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.json"), show_default=True)
+@click.option("--plot", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.png"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True, help="E1 target groups of 9 tiles")
+@click.option("--adjoint-targets", type=int, default=20, show_default=True,
+              help="target groups for the (slow) neural-adjoint settings")
+@click.option("--presets", default="fast,balanced", show_default=True, help="render presets to compare")
+@click.option("--profiles", default="fast,balanced,paper", show_default=True,
+              help="profiles measured end to end (paper renders 15,300 tiles)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+def bench_tradeoff_command(out, plot, targets, adjoint_targets, presets, profiles, cache):
+    """E1 accuracy against time for every knob that costs time, and the fast/balanced/paper profiles."""
+    from .fileio import write_text_atomic
+    from .tradeoff import bench_tradeoff, format_tradeoff_table, get_profile, plot_tradeoff
+
+    names = [p for p in profiles.split(",") if p]
+    for name in names:
+        get_profile(name)
+    bars = _Bars()
+    result = bench_tradeoff(targets=targets, adjoint_targets=adjoint_targets, root=cache,
+                            presets=[p for p in presets.split(",") if p], profiles=names, bar=bars)
+    bars.close()
+    write_text_atomic(out, json.dumps(result, indent=2) + "\n")
+    plot_tradeoff(result, plot)
+    click.echo(format_tradeoff_table(result))
+    click.echo(f"wrote {out} and {plot}")
 
 
 @bench.command("farm")

@@ -1,0 +1,50 @@
+"""The speed/accuracy report: profiles, table and plot from a measured-shaped result."""
+
+import json
+
+import numpy as np
+import pytest
+
+from meta_sim.errors import MetaSimError
+from meta_sim.textures.pngio import read_rgb8
+from meta_sim.tradeoff import PROFILES, accuracy, format_tradeoff_table, get_profile, plot_tradeoff
+
+
+def _result():
+    def point(knob, setting, top1, seconds, one_off):
+        metrics = {"flat_top1": top1, "flat_top10": 1.0, "sloped_top1": top1 - 0.1, "sloped_top10": 0.9}
+        return {"knob": knob, "setting": setting, "metrics": metrics, "seconds_per_group": seconds,
+                "one_off_seconds": one_off, "targets": 10, "detail": {}}
+
+    return {"experiment": "e1", "targets": 10, "adjoint_targets": 5,
+            "views": {"max_abs_difference_1_vs_8_views": 1e-7, "seconds_per_9_tiles_1_view": 0.1,
+                      "seconds_per_9_tiles_8_views_if_not_invariant": 0.8},
+            "points": [point("tiles per target group", "1", 0.5, 0.01, 300),
+                       point("tiles per target group", "9", 0.9, 0.09, 300),
+                       point("search", "adjoint M=1000, 200 it", 0.85, 16.0, 300),
+                       point("training set", "600 x 4", 0.95, 0.09, 700),
+                       point("render preset", "balanced", 0.9, 0.09, 900),
+                       point("profile", "fast", 0.9, 0.09, 300)]}
+
+
+def test_profiles_are_the_three_recommended_ones_and_unknown_names_are_clear_errors():
+    assert list(PROFILES) == ["fast", "balanced", "paper"]
+    paper = get_profile("paper")
+    assert (paper.dataset.designs, paper.dataset.tiles, paper.views, paper.method) == (1700, 9, 8, "adjoint")
+    assert paper.search_options() == {"M": 1000, "iterations": 200}
+    assert get_profile("fast").search_options() == {}
+    with pytest.raises(MetaSimError, match="unknown profile"):
+        get_profile("turbo")
+
+
+def test_table_and_plot(tmp_path):
+    result = _result()
+    table = format_tradeoff_table(result)
+    assert table.count("\n| ") == len(result["points"])  # one row per point below the header
+    assert "| search | adjoint M=1000, 200 it | 0.85 |" in table and "1.0e-07" in table
+    assert accuracy(result["points"][1]["metrics"]) == pytest.approx(0.85)
+    path = plot_tradeoff(result, tmp_path / "plot.png")
+    image = read_rgb8(path)
+    assert image.shape[0] > 300 and image.shape[1] > 600
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 20  # points, text and grid, not a blank canvas
+    json.dumps(result)
