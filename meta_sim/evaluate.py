@@ -7,8 +7,9 @@
 
 Scoring follows the paper (section 5.4): rank the bank's textures by the HSV
 similarity to the true texture (``meta_sim/textures/similarity.py``); a
-prediction is a top-n hit when it is among the n nearest. In E1 the nearest
-texture is the truth itself.
+prediction is a top-n hit when it is among the n nearest, with ties at the
+n-th place shared fairly (``Ranking.credit``). In E1 the nearest texture is
+the truth itself.
 """
 
 from __future__ import annotations
@@ -49,26 +50,55 @@ def target_jobs(experiment: str, space: DesignSpace, heldout, n: int, seed: int)
             for k, design in enumerate(designs)]
 
 
+@dataclass(frozen=True)
+class Ranking:
+    """The bank's textures of one kind by similarity to one true texture, nearest first."""
+
+    ids: tuple[str, ...]
+    similarity: tuple[float, ...]
+
+    def credit(self, predicted: str, n: int) -> float:
+        """1 when ``predicted`` is among the ``n`` nearest textures, else 0. Textures tied with the
+        n-th nearest share the places left (a tie decided by a fair coin, in expectation): a held-out
+        texture whose colours no bank texture has is equally far (similarity 0) from dozens, and
+        deciding such ties by bank order would make a hit depend on where a texture is listed."""
+        if predicted not in self.ids:
+            return 0.0
+        if n >= len(self.ids):
+            return 1.0
+        mine = self.similarity[self.ids.index(predicted)]
+        edge = self.similarity[n - 1]
+        if mine != edge:
+            return float(mine > edge)
+        better = sum(1 for v in self.similarity if v > edge)
+        tied = sum(1 for v in self.similarity if v == edge)
+        return (n - better) / tied
+
+
 def rankings(experiment: str, bank, heldout) -> dict:
-    """Per roof kind: true texture id -> bank ids of that kind, nearest first."""
+    """Per roof kind: true texture id -> its ``Ranking`` of the bank's textures of that kind."""
     from .textures import SIMILARITY_FILE, SIMILARITY_TO_DEFAULT_FILE, load_similarity, rank_by_similarity
 
     sim = load_similarity(Path(heldout.root if experiment == "e2" else bank.root) /
                           (SIMILARITY_TO_DEFAULT_FILE if experiment == "e2" else SIMILARITY_FILE))
     truth_bank = heldout if experiment == "e2" else bank
-    return {kind: {t: rank_by_similarity(t, bank.ids(kind), sim) for t in truth_bank.ids(kind)}
-            for kind in ("flat", "sloped")}
+
+    def ranking(truth: str, kind: str) -> Ranking:
+        order = rank_by_similarity(truth, bank.ids(kind), sim)
+        return Ranking(tuple(order), tuple(sim.value(truth, t) for t in order))
+
+    return {kind: {t: ranking(t, kind) for t in truth_bank.ids(kind)} for kind in ("flat", "sloped")}
 
 
 def score(predicted: dict, truth: dict, ranks: dict) -> dict:
-    """top-1 / top-10 hits for each roof parameter the space has."""
+    """top-1 / top-10 hits (tie-aware, see ``Ranking.credit``) for each roof parameter the space has."""
     out = {}
     for param, kind in KIND_OF.items():
         if param not in truth:
             continue
-        order = ranks[kind][truth[param]]
-        out[f"{kind}_top1"] = float(predicted[param] in order[:1])
-        out[f"{kind}_top10"] = float(predicted[param] in order[:10])
+        ranking = ranks[kind][truth[param]]
+        out[f"{kind}_top1"] = ranking.credit(predicted[param], 1)
+        out[f"{kind}_top10"] = ranking.credit(predicted[param], 10)
     return out
 
 

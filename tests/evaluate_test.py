@@ -1,0 +1,36 @@
+"""E1/E2 scoring: ranks by the HSV similarity, ties shared fairly."""
+
+import pytest
+
+from meta_sim.evaluate import Ranking, rankings, score
+from meta_sim.textures import ensure_default_bank, ensure_heldout_bank
+
+
+def test_credit_counts_the_n_nearest_and_shares_ties_at_the_edge():
+    ranking = Ranking(("a", "b", "c", "d", "e"), (0.9, 0.5, 0.2, 0.2, 0.2))
+    assert ranking.credit("a", 1) == 1.0 and ranking.credit("b", 1) == 0.0
+    assert ranking.credit("b", 2) == 1.0
+    # Third place is shared by c, d and e: each gets one third of it.
+    assert [ranking.credit(t, 3) for t in "cde"] == pytest.approx([1 / 3] * 3)
+    assert ranking.credit("d", 4) == pytest.approx(2 / 3)
+    assert ranking.credit("e", 10) == 1.0  # fewer candidates than n
+    assert ranking.credit("unknown", 10) == 0.0
+    # Expected credit of a uniform guess is n / candidates, whatever the ties.
+    assert sum(ranking.credit(t, 3) for t in ranking.ids) == pytest.approx(3.0)
+
+
+def test_e1_truth_is_its_own_nearest_texture_and_e2_ties_are_fair():
+    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    e1 = rankings("e1", bank, heldout)
+    for kind in ("flat", "sloped"):
+        for truth, ranking in e1[kind].items():
+            assert ranking.ids[0] == truth and ranking.credit(truth, 1) == 1.0
+    e2 = rankings("e2", bank, heldout)
+    for kind, n_bank in (("flat", 40), ("sloped", 44)):
+        assert set(e2[kind]) == set(heldout.ids(kind))
+        for ranking in e2[kind].values():
+            assert len(ranking.ids) == n_bank
+            assert list(ranking.similarity) == sorted(ranking.similarity, reverse=True)
+            assert sum(ranking.credit(t, 10) for t in ranking.ids) == pytest.approx(10.0)
+    truth = {"flat_roof": bank.ids("flat")[0], "sloped_roof": bank.ids("sloped")[0]}
+    assert score(truth, truth, e1) == {"flat_top1": 1.0, "flat_top10": 1.0, "sloped_top1": 1.0, "sloped_top10": 1.0}
