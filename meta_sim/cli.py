@@ -165,6 +165,8 @@ def _dataset_options(command):
         click.option("--designs", type=int, default=None, help="training designs [default: 300; paper: 1700]"),
         click.option("--tiles", type=int, default=None, help="tiles per design [default: 4; paper: 9]"),
         click.option("--paper-scale", is_flag=True, help="the paper's scale: 1,700 designs x 9 tiles"),
+        click.option("--profile", type=click.Choice(["fast", "balanced", "paper"]), default=None,
+                     help="a recommended training set (see `make bench-tradeoff`); --designs/--tiles override it"),
         click.option("--dataset-seed", type=int, default=1, show_default=True, help="design sampling and city seed"),
         click.option("--cities", type=int, default=8, show_default=True, help="cities the designs are spread over"),
         click.option("--preset", default="fast", show_default=True, help="render preset of the training tiles"),
@@ -189,7 +191,14 @@ def _configs(o):
     from .dataset import DatasetConfig
     from .workflow import ModelSettings
 
-    base = DatasetConfig.paper() if o["paper_scale"] else DatasetConfig()
+    if o["profile"] and o["paper_scale"]:
+        raise MetaSimError("give --profile or --paper-scale, not both")
+    if o["profile"]:
+        from .tradeoff import get_profile
+
+        base = get_profile(o["profile"]).dataset
+    else:
+        base = DatasetConfig.paper() if o["paper_scale"] else DatasetConfig()
     overrides = {k: v for k, v in (("designs", o["designs"]), ("tiles", o["tiles"])) if v is not None}
     dataset = DatasetConfig(**{**base.__dict__, **overrides, "seed": o["dataset_seed"], "cities": o["cities"],
                                "preset": o["preset"], "tile_px": o["tile_px"], "pixel_size_m": o["gsd"]})
@@ -266,12 +275,27 @@ def _search_options(command):
 @click.option("--seed", type=int, default=0, show_default=True, help="search seed")
 @click.option("--search", "method", type=click.Choice(["auto", "adjoint", "exhaustive"]), default="auto",
               show_default=True, help="exhaustive evaluates every design; adjoint is the paper's search")
+@click.option("--profile", type=click.Choice(["fast", "balanced", "paper"]), default=None,
+              help="recommended search settings (fast/balanced: exhaustive; paper: adjoint M=1000, 200 "
+                   "iterations, 8 views); options given explicitly win")
 @_search_options
-def infer_command(target_dir, model, out, group_size, gsd, views, weights, seed, method, M, k, S, iterations,
-                  lr, r):
+@click.pass_context
+def infer_command(ctx, target_dir, model, out, group_size, gsd, views, weights, seed, method, profile, M, k, S,
+                  iterations, lr, r):
     """Infer rooftop designs for a folder of target images; write presets and a report."""
     from .infer import InferSettings, infer
 
+    if profile:
+        from .tradeoff import get_profile
+
+        chosen = get_profile(profile)
+        given = {name for name in ctx.params
+                 if ctx.get_parameter_source(name) is not click.core.ParameterSource.DEFAULT}
+        method = method if "method" in given else chosen.method
+        M = M if "M" in given else chosen.M
+        iterations = iterations if "iterations" in given else chosen.iterations
+        views = views if "views" in given else str(chosen.views)
+        group_size = group_size if "group_size" in given else chosen.group_size
     settings = InferSettings(group_size=group_size, method=method, M=M, k=k, S=S, iterations=iterations, lr=lr,
                              r=r, seed=seed, gsd=gsd, views=int(views) if views else None,
                              weights=str(weights) if weights else None)

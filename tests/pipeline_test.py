@@ -107,6 +107,26 @@ def test_infer_is_deterministic(evaluated, tiny_env, tmp_path):
     assert [p.read_text() for p in a] == [p.read_text() for p in b]
 
 
+def test_infer_profile_sets_the_search_and_explicit_options_win(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "paper", "--profile", "paper",
+                  "-M", 16, "--iterations", 4, "-S", 4, "--group-size", 2)
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "paper" / "report.json").read_text())
+    assert report["method"] == "adjoint" and report["group_count"] == 2
+    preset = load_preset(sorted((tmp_path / "paper" / "presets").glob("*.json"))[0])
+    assert (preset.search["M"], preset.search["iterations"]) == (16, 4)
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "fast", "--profile", "fast")
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "fast" / "report.json").read_text())["method"] == "exhaustive"
+
+
+def test_dataset_profile_and_paper_scale_conflict(tmp_path):
+    result = CliRunner().invoke(cli, ["dataset", "--profile", "balanced", "--paper-scale", "--cache", str(tmp_path)])
+    assert result.exit_code == 2 and "not both" in result.output
+
+
 @pytest.mark.parametrize("content", ["empty", "junk"])
 def test_infer_without_usable_images_is_an_error(evaluated, tmp_path, content):
     out, _ = evaluated
