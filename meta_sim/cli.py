@@ -451,13 +451,17 @@ def bench_render(out, designs, tiles, repeats, presets):
 
 @bench.command("nams")
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/nams.json"), show_default=True)
-@click.option("--targets", type=int, default=20, show_default=True, help="target groups per experiment")
+@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--adjoint-targets", type=int, default=20, show_default=True,
+              help="target groups for the (slow) neural-adjoint settings")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
-def bench_nams_command(out, targets, cache):
-    """Training, feature and search time, and E1/E2 accuracy per search setting (default scale)."""
+def bench_nams_command(out, targets, adjoint_targets, cache):
+    """Training, feature and search time, and E1/E2 accuracy per method and search setting (default scale)."""
     from .bench import bench_nams, format_nams_table
 
-    result = bench_nams(targets=targets, root=cache)
+    bars = _Bars()
+    result = bench_nams(targets=targets, adjoint_targets=adjoint_targets, root=cache, bar=bars)
+    bars.close()
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     click.echo(format_nams_table(result))
