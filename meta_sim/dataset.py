@@ -4,8 +4,10 @@ A training set lives in one folder: ``tiles/`` (the EXR tiles and their
 ``designs.json``, resumable like any render) and one feature cache per
 extractor and view count, ``features-<key>.pt``, holding the design ids, the
 encoded designs, the design-space spec, the extractor id and one averaged
-feature vector per design. Rendering needs ``bpy``; everything after the
-cache (training, search) needs only torch.
+feature vector per design. ``tile-features-<key>.pt`` beside it holds, in
+the same format, one feature vector per tile (the pool MS2 samples from).
+Rendering needs ``bpy``; everything after the caches (training, search)
+needs only torch.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import json
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import torch
 
@@ -58,6 +60,14 @@ class FeatureSet:
     views: int
 
 
+class TileFeatures(NamedTuple):
+    """Per-tile features of a training set: every tile one simulation of its design."""
+
+    designs: list[dict]
+    encoded: torch.Tensor  # (N, design_dim) float32
+    features: torch.Tensor  # (N, tiles, feature_dim) float32
+
+
 def render_training_set(root: Path, config: DatasetConfig, progress: Callable[[int], None] | None = None):
     """Render (or finish rendering) the tiles; returns the render jobs."""
     from .render import RenderSettings, design_jobs, render_jobs, sample_designs
@@ -88,30 +98,72 @@ def group_features_of_paths(paths: list[Path], extractor, views: int) -> torch.T
 def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
                    progress: Callable[[int], None] | None = None) -> FeatureSet:
     """Features of every design of the training set, computing only what the cache lacks."""
-    from .render import sample_designs
-
     root = Path(root)
-    space = DesignSpace.load(config.space)
-    designs = sample_designs(space, config.designs, config.seed)
-    names = [f"d{k:05d}" for k in range(len(designs))]
-    key = hashlib.sha256(f"{extractor.id}|{views}".encode()).hexdigest()[:10]
-    cache_path = root / f"features-{key}.pt"
+    space, designs, names = _training_designs(config)
+    cache_path = _cache_path(root, "features", extractor, views)
     cached = _load_cache(cache_path, extractor.id, views)
     rows = []
     for name in names:
         if name not in cached:
-            paths = job_tiles(root / "tiles", name, config.tiles)
-            missing = [p for p in paths if not p.is_file()]
-            if missing:
-                raise MetaSimError(f"training tile {missing[0]} is missing; run `meta-sim dataset` to render it")
-            cached[name] = group_features_of_paths(paths, extractor, views)
+            cached[name] = group_features_of_paths(_existing_tiles(root, name, config.tiles), extractor, views)
             if progress:
                 progress(1)
         rows.append(cached[name])
     _save_cache(cache_path, cached, extractor.id, views, space)
-    return FeatureSet(names=names, designs=designs, encoded=torch.stack([torch.from_numpy(space.encode(d))
-                                                                         for d in designs]),
+    return FeatureSet(names=names, designs=designs, encoded=_encode(space, designs),
                       features=torch.stack(rows).float(), space=space, extractor_id=extractor.id, views=views)
+
+
+def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
+                        progress: Callable[[int], None] | None = None) -> TileFeatures:
+    """Features of every tile of the training set, each tile alone (averaged over its ``views``).
+
+    Cached per design beside ``build_features``'s cache, computing only what
+    the cache lacks; ``progress(1)`` after each design computed.
+    """
+    from .features import features_for_groups
+    from .imageio import read_image
+
+    root = Path(root)
+    space, designs, names = _training_designs(config)
+    cache_path = _cache_path(root, "tile-features", extractor, views)
+    cached = {name: tiles for name, tiles in _load_cache(cache_path, extractor.id, views).items()
+              if len(tiles) == config.tiles}
+    for name in names:
+        if name not in cached:
+            paths = _existing_tiles(root, name, config.tiles)
+            cached[name] = features_for_groups([[read_image(p)] for p in paths], extractor, views)
+            if progress:
+                progress(1)
+    _save_cache(cache_path, cached, extractor.id, views, space)
+    return TileFeatures(designs=designs, encoded=_encode(space, designs),
+                        features=torch.stack([cached[name] for name in names]).float())
+
+
+def _training_designs(config: DatasetConfig) -> tuple[DesignSpace, list[dict], list[str]]:
+    """The space, the designs and their names (``d00000``, ...) of a training set."""
+    from .render import sample_designs
+
+    space = DesignSpace.load(config.space)
+    designs = sample_designs(space, config.designs, config.seed)
+    return space, designs, [f"d{k:05d}" for k in range(len(designs))]
+
+
+def _encode(space: DesignSpace, designs: list[dict]) -> torch.Tensor:
+    return torch.stack([torch.from_numpy(space.encode(d)) for d in designs])
+
+
+def _existing_tiles(root: Path, name: str, n_tiles: int) -> list[Path]:
+    paths = job_tiles(root / "tiles", name, n_tiles)
+    missing = [p for p in paths if not p.is_file()]
+    if missing:
+        raise MetaSimError(f"training tile {missing[0]} is missing; run `meta-sim dataset` to render it")
+    return paths
+
+
+def _cache_path(root: Path, kind: str, extractor, views: int) -> Path:
+    key = hashlib.sha256(f"{extractor.id}|{views}".encode()).hexdigest()[:10]
+    return root / f"{kind}-{key}.pt"
 
 
 def _load_cache(path: Path, extractor_id: str, views: int) -> dict:
