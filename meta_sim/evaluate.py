@@ -5,6 +5,12 @@
 * E2: synthetic targets made with held-out textures (the design gap): the
   best a method can do is name the bank texture nearest to the truth.
 
+Methods, all in one harness: uniform sampling, direct regression (DR), MS2
+(REINFORCE over a categorical design distribution with KDE feature
+distributions, drawing simulations from the training set's tiles; see
+``meta_sim/nams/ms2.py``), and NAMS with the neural-adjoint and the
+exhaustive search.
+
 Scoring follows the paper (section 5.4): rank the bank's textures by the HSV
 similarity to the true texture (``meta_sim/textures/similarity.py``); a
 prediction is a top-n hit when it is among the n nearest, with ties at the
@@ -144,6 +150,7 @@ def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, 
 class EvalSettings(SearchOptions):
     targets: int = 20
     tiles: int = 9  # per target group, as in the paper (and `meta-sim infer`'s default group size)
+    ms2: bool = True  # run the MS2 baseline (needs the training set's per-tile features)
     seed: int = 1
     preset: str | None = None  # default: the training set's render preset
     sheet_rows: int = 6
@@ -160,9 +167,11 @@ class EvalContext:
     jobs: list
     folder: Path
     tiles: int
-    features: object  # (targets, F) tensor
+    features: object  # (targets, F) tensor: each group's tiles x views averaged
+    tile_features: object  # (targets, tiles, F) tensor: each tile's views averaged
     feature_seconds: float
     ranks: dict
+    pool: object = None  # dataset.TileFeatures of the training set: MS2's pre-rendered simulations
 
 
 def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
@@ -185,29 +194,46 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     extractor = make_extractor(models_settings.extractor,
                                Path(models_settings.weights) if models_settings.weights else None)
     started = time.perf_counter()
-    groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job in jobs]
-    feats = features_for_groups(groups, extractor, models_settings.views)
+    # Every tile x view weighs the same in a group's mean, so the mean of the tiles' features is the group's.
+    singles = [[read_image(p)] for job in jobs for p in job_tiles(folder, job.name, tiles)]
+    tile_feats = features_for_groups(singles, extractor, models_settings.views).reshape(len(jobs), tiles, -1)
     feature_seconds = (time.perf_counter() - started) / len(jobs)
     ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
-    return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, feats, feature_seconds, ranks)
+    pool = None
+    if settings.ms2:
+        from .dataset import build_tile_features
+        from .workflow import dataset_dir
+
+        pool = build_tile_features(dataset_dir(dataset, root), dataset, extractor, models_settings.views,
+                                   bar("MS2 pool: training tile features", dataset.designs) if bar else None)
+    return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, tile_feats.mean(dim=1), tile_feats,
+                       feature_seconds, ranks, pool)
 
 
 def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
     """Method name -> a function returning one design per target (searches batched over targets)."""
     import torch
 
-    from .nams import adjoint_search, dr_predict, exhaustive_search, uniform_predict
+    from .nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
 
     space, feats, n = ctx.nams.space, ctx.features, len(ctx.jobs)
     generator = torch.Generator().manual_seed(seed)
-    normed = ctx.nams.feature_norm.apply(feats)
-    return {
+    norm = ctx.nams.feature_norm
+    normed = norm.apply(feats)
+    runs = {
         "uniform": lambda: uniform_predict(space, n, generator),
         "dr": lambda: [r.design for r in dr_predict(ctx.dr.model, ctx.dr.feature_norm.apply(feats), space)],
-        "nams_adjoint": lambda: [r.design for r in adjoint_search(
-            ctx.nams.model, normed, space, generator=generator, **adjoint_settings)],
-        "nams_exhaustive": lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)],
     }
+    if ctx.pool is not None:
+        # MS2 compares distributions of single tiles, in the space NAMS searches in (see nams/ms2.py).
+        pool = norm.apply(ctx.pool.features.reshape(-1, ctx.pool.features.shape[-1]))
+        pool_designs = ctx.pool.encoded.repeat_interleave(ctx.pool.features.shape[1], dim=0)
+        runs["ms2"] = lambda: [r.design for r in ms2_search(
+            pool, pool_designs, [norm.apply(t) for t in ctx.tile_features], space, generator=generator)]
+    runs["nams_adjoint"] = lambda: [r.design for r in adjoint_search(
+        ctx.nams.model, normed, space, generator=generator, **adjoint_settings)]
+    runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)]
+    return runs
 
 
 def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
@@ -250,7 +276,7 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     shutil.copy2(ctx.models.nams_path, out / "nams.pt")
     shutil.copy2(ctx.models.dr_path, out / "dr.pt")
     banks = _banks()
-    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, predictions["nams_adjoint"],
+    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, predictions["nams_exhaustive"],
                      RenderSettings(space=DesignSpace.load(), banks=banks,
                                     preset=get_preset(settings.preset or dataset.preset),
                                     out_dir=root / "targets" / "inferred", n_tiles=ctx.tiles,

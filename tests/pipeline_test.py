@@ -39,7 +39,7 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
     out, result = evaluated
     results = json.loads((out / "results.json").read_text())
     assert results["experiment"] == "e1" and results["targets"] == 3
-    assert set(results["methods"]) == {"uniform", "dr", "nams_adjoint", "nams_exhaustive"}
+    assert set(results["methods"]) == {"uniform", "dr", "ms2", "nams_adjoint", "nams_exhaustive"}
     for metrics in results["methods"].values():
         for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
             assert 0.0 <= metrics[key] <= 1.0
