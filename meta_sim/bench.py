@@ -156,4 +156,26 @@ def format_nams_table(result: dict) -> str:
               f"Features: {result['feature_seconds_per_group']:.3f} s per group of 9 tiles x 8 views. "
               f"Fastest adjoint setting within 0.05 of the paper setting's E1 top-1: "
               f"M={f['M']}, {f['iterations']} iterations."]
+    stages = stage_times(result)
+    if stages:
+        lines += ["", "| stage (E4) | seconds | paper |", "|---|---|---|"]
+        lines += [f"| {name} | {seconds:.3f} | {paper} |" if seconds < 10 else f"| {name} | {seconds:.0f} | {paper} |"
+                  for name, seconds, paper in stages]
     return "\n".join(lines)
+
+
+def stage_times(result: dict, render_bench: Path = Path("benchmarks/render.json")) -> list[tuple[str, float, str]]:
+    """The paper's E4 (time per stage) from measured parts: rendering from ``make bench-render``'s
+    seconds per tile, training and features from this benchmark, search from its exhaustive row."""
+    import json
+
+    try:
+        per_tile = json.loads(render_bench.read_text())["presets"][result["dataset"]["preset"]]["seconds_per_tile"]
+    except (OSError, ValueError, KeyError):
+        return []
+    tiles = result["dataset"]["designs"] * result["dataset"]["tiles"]
+    group = result["feature_seconds_per_group"] + result["experiments"]["e1"]["nams_exhaustive"]["seconds_per_target"]
+    return [(f"simulation: training set of {tiles} tiles", per_tile * tiles, "15,300 images, 1.6 s each"),
+            ("training NAMS", result["train_seconds"]["train_nams"], "13 h"),
+            ("inference per target group of 9 tiles (features + exhaustive search)", group, "0.5 s per image"),
+            ("inference per 5,000-image domain", group * 5000 / 9, "0.7 h")]
