@@ -48,3 +48,19 @@ def test_table_and_plot(tmp_path):
     assert image.shape[0] > 300 and image.shape[1] > 600
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 20  # points, text and grid, not a blank canvas
     json.dumps(result)
+
+
+def test_stage_times_come_from_the_measured_parts(tmp_path):
+    from meta_sim.bench import stage_times
+
+    render = tmp_path / "render.json"
+    render.write_text(json.dumps({"presets": {"fast": {"seconds_per_tile": 0.1}}}))
+    result = {"dataset": {"designs": 300, "tiles": 4, "preset": "fast"}, "feature_seconds_per_group": 0.2,
+              "train_seconds": {"train_nams": 120.0},
+              "experiments": {"e1": {"nams_exhaustive": {"seconds_per_target": 0.05}}}}
+    stages = dict((name.split(":")[0].split(" (")[0], seconds) for name, seconds, _ in stage_times(result, render))
+    assert stages["simulation"] == pytest.approx(120.0)  # 1,200 tiles x 0.1 s
+    assert stages["training NAMS"] == 120.0
+    assert stages["inference per target group of 9 tiles"] == pytest.approx(0.25)
+    assert stages["inference per 5,000-image domain"] == pytest.approx(0.25 * 5000 / 9)
+    assert stage_times(result, tmp_path / "missing.json") == []
