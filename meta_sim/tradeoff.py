@@ -14,7 +14,9 @@ renders, target groups of 9 tiles, exhaustive search):
 
 * ``tiles per target group``: 1, 2, 4, 9;
 * ``search``: exhaustive, and the neural-adjoint search at several (M,
-  iterations), the paper's (1000, 200) first (on fewer targets: it is slow);
+  iterations), the paper's (1000, 200) first, plus DR and MS2: taken from
+  ``make bench-nams`` (``benchmarks/nams.json``, the same model and E1
+  targets), with this bench's feature time per tile added;
 * ``views``: the default extractor is invariant to the 8 dihedral views, so
   8 views give the features of 1 at the cost of 1 (checked, not assumed:
   the bench compares the vectors); a backbone pays 8x;
@@ -38,7 +40,6 @@ from .errors import MetaSimError
 from .fileio import write_bytes_atomic
 
 GROUP_TILES = (1, 2, 4, 9)
-ADJOINT_SETTINGS = ((1000, 200), (250, 200), (250, 100), (64, 100), (16, 50))
 TRAINING_SETS = ((150, 4), (300, 2), (300, 4), (600, 4))
 RENDER_PRESETS = ("fast", "balanced")
 METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
@@ -180,8 +181,33 @@ class _AllViews:
         return self.inner(batch)
 
 
+def _search_points(nams_bench: Path, base: _Experiment) -> list[Point]:
+    """The search methods' E1 rows of ``make bench-nams`` as points: search time plus 9 tiles' features."""
+    try:
+        bench = json.loads(nams_bench.read_text())
+        rows = bench["experiments"]["e1"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise MetaSimError(f"no E1 rows in {nams_bench} ({exc}); run `make bench-nams` first") from None
+    if bench.get("tiles_per_target") != max(GROUP_TILES):
+        raise MetaSimError(f"{nams_bench} was measured on groups of {bench.get('tiles_per_target')} tiles, "
+                           f"not {max(GROUP_TILES)}: run `make bench-nams` again")
+    features = max(GROUP_TILES) * base.feature_seconds_per_tile
+    points = []
+    for name, row in rows.items():
+        if name == "uniform":
+            continue
+        setting = name.replace("nams_adjoint_M", "adjoint M=").replace("_it", ", ") + (" it" if "_it" in name else "")
+        setting = setting.replace("nams_exhaustive", "exhaustive")
+        points.append(Point("search", setting, {k: row[k] for k in METRICS},
+                            round(row["seconds_per_target"] + features, 5), round(base.one_off, 1),
+                            int(row.get("targets", bench["targets"])),
+                            {"search_seconds_per_group": row["seconds_per_target"], "from": str(nams_bench)}))
+    return points
+
+
 def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, root: Path | None = None,
-                   render_bench: Path = Path("benchmarks/render.json"), presets=RENDER_PRESETS,
+                   render_bench: Path = Path("benchmarks/render.json"),
+                   nams_bench: Path = Path("benchmarks/nams.json"), presets=RENDER_PRESETS,
                    training_sets=TRAINING_SETS, profiles=tuple(PROFILES), bar=None) -> dict:
     """Measure every knob alone, then every profile end to end; returns a JSON-able dict."""
     from .workflow import cache_root
@@ -191,10 +217,7 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, seed: int = 1,
     base = _Experiment(DatasetConfig(), 8, targets, seed, root, render_bench, bar)
     for g in GROUP_TILES:
         points.append(base.run("tiles per target group", str(g), group_tiles=g))
-    points.append(base.run("search", "exhaustive", targets=adjoint_targets))
-    for M, iterations in ADJOINT_SETTINGS:
-        points.append(base.run("search", f"adjoint M={M}, {iterations} it", method="adjoint",
-                               adjoint={"M": M, "iterations": iterations}, targets=adjoint_targets))
+    points += _search_points(nams_bench, base)
     for designs, tiles in training_sets:
         experiment = _Experiment(DatasetConfig(designs=designs, tiles=tiles), 8, targets, seed, root,
                                  render_bench, bar)

@@ -64,3 +64,28 @@ def test_stage_times_come_from_the_measured_parts(tmp_path):
     assert stages["inference per target group of 9 tiles"] == pytest.approx(0.25)
     assert stages["inference per 5,000-image domain"] == pytest.approx(0.25 * 5000 / 9)
     assert stage_times(result, tmp_path / "missing.json") == []
+
+
+def test_search_points_come_from_the_nams_benchmark(tmp_path):
+    from types import SimpleNamespace
+
+    from meta_sim.tradeoff import _search_points
+
+    row = {"flat_top1": 0.9, "flat_top10": 1.0, "sloped_top1": 0.8, "sloped_top10": 0.9}
+    bench = {"targets": 100, "tiles_per_target": 9,
+             "experiments": {"e1": {"uniform": {**row, "seconds_per_target": 0.0},
+                                    "nams_exhaustive": {**row, "seconds_per_target": 0.004, "targets": 100},
+                                    "nams_adjoint_M1000_it200": {**row, "seconds_per_target": 16.0, "targets": 20}}}}
+    path = tmp_path / "nams.json"
+    path.write_text(json.dumps(bench))
+    base = SimpleNamespace(feature_seconds_per_tile=0.01, one_off=300.0)
+    points = {p.setting: p for p in _search_points(path, base)}
+    assert set(points) == {"exhaustive", "adjoint M=1000, 200 it"}
+    assert points["exhaustive"].seconds_per_group == pytest.approx(0.004 + 0.09)
+    assert points["adjoint M=1000, 200 it"].targets == 20
+    bench["tiles_per_target"] = 4
+    path.write_text(json.dumps(bench))
+    with pytest.raises(MetaSimError, match="groups of 4 tiles"):
+        _search_points(path, base)
+    with pytest.raises(MetaSimError, match="bench-nams"):
+        _search_points(tmp_path / "missing.json", base)
