@@ -48,7 +48,8 @@ bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
 
 # Every knob that costs time against E1 accuracy, and the fast/balanced/paper profiles (long: the paper
-# profile renders 15,300 tiles). Needs benchmarks/render.json (make bench-render) for the render cost.
+# profile renders 15,300 tiles). Reads benchmarks/render.json (render cost) and benchmarks/nams.json
+# (the search methods' rows): run bench-render and bench-nams first.
 bench-tradeoff: setup
 	$(BIN)/meta-sim bench tradeoff --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png
 
