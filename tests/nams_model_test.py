@@ -174,9 +174,12 @@ def test_noise_whitening_makes_the_design_residual_white_and_finds_the_design():
         return float((nearest == truth).float().mean())
 
     assert hits(noisy) > 0.97 and hits(noisy) > hits(total) + 0.1
-    # Too few rows for the noise covariance (fewer residual degrees of freedom than components).
+    # Fewer residual degrees of freedom (12 rows - rank 7 = 5) than components: half as many components.
     few = FeatureNorm.fit(features[:12], whiten=6, designs=designs[:12])
-    assert not few.noise_whitened and few.dim == 6
+    assert few.noise_whitened and few.dim == 2
+    # Fewer than 2 (3 rows, rank 3): the total spread, over the 2 directions 3 rows span.
+    fewer = FeatureNorm.fit(features[:3], whiten=6, designs=designs[:3])
+    assert not fewer.noise_whitened and fewer.dim == 2
     with pytest.raises(MetaSimError, match="noise_shrink"):
         TrainConfig(noise_shrink=1.5)
 
