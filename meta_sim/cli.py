@@ -340,17 +340,19 @@ def infer_command(ctx, target_dir, model, out, group_size, gsd, views, weights, 
 @click.option("--target-tiles", type=int, default=9, show_default=True,
               help="tiles per target group (the paper's groups have 9)")
 @click.option("--seed", type=int, default=1, show_default=True, help="target seed")
+@click.option("--ms2/--no-ms2", default=True, show_default=True,
+              help="run the MS2 baseline (computes and caches features of every training tile once)")
 @_dataset_options
 @_search_options
 @_torch_threads
-def eval_command(experiment, out, targets, target_tiles, seed, M, k, S, iterations, lr, r, **o):
+def eval_command(experiment, out, targets, target_tiles, seed, ms2, M, k, S, iterations, lr, r, **o):
     """E1 (bank designs, unseen cities) or E2 (held-out textures): top-1/top-10 for all methods."""
     from .evaluate import EvalSettings, results_markdown, run_eval
 
     dataset, settings = _configs(o)
     bars = _Bars()
     results = run_eval(experiment, out, dataset, settings,
-                       EvalSettings(targets=targets, tiles=target_tiles, seed=seed, M=M, k=k, S=S,
+                       EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
                                     iterations=iterations, lr=lr, r=r), o["cache"], bars)
     bars.close()
     click.echo(results_markdown(results))

@@ -54,6 +54,9 @@ def test_eval_reuses_its_cached_training_set_and_model(evaluated, tiny_env, tmp_
     again = _cli("eval", "e1", "--out", tmp_path, "--targets", 3, "-M", 16, "--iterations", 5, "-S", 4,
                  "--cache", tiny_env, *TINY)
     assert again.exit_code == 0
+    without = _cli("eval", "e1", "--out", tmp_path / "no-ms2", "--targets", 3, "-M", 16, "--iterations", 5,
+                   "-S", 4, "--no-ms2", "--cache", tiny_env, *TINY)
+    assert without.exit_code == 0 and "ms2" not in json.loads((tmp_path / "no-ms2" / "results.json").read_text())["methods"]
     assert (tmp_path / "nams.pt").read_bytes() == (out / "nams.pt").read_bytes()
     first = json.loads((out / "results.json").read_text())["methods"]
     second = json.loads((tmp_path / "results.json").read_text())["methods"]
