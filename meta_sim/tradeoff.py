@@ -272,6 +272,18 @@ def plot_tradeoff(result: dict, path: Path) -> Path:
     from matplotlib import pyplot as plt
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.8), dpi=110)
+    left.set_xscale("log")
+    placed: dict = {left: [], right: []}
+
+    def label(axis, x, y, text):
+        """Annotate, moving the text down a line while it would sit on an earlier label."""
+        px, py = axis.transData.transform((x, y))
+        shift = 0
+        while any(abs(px - qx) < 60 and abs(py - shift - qy) < 9 for qx, qy in placed[axis]):
+            shift += 9
+        placed[axis].append((px, py - shift))
+        axis.annotate(text, (x, y), textcoords="offset points", xytext=(5, 4 - shift * 72 / fig.dpi), fontsize=7)
+
     markers = {"tiles per target group": "o", "search": "s", "training set": "^", "render preset": "D",
                "profile": "*"}
     for knob, marker in markers.items():
@@ -284,13 +296,12 @@ def plot_tradeoff(result: dict, path: Path) -> Path:
         size = 160 if knob == "profile" else 50
         axis.scatter(xs, ys, marker=marker, s=size, label=knob, zorder=3)
         for x, y, p in zip(xs, ys, points):
-            axis.annotate(p["setting"], (x, y), textcoords="offset points", xytext=(5, 4), fontsize=7)
+            label(axis, x, y, p["setting"])
         if knob == "profile":  # profiles go on both panels
             lx = [p["seconds_per_group"] for p in points]
             left.scatter(lx, ys, marker=marker, s=size, label=knob, zorder=3)
             for x, y, p in zip(lx, ys, points):
-                left.annotate(p["setting"], (x, y), textcoords="offset points", xytext=(5, 4), fontsize=7)
-    left.set_xscale("log")
+                label(left, x, y, p["setting"])
     left.set_xlabel("seconds per target group (features + search), log scale")
     right.set_xlabel("one-off minutes (render + features + training)")
     for axis in (left, right):
