@@ -104,8 +104,6 @@ class _Experiment:
 
     def __init__(self, dataset: DatasetConfig, views: int, targets: int, seed: int, root: Path,
                  render_bench: Path, bar=None):
-        import torch
-
         from .features import features_for_groups, make_extractor
         from .imageio import read_image
         from .dataset import job_tiles
@@ -130,10 +128,11 @@ class _Experiment:
         self.one_off = (_render_seconds_per_tile(dataset.preset, render_bench) * dataset.designs * dataset.tiles
                         + feature_total + train)
         self.train_seconds = train
-        self.torch = torch
 
     def run(self, knob: str, setting: str, group_tiles: int = 9, method: str = "exhaustive",
             adjoint: dict | None = None, targets: int | None = None, seed: int = 1) -> Point:
+        import torch
+
         from .evaluate import mean_scores, score
         from .nams import adjoint_search, exhaustive_search
 
@@ -145,7 +144,7 @@ class _Experiment:
             results = exhaustive_search(self.nams.model, normed, self.nams.space)
         else:
             results = adjoint_search(self.nams.model, normed, self.nams.space,
-                                     generator=self.torch.Generator().manual_seed(seed),
+                                     generator=torch.Generator().manual_seed(seed),
                                      **{"S": min(50, adjoint["M"]), **adjoint})
         search_seconds = (time.perf_counter() - started) / n
         rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, self.jobs[:n])]

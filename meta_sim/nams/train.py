@@ -155,8 +155,8 @@ class FeatureNorm:
             if dof is not None and 2 <= dof < keep:
                 keep = dof // 2  # what the noise covariance can be estimated for (see the class docstring)
             components = v[:keep] / spread[:keep, None]
-            noise = None if designs is None else _noise_whitening(((x - mean) / std) @ components.T,
-                                                                  designs, shrink)
+            noise = None if dof is None else _noise_whitening(((x - mean) / std) @ components.T,
+                                                              designs, dof, shrink)
             if noise is not None:
                 components = noise @ components
             return cls(mean.float(), std.float(), components.float(), noise is not None)
@@ -217,12 +217,13 @@ def _residual_dof(designs: torch.Tensor) -> int:
     return len(designs) - int(torch.linalg.matrix_rank(_with_intercept(designs)))
 
 
-def _noise_whitening(components: torch.Tensor, designs: torch.Tensor, shrink: float) -> torch.Tensor | None:
+def _noise_whitening(components: torch.Tensor, designs: torch.Tensor, dof: int,
+                     shrink: float) -> torch.Tensor | None:
     """(k, k) matrix W with W C W^T = I for C the (shrunk) covariance of what an additive model
-    of the designs leaves unexplained in ``components`` (n, k); None when it cannot be estimated."""
+    of the designs (``dof`` residual degrees of freedom) leaves unexplained in ``components``
+    (n, k); None when it cannot be estimated."""
     n, k = components.shape
     a = _with_intercept(designs)
-    dof = _residual_dof(designs)
     if dof < k:
         return None
     gram = a.T @ a
