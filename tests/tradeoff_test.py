@@ -89,3 +89,23 @@ def test_search_points_come_from_the_nams_benchmark(tmp_path):
         _search_points(path, base)
     with pytest.raises(MetaSimError, match="bench-nams"):
         _search_points(tmp_path / "missing.json", base)
+
+
+def test_torch_side_commands_take_their_thread_count_from_meta_sim_threads(tmp_path, monkeypatch):
+    import torch
+    from click.testing import CliRunner
+
+    from meta_sim.cli import main
+
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        monkeypatch.setenv("META_SIM_THREADS", "1")
+        # Fails on its options after the thread count is set: nothing is rendered.
+        result = CliRunner().invoke(main, ["dataset", "--profile", "fast", "--paper-scale", "--cache", str(tmp_path)])
+        assert result.exit_code == 2 and torch.get_num_threads() == 1
+        monkeypatch.setenv("META_SIM_THREADS", "many")
+        result = CliRunner().invoke(main, ["dataset", "--cache", str(tmp_path)])
+        assert result.exit_code == 2 and "META_SIM_THREADS" in result.output
+    finally:
+        torch.set_num_threads(before)
