@@ -34,3 +34,19 @@ def test_e1_truth_is_its_own_nearest_texture_and_e2_ties_are_fair():
             assert sum(ranking.credit(t, 10) for t in ranking.ids) == pytest.approx(10.0)
     truth = {"flat_roof": bank.ids("flat")[0], "sloped_roof": bank.ids("sloped")[0]}
     assert score(truth, truth, e1) == {"flat_top1": 1.0, "flat_top10": 1.0, "sloped_top1": 1.0, "sloped_top10": 1.0}
+
+
+def test_e1_targets_are_not_the_training_sets_designs():
+    # Training sets and E1 targets both default to seed 1; they once shared a random stream, so the
+    # E1 targets were the training set's first designs and E1 measured recall of seen designs.
+    from meta_sim.design import DesignSpace
+    from meta_sim.evaluate import target_jobs
+    from meta_sim.render import sample_designs
+
+    space = DesignSpace.load()
+    train = sample_designs(space, 300, 1)
+    targets = [job.design for job in target_jobs("e1", space, ensure_heldout_bank(), 100, 1)]
+    # 300 of 1,760 designs: about 17 of 100 uniform targets are in the training set by chance.
+    assert sum(t in train for t in targets) < 30
+    assert targets[:10] != train[:10]
+    assert len({job.city_seed for job in target_jobs("e1", space, ensure_heldout_bank(), 100, 1)}) == 100
