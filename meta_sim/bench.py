@@ -141,12 +141,14 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
 
 def format_nams_table(result: dict) -> str:
     lines = ["| experiment | method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target "
-             "| targets |", "|---|---|---|---|---|---|---|---|"]
+             "| targets | top-1 flat / sloped, unseen designs |", "|---|---|---|---|---|---|---|---|---|"]
     for experiment, rows in result["experiments"].items():
         for name, m in rows.items():
+            unseen = (f"{m['unseen']['flat_top1']:.3f} / {m['unseen']['sloped_top1']:.3f} ({m['unseen_targets']})"
+                      if m.get("unseen") else "-")
             lines.append(f"| {experiment.upper()} | {name} | {m['flat_top1']:.3f} | {m['flat_top10']:.3f} | "
                          f"{m['sloped_top1']:.3f} | {m['sloped_top10']:.3f} | {m['seconds_per_target']:.4f} "
-                         f"| {m.get('targets', result['targets'])} |")
+                         f"| {m.get('targets', result['targets'])} | {unseen} |")
     t = result["train_seconds"]
     f = result["fastest_adjoint_keeping_e1"]
     lines += ["", f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "

@@ -128,6 +128,13 @@ def results_markdown(results: dict) -> str:
     for name, m in results["methods"].items():
         cells = " | ".join(f"{m[k]:.3f}" if k in m else "-" for k in METRICS)
         lines.append(f"| {name} | {cells} | {m['seconds_per_target']:.4f} |")
+    unseen = {name: m for name, m in results["methods"].items() if m.get("unseen")}
+    if unseen:
+        n = next(iter(unseen.values()))["unseen_targets"]
+        lines += ["", f"Only the {n} targets whose design is not in the training set:", "",
+                  "| method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 |", "|---|---|---|---|---|"]
+        for name, m in unseen.items():
+            lines.append(f"| {name} | " + " | ".join(f"{m['unseen'][k]:.3f}" for k in METRICS) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -179,6 +186,7 @@ class EvalContext:
     feature_seconds: float
     ranks: dict
     pool: object = None  # dataset.TileFeatures of the training set: MS2's pre-rendered simulations
+    training_designs: list = ()  # the training set's designs: E1 also scores the targets it lacks
 
 
 def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
@@ -213,8 +221,11 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
 
         pool = build_tile_features(dataset_dir(dataset, root), dataset, extractor, models_settings.views,
                                    bar("MS2 pool: training tile features", dataset.designs) if bar else None)
+    from .render import sample_designs
+
+    training_designs = sample_designs(nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
     return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, tile_feats.mean(dim=1), tile_feats,
-                       feature_seconds, ranks, pool)
+                       feature_seconds, ranks, pool, training_designs)
 
 
 def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
@@ -244,14 +255,23 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
 
 
 def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
-    """Mean top-1/top-10 rates and seconds per target of one method."""
+    """Mean top-1/top-10 rates and seconds per target of one method.
+
+    In E1 also ``unseen``: the rates over the targets whose design is not one
+    of the training set's (``unseen_targets`` of them). A method that only
+    recalls the designs it was trained on scores well overall and poorly there.
+    """
     import time
 
     started = time.perf_counter()
     designs = run()
     seconds = (time.perf_counter() - started) / len(ctx.jobs)
     rows = [score(p, job.design, ctx.ranks) for p, job in zip(designs, ctx.jobs)]
-    return {**mean_scores(rows), "seconds_per_target": seconds}, designs
+    metrics = {**mean_scores(rows), "seconds_per_target": seconds}
+    if ctx.training_designs:
+        unseen = [row for row, job in zip(rows, ctx.jobs) if job.design not in ctx.training_designs]
+        metrics.update(unseen=mean_scores(unseen), unseen_targets=len(unseen))
+    return metrics, designs
 
 
 def run_eval(experiment: str, out: Path, dataset, models_settings, settings: EvalSettings = EvalSettings(),

@@ -50,3 +50,24 @@ def test_e1_targets_are_not_the_training_sets_designs():
     assert sum(t in train for t in targets) < 30
     assert targets[:10] != train[:10]
     assert len({job.city_seed for job in target_jobs("e1", space, ensure_heldout_bank(), 100, 1)}) == 100
+
+
+def test_e1_scores_the_targets_the_training_set_lacks_apart():
+    from types import SimpleNamespace
+
+    from meta_sim.evaluate import score_method
+    from meta_sim.render import Job
+
+    bank = ensure_default_bank()
+    flat, sloped = bank.ids("flat"), bank.ids("sloped")
+    seen = {"flat_roof": flat[0], "sloped_roof": sloped[0]}
+    unseen = {"flat_roof": flat[1], "sloped_roof": sloped[1]}
+    wrong = {"flat_roof": flat[2], "sloped_roof": sloped[2]}
+    ctx = SimpleNamespace(jobs=[Job(seen, 1, "a"), Job(unseen, 2, "b")],
+                          ranks=rankings("e1", bank, ensure_heldout_bank()), training_designs=[seen])
+    metrics, _ = score_method(ctx, lambda: [seen, wrong])  # recalls the seen design, misses the other
+    assert metrics["flat_top1"] == metrics["sloped_top1"] == 0.5
+    assert metrics["unseen_targets"] == 1
+    assert metrics["unseen"]["flat_top1"] == metrics["unseen"]["sloped_top1"] == 0.0
+    ctx.training_designs = []  # E2: no such split
+    assert "unseen" not in score_method(ctx, lambda: [seen, wrong])[0]

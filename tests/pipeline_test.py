@@ -44,6 +44,9 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
         for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
             assert 0.0 <= metrics[key] <= 1.0
         assert metrics["flat_top1"] <= metrics["flat_top10"] and metrics["seconds_per_target"] >= 0
+        assert 0 <= metrics["unseen_targets"] <= 3
+        assert set(metrics["unseen"]) == ({"flat_top1", "flat_top10", "sloped_top1", "sloped_top10"}
+                                          if metrics["unseen_targets"] else set())
     assert "| nams_adjoint |" in (out / "results.md").read_text()
     assert (out / "sheet.png").stat().st_size > 1000
     assert (out / "nams.pt").is_file() and (out / "dr.pt").is_file()
