@@ -40,7 +40,7 @@ from .errors import MetaSimError
 from .fileio import write_bytes_atomic
 
 GROUP_TILES = (1, 2, 4, 9)
-TRAINING_SETS = ((150, 4), (300, 2), (300, 4), (600, 4))
+TRAINING_SETS = ((150, 4), (300, 2), (300, 4), (600, 4), (1700, 9))
 RENDER_PRESETS = ("fast", "balanced")
 METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
 
@@ -112,7 +112,12 @@ class _Experiment:
         from .textures import ensure_default_bank, ensure_heldout_bank
         from .workflow import ModelSettings, ensure_models
 
+        from .design import DesignSpace
+        from .render import sample_designs
+
         self.dataset = dataset
+        # E1 targets whose design the training set lacks are also scored alone ("unseen").
+        self.training_designs = sample_designs(DesignSpace.load(dataset.space), dataset.designs, dataset.seed)
         models = ensure_models(dataset, ModelSettings(views=views), root, bar)
         self.nams = load_checkpoint(models.nams_path, "nams")
         self.jobs, folder = render_targets("e1", targets, max(GROUP_TILES), seed, dataset.preset, root,
@@ -148,7 +153,10 @@ class _Experiment:
                                      **{"S": min(50, adjoint["M"]), **adjoint})
         search_seconds = (time.perf_counter() - started) / n
         rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, self.jobs[:n])]
-        return Point(knob, setting, mean_scores(rows),
+        unseen = [row for row, job in zip(rows, self.jobs[:n]) if job.design not in self.training_designs]
+        metrics = {**mean_scores(rows), "unseen_targets": len(unseen),
+                   **{f"unseen_{k}": v for k, v in mean_scores(unseen).items()}}
+        return Point(knob, setting, metrics,
                      round(search_seconds + group_tiles * self.feature_seconds_per_tile, 5),
                      round(self.one_off, 1), n,
                      {"search_seconds_per_group": round(search_seconds, 5),
@@ -200,7 +208,9 @@ def _search_points(nams_bench: Path, base: _Experiment) -> list[Point]:
             continue
         setting = name.replace("nams_adjoint_M", "adjoint M=").replace("_it", ", ") + (" it" if "_it" in name else "")
         setting = setting.replace("nams_exhaustive", "exhaustive")
-        points.append(Point("search", setting, {k: row[k] for k in METRICS},
+        unseen = ({"unseen_targets": row["unseen_targets"], **{f"unseen_{k}": v for k, v in row["unseen"].items()}}
+                  if row.get("unseen") else {})
+        points.append(Point("search", setting, {**{k: row[k] for k in METRICS}, **unseen},
                             round(row["seconds_per_target"] + features, 5), round(base.one_off, 1),
                             int(row.get("targets", bench["targets"])),
                             {"search_seconds_per_group": row["seconds_per_target"], "from": str(nams_bench)}))
@@ -250,11 +260,14 @@ def accuracy(metrics: dict) -> float:
 
 def format_tradeoff_table(result: dict) -> str:
     lines = ["| knob | setting | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per group | "
-             "one-off min | targets |", "|---|---|---|---|---|---|---|---|---|"]
+             "one-off min | targets | top-1 flat / sloped, unseen designs |", "|---|---|---|---|---|---|---|---|---|---|"]
     for p in result["points"]:
         m = p["metrics"]
+        unseen = (f"{m['unseen_flat_top1']:.2f} / {m['unseen_sloped_top1']:.2f} ({m['unseen_targets']})"
+                  if "unseen_flat_top1" in m else "-")
         lines.append(f"| {p['knob']} | {p['setting']} | " + " | ".join(f"{m[k]:.2f}" for k in METRICS)
-                     + f" | {p['seconds_per_group']:.3f} | {p['one_off_seconds'] / 60:.1f} | {p['targets']} |")
+                     + f" | {p['seconds_per_group']:.3f} | {p['one_off_seconds'] / 60:.1f} | {p['targets']} "
+                     f"| {unseen} |")
     v = result["views"]
     lines += ["", f"Views: the default extractor's features of 1 and 8 dihedral views differ by at most "
               f"{v['max_abs_difference_1_vs_8_views']:.1e}, so it computes one ({v['seconds_per_9_tiles_1_view']:.3f} s "

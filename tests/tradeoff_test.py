@@ -43,6 +43,9 @@ def test_table_and_plot(tmp_path):
     assert table.count("\n| ") == len(result["points"])  # one row per point below the header
     assert "| search | adjoint M=1000, 200 it | 0.85 |" in table and "1.0e-07" in table
     assert accuracy(result["points"][1]["metrics"]) == pytest.approx(0.85)
+    assert table.count("| - |") == len(result["points"])  # no unseen-design scores given
+    result["points"][3]["metrics"].update(unseen_targets=83, unseen_flat_top1=0.9, unseen_sloped_top1=0.55)
+    assert "| 0.90 / 0.55 (83) |" in format_tradeoff_table(result)
     path = plot_tradeoff(result, tmp_path / "plot.png")
     image = read_rgb8(path)
     assert image.shape[0] > 300 and image.shape[1] > 600
