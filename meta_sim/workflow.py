@@ -95,7 +95,7 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
     seconds = {}
     out_dir = Path(out_dir)
     # DR keeps per-feature standardisation: whitening is there for the search's metric, and DR
-    # has no search (it is the paper's baseline as measured, E1 top-1 0.92/0.80 at 300 x 4).
+    # has no search (it is the paper's baseline as measured; `make bench-nams` has its E1/E2 rows).
     jobs = (("nams", train_nams, nams_config, train_config),
             ("dr", train_dr, None, dataclasses.replace(train_config, whiten=0)))
     for kind, trainer, config, trainer_config in jobs:

@@ -58,7 +58,10 @@ class TrainConfig:
     progress, rather than patience 20 at a fixed rate: P keeps improving
     slowly for hundreds of epochs (E1 top-1 of NAMS exhaustive, 300 x 4
     tiles, 100 targets of 9 tiles: 0.94/0.79 stopped at epoch 168,
-    0.94/0.86 at epoch 430).
+    0.94/0.86 at epoch 430 -- on the first E1 targets, which were training
+    designs; on independent targets 0.78/0.48 with patience 20 at a fixed
+    rate (233 epochs) and 0.79/0.50 with this schedule (511 epochs), the same
+    within the seed's spread).
     """
 
     lr: float = 1e-3
@@ -112,7 +115,8 @@ class FeatureNorm:
     Whitening exists for the search: its MSE over 774 standardised features is
     dominated by many correlated, noisy dimensions, while unit-variance
     principal components weigh every independent direction once (E1 top-1 of
-    NAMS exhaustive, 300 x 4 tiles: 0.65/0.55 -> 0.91/0.74 with 128 components).
+    NAMS exhaustive, 300 x 4 tiles: 0.65/0.55 -> 0.91/0.74 with 128 components,
+    measured on the first E1 targets, which were training designs).
 
     Noise whitening (``designs`` given) goes one step further: within the
     components it whitens by the covariance of the simulation noise -- what
@@ -129,7 +133,12 @@ class FeatureNorm:
     0.81/0.57, 26 by the noise 0.88/0.77); with fewer than 2 the total
     spread is used (``noise_whitened`` is then False). Measured with the linear fit itself
     (300 x 4 tiles, 100 E1 targets of 4 tiles, 128 components): top-1
-    flat/sloped 0.91/0.81 whitened by the total spread, 0.95/0.92 by the noise.
+    flat/sloped 0.91/0.81 whitened by the total spread, 0.95/0.92 by the noise
+    (on the first E1 targets, training designs; on independent targets of 9
+    tiles the noise-whitened linear fit also gets 0.95/0.92). With NAMS on
+    independent E1 targets (exhaustive, 100 groups of 9 tiles): E1 top-1
+    0.84/0.43 whitened by the total spread, 0.79/0.50 by the noise; E2 top-10
+    0.60/0.56 and 0.80/0.60.
     """
 
     mean: torch.Tensor
@@ -413,8 +422,9 @@ def _store_search_stats(model: NAMS, train_designs: torch.Tensor, designs: torch
     """z_mean/z_std from the training split; feature_scale from P's error over all rows.
 
     The error scale uses the validation rows too: a variance per feature needs
-    more rows than the validation split alone has (measured: validation-only
-    scales gave E1 top-1 0.58/0.39, all rows 0.74/0.57).
+    more rows than the validation split alone has (measured on the first
+    E1 targets, which were training designs: validation-only scales gave
+    E1 top-1 0.58/0.39, all rows 0.74/0.57).
     """
     mu, _ = model.encode(train_designs)
     model.z_mean.copy_(mu.mean(dim=0))
