@@ -61,10 +61,10 @@ class Profile:
         return {"M": self.M, "iterations": self.iterations} if self.method == "adjoint" else {}
 
 
-# Chosen on `make bench-tradeoff`'s training-set points (E1, 100 groups of 9 tiles, exhaustive search,
-# flat/sloped top-1): 150 x 4 0.63/0.38 (too few designs to estimate the noise: see FeatureNorm),
-# 300 x 2 0.95/0.85, 300 x 4 0.94/0.86, 600 x 4 0.97/0.85. Past 300 designs, more rendering buys
-# little at this scale; fast halves it, balanced is the default.
+# Chosen on `make bench-tradeoff`'s training-set points (E1, 100 groups of 9 tiles with designs
+# independent of the training set's, exhaustive search, flat/sloped top-1): 300 x 2 0.79/0.53 and
+# 300 x 4 0.78/0.49 -- tiles per design do not matter at 300 designs, so fast halves the rendering --
+# while designs do: 600 x 4 0.94/0.56, 1,700 x 9 0.98/0.80 (an hour of one-off work on 2 CPUs).
 PROFILES = {
     "fast": Profile("300 designs x 2 rasterised tiles (half the default's rendering), exhaustive search",
                     DatasetConfig(tiles=2)),
