@@ -198,6 +198,7 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     from .features import features_for_groups, make_extractor
     from .imageio import read_image
     from .nams import load_checkpoint
+    from .render import sample_designs
     from .textures import ensure_default_bank, ensure_heldout_bank
     from .workflow import ensure_models
 
@@ -221,8 +222,6 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
 
         pool = build_tile_features(dataset_dir(dataset, root), dataset, extractor, models_settings.views,
                                    bar("MS2 pool: training tile features", dataset.designs) if bar else None)
-    from .render import sample_designs
-
     training_designs = sample_designs(nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
     return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, tile_feats.mean(dim=1), tile_feats,
                        feature_seconds, ranks, pool, training_designs)
