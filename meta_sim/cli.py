@@ -186,8 +186,8 @@ class _Bars:
 
 def _dataset_options(command):
     for decorator in reversed([
-        click.option("--designs", type=int, default=None, help="training designs [default: 300; paper: 1700]"),
-        click.option("--tiles", type=int, default=None, help="tiles per design [default: 4; paper: 9]"),
+        click.option("--designs", type=int, default=None, help="training designs [default: 600; paper: 1700]"),
+        click.option("--tiles", type=int, default=None, help="tiles per design [default: 2; paper: 9]"),
         click.option("--paper-scale", is_flag=True, help="the paper's scale: 1,700 designs x 9 tiles"),
         click.option("--profile", type=click.Choice(["fast", "balanced", "paper"]), default=None,
                      help="a recommended training set (see `make bench-tradeoff`); --designs/--tiles override it"),
