@@ -115,6 +115,11 @@ def score(predicted: dict, truth: dict, ranks: dict) -> dict:
     return out
 
 
+def unseen_rows(rows: list[dict], jobs: list[Job], training_designs) -> list[dict]:
+    """The score rows of the targets whose design is not one of the training set's."""
+    return [row for row, job in zip(rows, jobs) if job.design not in training_designs]
+
+
 def mean_scores(rows: list[dict]) -> dict:
     return {key: float(np.mean([r[key] for r in rows])) for key in rows[0]} if rows else {}
 
@@ -268,7 +273,7 @@ def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
     rows = [score(p, job.design, ctx.ranks) for p, job in zip(designs, ctx.jobs)]
     metrics = {**mean_scores(rows), "seconds_per_target": seconds}
     if ctx.training_designs:
-        unseen = [row for row, job in zip(rows, ctx.jobs) if job.design not in ctx.training_designs]
+        unseen = unseen_rows(rows, ctx.jobs, ctx.training_designs)
         metrics.update(unseen=mean_scores(unseen), unseen_targets=len(unseen))
     return metrics, designs
 

@@ -111,11 +111,10 @@ class _Experiment:
         from .dataset import job_tiles
         from .evaluate import rankings, render_targets
         from .nams import load_checkpoint
-        from .textures import ensure_default_bank, ensure_heldout_bank
-        from .workflow import ModelSettings, ensure_models
-
         from .design import DesignSpace
         from .render import sample_designs
+        from .textures import ensure_default_bank, ensure_heldout_bank
+        from .workflow import ModelSettings, ensure_models
 
         self.dataset = dataset
         # E1 targets whose design the training set lacks are also scored alone ("unseen").
@@ -140,7 +139,7 @@ class _Experiment:
             adjoint: dict | None = None, targets: int | None = None, seed: int = 1) -> Point:
         import torch
 
-        from .evaluate import mean_scores, score
+        from .evaluate import mean_scores, score, unseen_rows
         from .nams import adjoint_search, exhaustive_search
 
         n = targets or len(self.jobs)
@@ -155,7 +154,7 @@ class _Experiment:
                                      **{"S": min(50, adjoint["M"]), **adjoint})
         search_seconds = (time.perf_counter() - started) / n
         rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, self.jobs[:n])]
-        unseen = [row for row, job in zip(rows, self.jobs[:n]) if job.design not in self.training_designs]
+        unseen = unseen_rows(rows, self.jobs[:n], self.training_designs)
         metrics = {**mean_scores(rows), "unseen_targets": len(unseen),
                    **{f"unseen_{k}": v for k, v in mean_scores(unseen).items()}}
         return Point(knob, setting, metrics,
