@@ -100,11 +100,14 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     from .dataset import DatasetConfig
     from .evaluate import EvalSettings, method_runs, prepare_eval, score_method
     from .features import make_extractor, time_extractor
-    from .workflow import ModelSettings, cache_root, train_models
+    from .nams import ARCHITECTURES, load_checkpoint
+    from .workflow import ModelSettings, cache_root, ensure_models, train_models
 
     root = Path(root or cache_root())
     dataset, settings = DatasetConfig(), ModelSettings()
+    others = [name for name in ARCHITECTURES if name != settings.architecture]
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
+              "architecture": settings.architecture, "train_seconds_other_architectures": {},
               "targets": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": EvalSettings.tiles,
               "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}}
     experiments = {}
@@ -121,6 +124,14 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
             name = f"nams_adjoint_M{starts}_it{iterations}"
             rows[name], _ = score_method(few, run)
             rows[name]["targets"] = len(few.jobs)
+        # The other NAMS architectures, exhaustive search, on the same targets and features.
+        for architecture in others:
+            models = ensure_models(dataset, dataclasses.replace(settings, architecture=architecture), root, bar)
+            other = dataclasses.replace(ctx, nams=load_checkpoint(models.nams_path, "nams"))
+            name = f"nams_exhaustive_{architecture}"
+            rows[name], _ = score_method(other, method_runs(other, seed, {})["nams_exhaustive"])
+            rows[name]["targets"] = len(ctx.jobs)
+            result["train_seconds_other_architectures"][architecture] = round(other.nams.extra["seconds"], 1)
         experiments[experiment] = rows
     result["experiments"] = experiments
     paper = experiments["e1"]["nams_adjoint_M1000_it200"]
@@ -154,7 +165,10 @@ def format_nams_table(result: dict) -> str:
     lines += ["", f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
               f"({result['dataset']['preset']}); target groups of {result.get('tiles_per_target', 4)} tiles "
               f"in unseen cities. "
-              f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s. "
+              f"NAMS architecture {result.get('architecture', 'paper')} (rows nams_exhaustive_NAME: the others). "
+              f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
+              + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
+                        for name, s in result.get("train_seconds_other_architectures", {}).items()) + ". "
               f"Features: {result['feature_seconds_per_group']:.3f} s per group of 9 tiles x 8 views. "
               f"Fastest adjoint setting within 0.05 of the paper setting's E1 top-1: "
               f"M={f['M']}, {f['iterations']} iterations."]

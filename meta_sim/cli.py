@@ -12,6 +12,9 @@ import click
 
 from .errors import MetaSimError
 
+# nams.model.ARCHITECTURES, named here so that `--help` does not import torch (a test keeps them equal).
+ARCHITECTURE_NAMES = ("paper", "factorised", "additive")
+
 
 class _Group(click.Group):
     """Prints MetaSimError as one line and exits 2, without a traceback."""
@@ -203,6 +206,10 @@ def _dataset_options(command):
         click.option("--views", type=click.Choice(["1", "2", "4", "8"]), default="8", show_default=True,
                      help="augmentation views per tile (rotations x flip) averaged into a design's features"),
         click.option("--max-epochs", type=int, default=None, help="training epochs at most (early stopping)"),
+        click.option("--architecture", type=click.Choice(list(ARCHITECTURE_NAMES)), default="additive",
+                     show_default=True,
+                     help="NAMS networks: paper (joint E, D, P), factorised (E and D per design parameter) or "
+                          "additive (factorised, P a sum over parameters)"),
         click.option("--hidden", default=None, help="hidden layer sizes of E, D and P, e.g. 1024,2048 (paper)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
@@ -234,7 +241,7 @@ def _configs(o):
             raise MetaSimError("--hidden takes comma-separated integers, e.g. 1024,2048") from None
     train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] else {}
     return dataset, ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
-                                  views=int(o["views"]), nams=nams, train=train)
+                                  views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"])
 
 
 @main.command("dataset")

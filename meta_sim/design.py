@@ -218,6 +218,10 @@ class DesignSpace:
         return out
 
     # --- designs -----------------------------------------------------------
+    def widths(self) -> list[int]:
+        """Each parameter's width in the encoded vector, in order."""
+        return [p.width for p in self.parameters]
+
     def validate(self, design: Mapping, extra: Mapping[str, Iterable[str]] | None = None) -> dict:
         """A complete, canonical design (choice ids, floats), or MetaSimError."""
         extra = extra or {}

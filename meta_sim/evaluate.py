@@ -299,7 +299,7 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
                "feature_seconds_per_target": ctx.feature_seconds, "methods": methods,
                "adjoint": adjoint, "training": {"designs": dataset.designs, "tiles": dataset.tiles,
                                                 "preset": dataset.preset, "seconds": ctx.models.seconds},
-               "model_id": ctx.nams.model_id,
+               "model_id": ctx.nams.model_id, "architecture": ctx.nams.model.config.architecture,
                "targets_detail": [{"name": j.name, "truth": j.design,
                                    "predicted": {m: predictions[m][i] for m in predictions}}
                                   for i, j in enumerate(ctx.jobs)]}

@@ -107,6 +107,7 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     report = {"target_dir": str(target_dir), "images": len(paths), "tiles": len(targets),
               "group_count": len(groups),
               "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
+              "architecture": ckpt.model.config.architecture,
               "method": results[0].method if results else settings.method,
               "seconds": {"read_and_features": read_seconds, "search": search_seconds,
                           "search_per_group": search_seconds / max(1, len(groups))},

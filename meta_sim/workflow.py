@@ -19,6 +19,7 @@ import torch
 
 from .dataset import DatasetConfig, FeatureSet, build_features, render_training_set
 from .errors import MetaSimError
+from .nams.model import DEFAULT_ARCHITECTURE, architecture_options
 
 
 # Bumped when training changes in a way no setting shows (e.g. how features are normalised).
@@ -27,6 +28,7 @@ MODEL_CODE_VERSION = 2
 
 @dataclass(frozen=True)
 class ModelSettings:
+    architecture: str = DEFAULT_ARCHITECTURE  # a name from nams.ARCHITECTURES
     extractor: str = "colour-texture"
     weights: str | None = None
     views: int = 8
@@ -39,11 +41,14 @@ class ModelSettings:
         that a change of a default (not only of an override) trains afresh."""
         from .nams import NAMSConfig, TrainConfig
 
+        architecture_options(self.architecture, ())  # an unknown name is an error before anything runs
         nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, **self.nams}).to_dict()
         train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
-        blob = json.dumps({"dataset": asdict(dataset), "extractor": extractor_id, "views": self.views,
-                           "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION},
-                          sort_keys=True)
+        inputs = {"dataset": asdict(dataset), "extractor": extractor_id, "views": self.views,
+                  "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION}
+        if self.architecture != "paper":  # models cached before the choice existed are the paper's
+            inputs["architecture"] = self.architecture
+        blob = json.dumps(inputs, sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:12]
 
 
@@ -91,7 +96,8 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
     torch.manual_seed(settings.seed)
     train_config = TrainConfig.from_dict({"seed": settings.seed, **settings.train})
     nams_config = NAMSConfig.from_dict({"design_dim": features.encoded.shape[1],
-                                        "feature_dim": features.features.shape[1], **settings.nams})
+                                        "feature_dim": features.features.shape[1],
+                                        **architecture_options(settings.architecture, features.space.widths()), **settings.nams})
     seconds = {}
     out_dir = Path(out_dir)
     # DR keeps per-feature standardisation: whitening is there for the search's metric, and DR

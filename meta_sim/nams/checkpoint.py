@@ -143,6 +143,8 @@ def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
     space = DesignSpace.from_dict(payload["space"])
     if space.dim != model.config.design_dim:
         raise MetaSimError(f"{path}: its design space does not match its model")
+    if getattr(model.config, "blocks", ()) and list(model.config.blocks) != space.widths():
+        raise MetaSimError(f"{path}: its model's parameter blocks do not match its design space")
     norm = FeatureNorm.from_dict(payload["feature_norm"])
     feature_dim = model.config.feature_dim
     if norm.dim != feature_dim:

@@ -5,6 +5,15 @@ Sizes follow the paper (section 5.3): E, D and P each have two hidden layers of
 Dropout(0.5); the design embedding z has 10 dimensions. DR has five hidden
 layers of 500 units with BatchNorm and ReLU. Every size is a config option.
 
+Architectures (``ARCHITECTURES``, `--architecture`): "paper" is the above.
+"factorised" gives each design parameter its own E and D and its own slice
+of z. "additive" (the default) also splits P into one network per
+parameter's slice of z, summed: a tile's features are close to a sum over
+its flat and its sloped roofs, and a sum carries what one texture does to
+pairings the training set never rendered, which the joint P does not (E1
+sloped top-1 on independent targets: `make bench-nams`, rows
+nams_exhaustive and nams_exhaustive_paper).
+
 Loss reductions (the paper does not state them): BCE and MSE are means over
 all entries, KL is summed over the z dimensions and averaged over the batch,
 so that no term depends on the batch size.
@@ -63,6 +72,23 @@ def mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int, activation: nn.Modul
     return MLP(*layers)
 
 
+class Blockwise(nn.Module):
+    """One network per block: input block i (of widths ``in_blocks``) -> output block i. The outputs are
+    concatenated, or summed (``sum=True``, outputs of one width: an additive model)."""
+
+    def __init__(self, in_blocks, out_blocks, make, sum: bool = False) -> None:
+        super().__init__()
+        self.in_blocks, self.sum = tuple(in_blocks), sum
+        self.nets = nn.ModuleList(make(i, o) for i, o in zip(in_blocks, out_blocks))
+
+    def parts(self, x: torch.Tensor) -> list[torch.Tensor]:
+        return [net(part) for net, part in zip(self.nets, x.split(self.in_blocks, dim=-1))]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        parts = self.parts(x)
+        return torch.stack(parts).sum(dim=0) if self.sum else torch.cat(parts, dim=-1)
+
+
 def soft_clamp(x: torch.Tensor, bound: float) -> torch.Tensor:
     """``bound * tanh(x / bound)``: the identity for |x| << bound, never beyond it, never a dead gradient."""
     return bound * torch.tanh(x / bound)
@@ -74,6 +100,27 @@ def kl_to_standard_normal(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tenso
     ``expm1(lv) - lv`` is ``exp(lv) - 1 - lv`` without the cancellation near lv = 0.
     """
     return 0.5 * (mu.square() + torch.expm1(logvar) - logvar).sum(dim=-1)
+
+
+PREDICTORS = ("joint", "additive")
+
+# What `--architecture` offers: name -> (factorised E and D, predictor, description).
+ARCHITECTURES = {
+    "paper": (False, "joint", "the paper's NAMS: E, D and P each see the whole design (all of z)"),
+    "factorised": (True, "joint", "one E and one D per design parameter, each with its own slice of z; "
+                                  "the paper's joint P"),
+    "additive": (True, "additive", "factorised E and D, and P a sum of one network per parameter: a tile's "
+                                   "features add up over its flat and sloped roofs"),
+}
+DEFAULT_ARCHITECTURE = "additive"
+
+
+def architecture_options(name: str, widths) -> dict:
+    """NAMSConfig fields for architecture ``name`` on a design space with parameter block ``widths``."""
+    if name not in ARCHITECTURES:
+        raise MetaSimError(f"unknown architecture {name!r}; use one of {', '.join(ARCHITECTURES)}")
+    factorised, predictor, _ = ARCHITECTURES[name]
+    return {"blocks": [int(w) for w in widths] if factorised else [], "predictor": predictor}
 
 
 @dataclass(frozen=True)
@@ -92,9 +139,29 @@ class NAMSConfig:
     # Both bounds sit far outside what a trained encoder produces.
     mu_bound: float = 100.0
     logvar_bound: float = 20.0
+    # The architecture (see ARCHITECTURES). ``blocks`` are the widths of the
+    # design parameters' blocks in the encoded vector: empty, E and D see the
+    # whole design at once (the paper); given, E and D are factorised, one
+    # network per parameter with its own slice of z. ``predictor``: "joint" P
+    # sees all of z (the paper), "additive" P is a sum of one network per
+    # parameter's slice of z, "both" adds the two.
+    blocks: tuple[int, ...] = ()
+    predictor: str = "joint"
 
     def __post_init__(self):
         _check_sizes(self, ("design_dim", "feature_dim", "z_dim"))
+        object.__setattr__(self, "blocks", tuple(int(b) for b in self.blocks))
+        if self.predictor not in PREDICTORS:
+            raise MetaSimError(f"predictor must be one of {', '.join(PREDICTORS)}, not {self.predictor!r}")
+        if self.predictor != "joint" and not self.blocks:
+            raise MetaSimError(f"an {self.predictor!r} predictor needs the design's parameter blocks")
+        if self.blocks:
+            if any(b < 1 for b in self.blocks) or sum(self.blocks) != self.design_dim:
+                raise MetaSimError(f"blocks {list(self.blocks)} must be positive widths summing to "
+                                   f"design_dim {self.design_dim}")
+            if self.z_dim < len(self.blocks):
+                raise MetaSimError(f"a factorised model needs z_dim >= the number of parameters "
+                                   f"({len(self.blocks)}), not {self.z_dim}")
         if not 0.0 <= self.dropout < 1.0:
             raise MetaSimError(f"dropout must be in [0, 1), not {self.dropout}")
         if min(self.lambda_d, self.lambda_kld, self.lambda_p) < 0:
@@ -105,7 +172,21 @@ class NAMSConfig:
     def to_dict(self) -> dict:
         out = asdict(self)
         out["hidden"] = list(self.hidden)
+        out["blocks"] = list(self.blocks)
         return out
+
+    @property
+    def architecture(self) -> str:
+        for name, (factorised, predictor, _) in ARCHITECTURES.items():
+            if factorised == bool(self.blocks) and predictor == self.predictor:
+                return name
+        raise AssertionError("unreachable: __post_init__ admits only the combinations ARCHITECTURES names")
+
+    @property
+    def z_blocks(self) -> tuple[int, ...]:
+        """z's width per parameter block: z_dim split as evenly as it goes, earlier blocks first."""
+        n = len(self.blocks)
+        return tuple(self.z_dim // n + (i < self.z_dim % n) for i in range(n))
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "NAMSConfig":
@@ -141,9 +222,16 @@ class NAMS(nn.Module):
         def net(in_dim: int, out_dim: int) -> MLP:
             return mlp(in_dim, c.hidden, out_dim, nn.LeakyReLU(c.negative_slope), c.dropout)
 
-        self.encoder = net(c.design_dim, 2 * c.z_dim)
-        self.decoder = net(c.z_dim, c.design_dim)
-        self.predictor = net(c.z_dim, c.feature_dim)
+        if c.blocks:
+            self.encoder = Blockwise(c.blocks, [2 * w for w in c.z_blocks], net)
+            self.decoder = Blockwise(c.z_blocks, c.blocks, net)
+        else:
+            self.encoder = net(c.design_dim, 2 * c.z_dim)
+            self.decoder = net(c.z_dim, c.design_dim)
+        if c.predictor == "joint":
+            self.predictor = net(c.z_dim, c.feature_dim)
+        else:
+            self.predictor = Blockwise(c.z_blocks, [c.feature_dim] * len(c.blocks), net, sum=True)
         self.register_buffer("z_mean", torch.zeros(c.z_dim))
         self.register_buffer("z_std", torch.ones(c.z_dim))
         self.register_buffer("feature_scale", torch.ones(c.feature_dim))
@@ -161,7 +249,11 @@ class NAMS(nn.Module):
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def encode(self, designs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        mu, logvar = self.encoder(designs).chunk(2, dim=-1)
+        if self.config.blocks:
+            pairs = [out.chunk(2, dim=-1) for out in self.encoder.parts(designs)]
+            mu, logvar = torch.cat([m for m, _ in pairs], dim=-1), torch.cat([v for _, v in pairs], dim=-1)
+        else:
+            mu, logvar = self.encoder(designs).chunk(2, dim=-1)
         return soft_clamp(mu, self.config.mu_bound), soft_clamp(logvar, self.config.logvar_bound)
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
