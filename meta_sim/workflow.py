@@ -43,6 +43,11 @@ class ModelSettings:
 
         architecture_options(self.architecture, ())  # an unknown name is an error before anything runs
         nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, **self.nams}).to_dict()
+        # The architecture names blocks and predictor (filled in from the design space when training);
+        # keys without them stay those of the models cached before architectures existed.
+        for name in ("blocks", "predictor"):
+            if name not in self.nams:
+                del nams[name]
         train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
         inputs = {"dataset": asdict(dataset), "extractor": extractor_id, "views": self.views,
                   "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION}
