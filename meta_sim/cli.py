@@ -210,7 +210,9 @@ def _dataset_options(command):
                      show_default=True,
                      help="NAMS networks: paper (joint E, D, P), factorised (E and D per design parameter) or "
                           "additive (factorised, P a sum over parameters)"),
-        click.option("--hidden", default=None, help="hidden layer sizes of E, D and P, e.g. 1024,2048 (paper)"),
+        click.option("--hidden", default=None,
+                     help="hidden layer sizes of each network, e.g. 1024,2048 (default: the architecture's, "
+                          "1024,2048 for paper, 512,1024 for the factorised ones)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):

@@ -41,8 +41,8 @@ class ModelSettings:
         that a change of a default (not only of an override) trains afresh."""
         from .nams import NAMSConfig, TrainConfig
 
-        architecture_options(self.architecture, ())  # an unknown name is an error before anything runs
-        nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, **self.nams}).to_dict()
+        hidden = architecture_options(self.architecture, ())["hidden"]  # an unknown name: an error here
+        nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, "hidden": hidden, **self.nams}).to_dict()
         # The architecture names blocks and predictor (filled in from the design space when training);
         # keys without them stay those of the models cached before architectures existed.
         for name in ("blocks", "predictor"):

@@ -183,7 +183,7 @@ def test_factorised_losses_stay_finite_with_weights_at_extreme_scales(factor):
 def test_one_parameter_of_one_choice_with_the_factorised_model():
     space = _space(1)
     fit = train_nams(torch.ones(20, 1), torch.randn(20, 4, generator=torch.Generator().manual_seed(0)),
-                     NAMSConfig(1, 4, hidden=(8, 8), **architecture_options("additive", [1])),
+                     NAMSConfig(1, 4, **{**architecture_options("additive", [1]), "hidden": (8, 8)}),
                      TrainConfig(max_epochs=3))
     results = exhaustive_search(fit.model, fit.norm.apply(torch.randn(2, 4)), space)
     assert [r.design for r in results] == [{"p0": "p0c0"}] * 2
