@@ -279,7 +279,7 @@ def train_command(out, **o):
     out.mkdir(parents=True, exist_ok=True)
     shutil.copy2(models.nams_path, out / "nams.pt")
     shutil.copy2(models.dr_path, out / "dr.pt")
-    click.echo(f"wrote {out / 'nams.pt'} and {out / 'dr.pt'} "
+    click.echo(f"wrote {out / 'nams.pt'} ({settings.architecture} NAMS) and {out / 'dr.pt'} "
                + ", ".join(f"{k} {v:.0f} s" for k, v in models.seconds.items()))
 
 

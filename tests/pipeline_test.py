@@ -39,6 +39,7 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
     out, result = evaluated
     results = json.loads((out / "results.json").read_text())
     assert results["experiment"] == "e1" and results["targets"] == 3
+    assert results["architecture"] == "additive"  # the default
     assert set(results["methods"]) == {"uniform", "dr", "ms2", "nams_adjoint", "nams_exhaustive"}
     for metrics in results["methods"].values():
         for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
@@ -99,6 +100,7 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert population.kind == "population" and sum(d["count"] for d in population.designs) == 2
     report = json.loads((tmp_path / "inferred" / "report.json").read_text())
     assert report["group_count"] == 2 and len(report["groups"]) == 2 and len(report["skipped"]) == 3
+    assert report["architecture"] == "additive"
     assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
 
 
@@ -170,3 +172,18 @@ def test_infer_on_real_aerial_imagery(evaluated, tmp_path):
     assert result.exit_code == 0, result.output
     preset = load_preset(next((tmp_path / "inferred" / "presets").glob("*.json")))
     assert np.isfinite(preset.search["loss"])
+
+
+def test_train_with_the_papers_architecture(evaluated, tiny_env, tmp_path):
+    """Same cached training set; another architecture is another cached model, and says so."""
+    from meta_sim.nams import load_checkpoint
+
+    result = _cli("train", "--out", tmp_path, "--architecture", "paper", "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    assert "(paper NAMS)" in result.output and "render" in result.output
+    paper = load_checkpoint(tmp_path / "nams.pt", "nams")
+    assert paper.model.config.architecture == "paper" and paper.model.config.blocks == ()
+    default = load_checkpoint(evaluated[0] / "nams.pt", "nams")
+    assert default.model.config.architecture == "additive" and default.model.config.blocks == (40, 44)
+    bad = CliRunner().invoke(cli, ["train", "--out", str(tmp_path), "--architecture", "deep"])
+    assert bad.exit_code != 0 and "deep" in bad.output
