@@ -10,9 +10,10 @@ Architectures (``ARCHITECTURES``, `--architecture`): "paper" is the above.
 of z. "additive" (the default) also splits P into one network per
 parameter's slice of z, summed: a tile's features are close to a sum over
 its flat and its sloped roofs, and a sum carries what one texture does to
-pairings the training set never rendered, which the joint P does not (E1
-sloped top-1 on independent targets: `make bench-nams`, rows
-nams_exhaustive and nams_exhaustive_paper).
+pairings the training set never rendered, which the joint P does not.
+`make bench-nams` (600 designs x 2 tiles, 100 independent E1 targets,
+exhaustive search), E1 top-1 flat/sloped: paper 0.94/0.56, factorised
+0.97/0.79, additive 0.99/0.93; training 211, 207 and 167 s.
 
 Loss reductions (the paper does not state them): BCE and MSE are means over
 all entries, KL is summed over the z dimensions and averaged over the batch,
