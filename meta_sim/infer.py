@@ -128,7 +128,8 @@ def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
     lines = [f"# meta-sim infer: {report['target_dir']}", "",
              f"{report['images']} images, {report['tiles']} tiles, {report['group_count']} groups; "
              f"search `{report['method']}`, {report['seconds']['search_per_group']:.4f} s per group; "
-             f"model `{report['model_id']}`.", "", "| group | " + " | ".join(space.names) + " |",
+             f"model `{report['model_id']}` ({report['architecture']} NAMS).", "",
+             "| group | " + " | ".join(space.names) + " |",
              "|---|" + "---|" * len(space.names)]
     for g in report["groups"]:
         cells = " | ".join(f"{g['design'][n]} ({g['confidence'][n]:.0%})" for n in space.names)

@@ -101,6 +101,7 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     report = json.loads((tmp_path / "inferred" / "report.json").read_text())
     assert report["group_count"] == 2 and len(report["groups"]) == 2 and len(report["skipped"]) == 3
     assert report["architecture"] == "additive"
+    assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
     assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
 
 
