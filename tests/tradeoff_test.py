@@ -7,6 +7,7 @@ import pytest
 
 from meta_sim.errors import MetaSimError
 from meta_sim.textures.pngio import read_rgb8
+from meta_sim.dataset import DatasetConfig
 from meta_sim.tradeoff import PROFILES, accuracy, format_tradeoff_table, get_profile, plot_tradeoff
 
 
@@ -33,6 +34,9 @@ def test_profiles_are_the_three_recommended_ones_and_unknown_names_are_clear_err
     assert (paper.dataset.designs, paper.dataset.tiles, paper.views, paper.method) == (1700, 9, 8, "adjoint")
     assert paper.search_options() == {"M": 1000, "iterations": 200}
     assert get_profile("fast").search_options() == {}
+    fast, balanced = get_profile("fast").dataset, get_profile("balanced").dataset
+    assert balanced == DatasetConfig()  # balanced is the default
+    assert fast.designs * fast.tiles == balanced.designs * balanced.tiles // 2  # half the rendering
     with pytest.raises(MetaSimError, match="unknown profile"):
         get_profile("turbo")
 
