@@ -1,6 +1,7 @@
 """Shared fixtures: a private cache (texture banks) for the whole test session."""
 
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -9,6 +10,11 @@ import pytest
 # Banks are built once per session into a private cache, never the user's ~/.cache.
 _CACHE = Path(tempfile.mkdtemp(prefix="meta-sim-test-cache-"))
 os.environ["META_SIM_CACHE"] = str(_CACHE)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """The private cache (texture banks, about 10 MB) goes with the session instead of piling up in /tmp."""
+    shutil.rmtree(_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
