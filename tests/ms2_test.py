@@ -11,18 +11,10 @@ from meta_sim.dataset import DatasetConfig, build_features, build_tile_features
 from meta_sim.design import DesignSpace
 from meta_sim.errors import MetaSimError
 from meta_sim.nams import MS2Config, ms2_search
+from toys import toy_space as _space
 
 FEATURES = 16
 FAST = MS2Config(samples=200, iterations=100)
-
-
-def _space(*widths, continuous=False):
-    params = [{"name": f"p{i}", "type": "categorical", "choices": [f"p{i}c{j}" for j in range(w)]}
-              for i, w in enumerate(widths)]
-    if continuous:
-        params.append({"name": "density", "type": "continuous", "low": 0.3, "high": 0.9})
-    return DesignSpace.from_dict({"format": "meta-sim-design-space", "version": 1, "name": "toy",
-                                  "parameters": params})
 
 
 class ToySimulator:

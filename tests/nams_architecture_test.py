@@ -12,17 +12,9 @@ from meta_sim.errors import MetaSimError
 from meta_sim.nams import (ARCHITECTURES, NAMS, NAMSConfig, FeatureNorm, TrainConfig, adjoint_search,
                            architecture_options, exhaustive_search, load_checkpoint, save_checkpoint, train_nams)
 from meta_sim.workflow import ModelSettings
+from toys import toy_space as _space
 
 FEATURES = 24
-
-
-def _space(*widths, continuous=False):
-    params = [{"name": f"p{i}", "type": "categorical", "choices": [f"p{i}c{j}" for j in range(w)]}
-              for i, w in enumerate(widths)]
-    if continuous:
-        params.append({"name": "density", "type": "continuous", "low": 0.3, "high": 0.9})
-    return DesignSpace.from_dict({"format": "meta-sim-design-space", "version": 1, "name": "toy",
-                                  "parameters": params})
 
 
 def _config(space, architecture, **kw):

@@ -13,18 +13,10 @@ from meta_sim.errors import MetaSimError
 from meta_sim.nams import (DRConfig, NAMS, NAMSConfig, TrainConfig, adjoint_search, design_table, dr_predict,
                            exhaustive_search, search, time_search, train_dr, train_nams, uniform_predict)
 from meta_sim.nams.search import resolve_method
+from toys import toy_space as _space
 
 FEATURES = 32
 FAST = {"M": 64, "S": 8, "iterations": 60}
-
-
-def _space(*widths, continuous=False):
-    params = [{"name": f"p{i}", "type": "categorical", "choices": [f"p{i}c{j}" for j in range(w)]}
-              for i, w in enumerate(widths)]
-    if continuous:
-        params.append({"name": "density", "type": "continuous", "low": 0.3, "high": 0.9})
-    return DesignSpace.from_dict({"format": "meta-sim-design-space", "version": 1, "name": "toy",
-                                  "parameters": params})
 
 
 class FakeSimulator:
