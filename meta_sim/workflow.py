@@ -100,9 +100,9 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
 
     torch.manual_seed(settings.seed)
     train_config = TrainConfig.from_dict({"seed": settings.seed, **settings.train})
+    architecture = architecture_options(settings.architecture, features.space.widths())
     nams_config = NAMSConfig.from_dict({"design_dim": features.encoded.shape[1],
-                                        "feature_dim": features.features.shape[1],
-                                        **architecture_options(settings.architecture, features.space.widths()), **settings.nams})
+                                        "feature_dim": features.features.shape[1], **architecture, **settings.nams})
     seconds = {}
     out_dir = Path(out_dir)
     # DR keeps per-feature standardisation: whitening is there for the search's metric, and DR
