@@ -50,8 +50,15 @@ class DatasetConfig:
     def paper(cls, **overrides) -> "DatasetConfig":
         return cls(**{"designs": 1700, "tiles": 9, **overrides})
 
+    def identity(self) -> dict:
+        """Every input of the training set: the fields and what of the render preset's settings
+        sets its tiles apart (``RenderPreset.cache_fields``)."""
+        from .render_presets import get_preset
+
+        return {**asdict(self), **get_preset(self.preset).cache_fields()}
+
     def key(self) -> str:
-        return hashlib.sha256(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:12]
+        return hashlib.sha256(json.dumps(self.identity(), sort_keys=True).encode()).hexdigest()[:12]
 
 
 @dataclass

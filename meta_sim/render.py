@@ -84,7 +84,7 @@ def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
     return {"design": job.design, "design_space": settings.space.name, "city_seed": job.city_seed,
             "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
             "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
-            "format_version": tiles.TILE_FORMAT_VERSION}
+            "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields()}
 
 
 def resolve_textures(space: DesignSpace, design: dict, banks) -> dict:
@@ -190,7 +190,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                         meta = tiles.tile_metadata(
                             design=job.design, space=settings.space.name, city_seed=job.city_seed,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
-                            pixel_size_m=settings.pixel_size_m, preset=settings.preset.name)
+                            pixel_size_m=settings.pixel_size_m, preset=settings.preset)
                         tiles.write_tile(path, rgb[cut], instance[cut], roof_class[cut], meta)
                         if settings.preview:
                             write_previews(path, rgb[cut], instance[cut], roof_class[cut])

@@ -61,12 +61,17 @@ def _versions() -> dict:
 
 
 def tile_metadata(*, design: dict, space: str, city_seed: int, tile_index: int, origin_m, size_px,
-                  pixel_size_m: float, preset: str) -> dict:
+                  pixel_size_m: float, preset) -> dict:
+    """A tile's header; ``preset`` is a ``RenderPreset`` or its name (its settings are recorded)."""
+    from .render_presets import get_preset
+
+    preset = get_preset(preset) if isinstance(preset, str) else preset
     return {"format_version": TILE_FORMAT_VERSION, "design": design, "design_space": space,
             "city_seed": int(city_seed), "tile_index": int(tile_index),
             "tile_origin_m": [float(origin_m[0]), float(origin_m[1])],
             "tile_size_px": [int(size_px[0]), int(size_px[1])],
-            "pixel_size_m": float(pixel_size_m), "preset": preset, "software": _versions()}
+            "pixel_size_m": float(pixel_size_m), "preset": preset.name, "render": preset.to_dict(),
+            "exposure": preset.exposure, "software": _versions()}
 
 
 def write_tile(path: str | Path, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray,

@@ -49,7 +49,7 @@ class ModelSettings:
             if name not in self.nams:
                 del nams[name]
         train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
-        inputs = {"dataset": asdict(dataset), "extractor": extractor_id, "views": self.views,
+        inputs = {"dataset": dataset.identity(), "extractor": extractor_id, "views": self.views,
                   "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION}
         if self.architecture != "paper":  # models cached before the choice existed are the paper's
             inputs["architecture"] = self.architecture

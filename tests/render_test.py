@@ -164,13 +164,32 @@ def test_flat_roof_colour_follows_the_flat_texture(space, bank, tmp_path):
     assert means[light] > 2 * means[dark]
 
 
-def test_path_traced_preset_renders_same_labels(rendered, space, bank, tmp_path):
+@pytest.fixture(scope="module")
+def traced(space, bank, tmp_path_factory):
+    """The tiles of ``rendered`` with the path-traced preset."""
+    return _render(space, [bank], tmp_path_factory.mktemp("traced"), _design(space, 5, 9), preset="balanced")[1]
+
+
+def test_path_traced_preset_renders_same_labels(rendered, traced):
     _, _, base = rendered
-    _, traced = _render(space, [bank], tmp_path, _design(space, 5, 9), preset="balanced")
     for a, b in zip(traced, base):
         assert np.array_equal(a.instance, b.instance)
         assert np.isfinite(a.rgb).all() and a.rgb.mean() > 0.02
         assert a.meta["preset"] == "balanced"
+
+
+def test_presets_render_roofs_equally_bright(rendered, traced):
+    """The rasterised preset's exposure brings its roofs to the path-traced brightness (without
+    it, the studio light rendered them at a sixth; see render_presets.FAST_EXPOSURE)."""
+    _, _, base = rendered
+
+    def roof_luminance(tile_list):
+        return np.median(np.concatenate([t.rgb[t.instance > 0] @ np.array([0.2126, 0.7152, 0.0722])
+                                         for t in tile_list]))
+
+    assert base[0].meta["exposure"] == get_preset("fast").exposure != 1.0
+    assert base[0].meta["render"] == get_preset("fast").to_dict()
+    assert 0.75 < roof_luminance(base) / roof_luminance(traced) < 1.33
 
 
 def test_held_out_texture_can_be_rendered(space, bank, heldout_bank, tmp_path):

@@ -1,3 +1,4 @@
+import dataclasses
 import os
 
 import numpy as np
@@ -5,6 +6,7 @@ import OpenImageIO as oiio
 import pytest
 
 from meta_sim import tiles
+from meta_sim.design import DesignSpace
 from meta_sim.errors import MetaSimError
 
 
@@ -74,3 +76,31 @@ def test_write_is_atomic_and_leaves_nothing_on_failure(tmp_path):
         tiles.write_tile(path, rgb[:, :5], instance, roof_class, _meta())  # shape mismatch
     assert path.read_bytes() == before
     assert sorted(os.listdir(tmp_path)) == ["t.exr"]
+
+
+def test_tiles_rendered_before_an_exposure_change_are_rendered_again(tmp_path):
+    """A preset whose exposure is not 1 names it in the tiles it expects, the training set's key and
+    the models' key; presets at exposure 1 keep the keys of their earlier caches."""
+    from meta_sim.dataset import DatasetConfig
+    from meta_sim.render import RenderSettings, expected_meta, single_job
+    from meta_sim.render_presets import get_preset
+
+    rgb, instance, roof_class = _pixels(np.random.default_rng(1))
+    path = tmp_path / "t.exr"
+    old = {key: value for key, value in _meta().items() if key not in ("exposure", "render")}
+    tiles.write_tile(path, rgb, instance, roof_class, old)
+    fast = get_preset("fast")
+    assert fast.exposure != 1.0 and fast.cache_fields() == {"exposure": fast.exposure}
+    assert not tiles.is_valid_tile(path, {"city_seed": 7, **fast.cache_fields()})
+    tiles.write_tile(path, rgb, instance, roof_class, _meta())
+    assert tiles.is_valid_tile(path, {"city_seed": 7, **fast.cache_fields()})
+    assert tiles.read_tile(path).meta["render"] == fast.to_dict()
+
+    space = DesignSpace.load()
+    settings = RenderSettings(space=space, banks=[], preset=fast, out_dir=tmp_path, n_tiles=1)
+    assert expected_meta(settings, single_job(space, space.sample(np.random.default_rng(0), 1)[0], 1), 0)[
+        "exposure"] == fast.exposure
+    assert get_preset("balanced").cache_fields() == {}
+    config = DatasetConfig(preset="balanced")
+    assert config.identity() == dataclasses.asdict(config)  # the key of sets cached before exposures
+    assert "exposure" in DatasetConfig(preset="fast").identity()

@@ -407,7 +407,7 @@ class CityScene:
         return meshes.decode_labels(pixels[..., :3])
 
     def render_rgb(self, rect: Rect, preset: RenderPreset) -> np.ndarray:
-        """Linear RGB (float32) of a rectangle with a quality preset."""
+        """Linear RGB (float32) of a rectangle with a quality preset, scaled by its exposure."""
         scene = self.scene
         scene.render.film_transparent = False
         if preset.engine == "BLENDER_WORKBENCH":
@@ -437,7 +437,8 @@ class CityScene:
             # Spelled out: a new scene (the add-on's) would otherwise pick another pattern than the factory one
             # and its preview would not be the farm's pixels.
             cycles.sampling_pattern = "TABULATED_SOBOL"
-        return self._render_to_array(rect, "rgb")[..., :3]
+        rgb = self._render_to_array(rect, "rgb")[..., :3]
+        return rgb if preset.exposure == 1.0 else rgb * np.float32(preset.exposure)
 
     def close(self) -> None:
         """Remove the temporary files (the city itself stays; `remove_city` deletes it)."""
