@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all addon bench-render bench-nams bench-tradeoff bench-farm clean
+.PHONY: setup demo test test-all addon bench-render bench-nams bench-tradeoff bench-farm bench-reference clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -58,6 +58,11 @@ bench-farm: setup
 
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
+
+# How far the renders' roof colours (found with the roof labels) agree with the swatch similarity that
+# scores E1/E2: a reference for bench-nams' accuracy, on the same training set and targets.
+bench-reference: setup
+	$(BIN)/meta-sim bench reference --out benchmarks/reference.json
 
 clean:
 	rm -rf out build dist *.egg-info

@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from .errors import MetaSimError
+from .fileio import write_text_atomic
 
 # nams.model.ARCHITECTURES, named here so that `--help` does not import torch (a test keeps them equal).
 ARCHITECTURE_NAMES = ("paper", "factorised", "additive")
@@ -482,8 +483,7 @@ def bench_render(out, designs, tiles, repeats, presets):
     from .bench import bench_render as run, format_render_table
 
     result = run(designs=designs, tiles=tiles, repeats=repeats, presets=presets.split(","))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    write_text_atomic(out, json.dumps(result, indent=2) + "\n")
     click.echo(format_render_table(result))
     click.echo(f"wrote {out}")
 
@@ -502,11 +502,26 @@ def bench_nams_command(out, targets, adjoint_targets, cache):
     bars = _Bars()
     result = bench_nams(targets=targets, adjoint_targets=adjoint_targets, root=cache, bar=bars)
     bars.close()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    write_text_atomic(out, json.dumps(result, indent=2) + "\n")
     click.echo(format_nams_table(result))
     click.echo(f"wrote {out}")
 
+
+@bench.command("reference")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+def bench_reference_command(out, targets, cache):
+    """E1/E2 of the roof-colour reference: how far the renders' roof colours (found with the roof labels)
+    agree with the swatch similarity that scores every method."""
+    from .reference import bench_reference, format_reference_table
+
+    bars = _Bars()
+    result = bench_reference(targets=targets, root=cache, bar=bars)
+    bars.close()
+    write_text_atomic(out, json.dumps(result, indent=2) + "\n")
+    click.echo(format_reference_table(result))
+    click.echo(f"wrote {out}")
 
 
 @bench.command("tradeoff")
@@ -522,7 +537,6 @@ def bench_nams_command(out, targets, adjoint_targets, cache):
 @_torch_threads
 def bench_tradeoff_command(out, plot, targets, adjoint_targets, presets, profiles, cache):
     """E1 accuracy against time for every knob that costs time, and the fast/balanced/paper profiles."""
-    from .fileio import write_text_atomic
     from .tradeoff import bench_tradeoff, format_tradeoff_table, get_profile, plot_tradeoff
 
     names = [p for p in profiles.split(",") if p]
@@ -547,8 +561,7 @@ def bench_farm_command(out, designs, tiles):
     from .farm.bench import bench_farm, format_farm_table
 
     result = bench_farm(designs=designs, tiles=tiles)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    write_text_atomic(out, json.dumps(result, indent=2) + "\n")
     click.echo(format_farm_table(result))
     click.echo(f"wrote {out}")
 
