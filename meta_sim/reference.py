@@ -52,8 +52,7 @@ def nearest(histogram: np.ndarray, references: dict[str, np.ndarray]) -> str | N
     if histogram.sum() == 0:
         return None
     target = histogram / histogram.sum()
-    best = max(references, key=lambda t: (np.minimum(references[t], target).sum(), t))
-    return best
+    return max(references, key=lambda t: (np.minimum(references[t], target).sum(), t))
 
 
 def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Path | None = None,
