@@ -27,9 +27,10 @@ import numpy as np
 
 from .evaluate import KIND_OF, mean_scores, rankings, render_targets, score
 from .imageio import linear_to_srgb
+from .meshes import FLAT_ROOF, SLOPED_ROOF
 from .textures import hsv_cone_histogram
 
-ROOF_CLASS_OF = {"flat": 1, "sloped": 2}  # meshes.FLAT_ROOF, meshes.SLOPED_ROOF (bpy-free here)
+ROOF_CLASS_OF = {"flat": FLAT_ROOF, "sloped": SLOPED_ROOF}
 
 
 def roof_histograms(paths) -> dict[str, np.ndarray]:
@@ -56,14 +57,15 @@ def nearest(histogram: np.ndarray, references: dict[str, np.ndarray]) -> str | N
 
 
 def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Path | None = None,
-                    bar=None) -> dict:
-    """E1 and E2 top-1/top-10 of the roof-colour reference on bench-nams' training set and targets."""
+                    bar=None, dataset=None) -> dict:
+    """E1 and E2 top-1/top-10 of the roof-colour reference on bench-nams' training set and targets
+    (``dataset``: another training set, a ``DatasetConfig``; its tile size and pixel size are the targets')."""
     from .dataset import DatasetConfig, render_training_set
     from .textures import ensure_default_bank, ensure_heldout_bank
     from .workflow import cache_root, dataset_dir
 
     root = Path(root or cache_root())
-    dataset = DatasetConfig()
+    dataset = dataset or DatasetConfig()
     folder = dataset_dir(dataset, root)
     jobs = render_training_set(folder, dataset, bar("render training set", dataset.designs * dataset.tiles)
                                if bar else None)

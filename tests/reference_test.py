@@ -3,6 +3,7 @@
 import numpy as np
 
 from meta_sim import tiles
+from meta_sim.design import DesignSpace
 from meta_sim.reference import nearest, roof_histograms
 from meta_sim.textures import hsv_cone_histogram
 
@@ -40,3 +41,22 @@ def test_nearest_picks_the_most_similar_colours_and_none_without_pixels(tmp_path
     target = roof_histograms([_tile(tmp_path / "t.exr", {"flat": (0.55, 0.06, 0.04), "sloped": (0.1, 0.1, 0.1)})])
     assert nearest(target["flat"], references) == "red"
     assert nearest(np.zeros(512), references) is None
+
+
+def test_bench_reference_on_a_small_rendered_training_set(bank, heldout_bank, tmp_path):
+    """The whole benchmark on real renders: a few designs at a quarter of the pixels."""
+    from meta_sim.dataset import DatasetConfig
+    from meta_sim.reference import bench_reference, format_reference_table
+    from meta_sim.render import sample_designs
+
+    dataset = DatasetConfig(designs=6, tiles=1, cities=1, tile_px=96, pixel_size_m=1.2)
+    result = bench_reference(targets=2, tiles=2, root=tmp_path, dataset=dataset)
+    designs = sample_designs(DesignSpace.load(), 6, dataset.seed)
+    # every texture of the training set with a roof of its kind in view has a reference histogram
+    for kind, param in (("flat", "flat_roof"), ("sloped", "sloped_roof")):
+        assert 1 <= result["bank_textures_seen"][kind] <= len({d[param] for d in designs})
+    for experiment in ("e1", "e2"):
+        row = result["experiments"][experiment]["roof_colour_reference"]
+        assert row["targets"] == 2
+        assert all(0.0 <= row[f"{kind}_top{n}"] <= 1.0 for kind in ("flat", "sloped") for n in (1, 10))
+    assert format_reference_table(result).count("\n") == 3
