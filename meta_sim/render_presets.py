@@ -35,11 +35,9 @@ class RenderPreset:
 
 
 # Workbench's studio light renders a surface at about a sixth of the linear brightness that the
-# path-traced presets' sun and sky give it: flat roofs came out at 0.49 x their texture's mean
-# display value (0.23 for roofs on average, where real roofs in ../shared/realdata average
-# 0.4-0.8), against 1.2 x in Cycles. Measured on the 600 x 2 training sets of both presets (same
-# designs, cities and tiles; 60 tiles, flat-roof pixels): balanced / fast median ratio 5.8 / 6.0 /
-# 6.9 for R / G / B (luminance 6.0). `tests/render_test.py` checks that the two presets' roofs agree.
+# path-traced presets' sun and sky give it. 6.0 is the median ratio of flat-roof brightness,
+# balanced over fast, on the two presets' 600 x 2 training sets (same designs, cities and tiles);
+# `tests/render_test.py` checks that the two presets' roofs agree within a third.
 FAST_EXPOSURE = 6.0
 
 
