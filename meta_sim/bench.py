@@ -99,7 +99,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
 
     from .dataset import DatasetConfig
     from .evaluate import EvalSettings, method_runs, prepare_eval, score_method
-    from .features import make_extractor, time_extractor
+    from .features import time_extractor
+    from .roofcolour import checkpoint_extractor
     from .nams import ARCHITECTURES, load_checkpoint
     from .workflow import ModelSettings, cache_root, ensure_models, train_models
 
@@ -109,6 +110,10 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     others = {name: load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, architecture=name),
                                                   root, bar).nams_path, "nams")
               for name in ARCHITECTURES if name != settings.architecture}
+    # The default without the roof-colour histograms: its features are the default's leading part.
+    plain = load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, roof_colour=False),
+                                          root, bar).nams_path, "nams")
+    others["no_roof_colour"] = plain
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
               "architecture": settings.architecture,
               "train_seconds_other_architectures": {name: round(ckpt.extra["seconds"], 1)
@@ -130,7 +135,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
             rows[name], _ = score_method(few, run)
             rows[name]["targets"] = len(few.jobs)
         for architecture, ckpt in others.items():  # same targets and features
-            other = dataclasses.replace(ctx, nams=ckpt)
+            dim = ckpt.feature_norm.mean.shape[0] + ckpt.feature_norm.hist_dim
+            other = dataclasses.replace(ctx, nams=ckpt, features=ctx.features[:, :dim])
             name = f"nams_exhaustive_{architecture}"
             rows[name], _ = score_method(other, method_runs(other, seed, {})["nams_exhaustive"])
             rows[name]["targets"] = len(ctx.jobs)
@@ -142,7 +148,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
                     for k in ("flat_top1", "sloped_top1"))]
     fastest = min(keeps, key=lambda si: experiments["e1"][f"nams_adjoint_M{si[0]}_it{si[1]}"]["seconds_per_target"])
     result["fastest_adjoint_keeping_e1"] = {"M": fastest[0], "iterations": fastest[1]}
-    result["feature_seconds_per_group"] = round(time_extractor(make_extractor(), dataset.tile_px, 9, 8), 4)
+    extractor = checkpoint_extractor(load_checkpoint(ensure_models(dataset, settings, root).nams_path, "nams"))
+    result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, 9, 8), 4)
     with tempfile.TemporaryDirectory() as out:
         from .workflow import prepare_features
 
@@ -167,7 +174,8 @@ def format_nams_table(result: dict) -> str:
     lines += ["", f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
               f"({result['dataset']['preset']}); target groups of {result.get('tiles_per_target', 4)} tiles "
               f"in unseen cities. "
-              f"NAMS architecture {result.get('architecture', 'paper')} (rows nams_exhaustive_NAME: the others). "
+              f"NAMS architecture {result.get('architecture', 'paper')} (rows nams_exhaustive_NAME: the other "
+              f"architectures; nams_exhaustive_no_roof_colour: the default without the roof-colour histograms). "
               f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
               + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
                         for name, s in result.get("train_seconds_other_architectures", {}).items()) + ". "

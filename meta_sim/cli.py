@@ -214,6 +214,9 @@ def _dataset_options(command):
         click.option("--hidden", default=None,
                      help="hidden layer sizes of each network, e.g. 1024,2048 (default: the architecture's, "
                           "1024,2048 for paper, 512,1024 for the factorised ones)"),
+        click.option("--roof-colour/--no-roof-colour", default=True, show_default=True,
+                     help="add colour histograms of the likely roof pixels to the features (counted on the "
+                          "training tiles' labels; see `make bench-nams` for what they change)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):
@@ -244,7 +247,8 @@ def _configs(o):
             raise MetaSimError("--hidden takes comma-separated integers, e.g. 1024,2048") from None
     train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] else {}
     return dataset, ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
-                                  views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"])
+                                  views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
+                                  roof_colour=o["roof_colour"])
 
 
 @main.command("dataset")

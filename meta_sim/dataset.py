@@ -70,6 +70,10 @@ class FeatureSet:
     space: DesignSpace
     extractor_id: str
     views: int
+    # With roof colour (roofcolour.RoofColourExtractor): the widths of the features' trailing
+    # histograms, and the likelihood they were weighted by (its to_dict()), for the checkpoint.
+    hist_blocks: tuple[int, ...] = ()
+    roof_likelihood: dict | None = None
 
 
 class TileFeatures(NamedTuple):
@@ -99,6 +103,12 @@ def job_tiles(tile_dir: Path, name: str, n_tiles: int) -> list[Path]:
     return [Path(tile_dir) / f"{name}_t{j:02d}.exr" for j in range(n_tiles)]
 
 
+def training_tiles(root: Path, config: DatasetConfig) -> list[Path]:
+    """Every tile of a rendered training set, in design order."""
+    _, _, names = _training_designs(config)
+    return [p for name in names for p in _existing_tiles(Path(root), name, config.tiles)]
+
+
 def group_features_of_paths(paths: list[Path], extractor, views: int) -> torch.Tensor:
     """One feature vector for a group of image files: all tiles x views averaged."""
     from .features import group_feature
@@ -122,8 +132,11 @@ def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
                 progress(1)
         rows.append(cached[name])
     _save_cache(cache_path, cached, extractor.id, views, space)
+    likelihood = getattr(extractor, "likelihood", None)
     return FeatureSet(names=names, designs=designs, encoded=_encode(space, designs),
-                      features=torch.stack(rows).float(), space=space, extractor_id=extractor.id, views=views)
+                      features=torch.stack(rows).float(), space=space, extractor_id=extractor.id, views=views,
+                      hist_blocks=tuple(getattr(extractor, "hist_blocks", ())),
+                      roof_likelihood=likelihood.to_dict() if likelihood is not None else None)
 
 
 def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int = 8,

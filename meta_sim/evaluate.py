@@ -200,10 +200,11 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     import time
 
     from .dataset import job_tiles
-    from .features import features_for_groups, make_extractor
+    from .features import features_for_groups
     from .imageio import read_image
     from .nams import load_checkpoint
     from .render import sample_designs
+    from .roofcolour import checkpoint_extractor
     from .textures import ensure_default_bank, ensure_heldout_bank
     from .workflow import ensure_models
 
@@ -212,8 +213,7 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     tiles = settings.tiles
     jobs, folder = render_targets(experiment, settings.targets, tiles, settings.seed,
                                   settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bar)
-    extractor = make_extractor(models_settings.extractor,
-                               Path(models_settings.weights) if models_settings.weights else None)
+    extractor = checkpoint_extractor(nams, Path(models_settings.weights) if models_settings.weights else None)
     started = time.perf_counter()
     # Every tile x view weighs the same in a group's mean, so the mean of the tiles' features is the group's.
     singles = [[read_image(p)] for job in jobs for p in job_tiles(folder, job.name, tiles)]

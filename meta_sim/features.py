@@ -195,9 +195,11 @@ def _cone_axes(rgb: torch.Tensor, bins: int, chroma_power: float) -> list[tuple]
             (value, 0.0, 1.0, bins)]
 
 
-def _soft_histogram(axes: list[tuple]) -> torch.Tensor:
+def _soft_histogram(axes: list[tuple], weights: torch.Tensor | None = None) -> torch.Tensor:
     """Joint soft histogram (N, prod(bins)), summing to 1 per image, of per-pixel values.
 
+    With ``weights`` (N, ...) (one per pixel) each pixel counts its weight:
+    the histogram then sums to the image's mean weight.
     ``axes`` holds ``(values (N, ...), lo, hi, bins)``; each value is shared
     linearly between its two nearest bin centres, so each pixel adds
     2^len(axes) weighted entries, one ``bincount`` per corner of its cell
@@ -206,7 +208,7 @@ def _soft_histogram(axes: list[tuple]) -> torch.Tensor:
     """
     n = axes[0][0].shape[0]
     base, total = 0, 1  # each pixel's lowest corner bin, and the number of bins
-    corners = [(0, None)]  # (flat offset from base, weight) of every corner
+    corners = [(0, None if weights is None else weights.reshape(n, -1))]  # (flat offset from base, weight)
     for values, lo, hi, bins in axes:
         t = ((values.reshape(n, -1) - lo) * (bins / (hi - lo)) - 0.5).clamp_(0.0, bins - 1.0)
         low = t.floor().clamp_(max=bins - 2)

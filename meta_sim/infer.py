@@ -62,17 +62,14 @@ def group_tiles(tiles: list, group_size: int) -> list[list]:
 
 def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: InferSettings = InferSettings(),
           progress: Callable[[str, int], Callable[[int], None]] | None = None) -> dict:
-    from .features import features_for_groups, make_extractor
+    from .features import features_for_groups
     from .imageio import list_images, load_targets
     from .nams import load_checkpoint, search
+    from .roofcolour import checkpoint_extractor
 
     started = time.perf_counter()
     ckpt = load_checkpoint(checkpoint_path, "nams")
-    spec = ckpt.extra.get("extractor_spec", "colour-texture")
-    extractor = make_extractor(spec, Path(settings.weights) if settings.weights else None)
-    if extractor.id != ckpt.extractor_id:
-        raise MetaSimError(f"the model was trained on features {ckpt.extractor_id!r} but {spec!r} gives "
-                           f"{extractor.id!r}; pass the same backbone weights (--weights)")
+    extractor = checkpoint_extractor(ckpt, Path(settings.weights) if settings.weights else None)
     paths, skipped = list_images(target_dir)
     tile_px = int(ckpt.extra.get("tile_px", 384))
     render_gsd = float(ckpt.extra.get("pixel_size_m", 0.3))

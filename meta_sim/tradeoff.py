@@ -105,8 +105,9 @@ class _Experiment:
 
     def __init__(self, dataset: DatasetConfig, views: int, targets: int, seed: int, root: Path,
                  render_bench: Path, bar=None):
-        from .features import features_for_groups, make_extractor
+        from .features import features_for_groups
         from .imageio import read_image
+        from .roofcolour import checkpoint_extractor
         from .dataset import job_tiles
         from .evaluate import rankings, render_targets
         from .nams import load_checkpoint
@@ -122,7 +123,7 @@ class _Experiment:
         self.nams = load_checkpoint(models.nams_path, "nams")
         self.jobs, folder = render_targets("e1", targets, max(GROUP_TILES), seed, dataset.preset, root,
                                            dataset.tile_px, dataset.pixel_size_m, bar)
-        extractor = make_extractor()
+        extractor = checkpoint_extractor(self.nams)
         tiles = [[read_image(p)] for job in self.jobs for p in job_tiles(folder, job.name, max(GROUP_TILES))]
         started = time.perf_counter()
         self.tile_features = features_for_groups(tiles, extractor, 1).reshape(len(self.jobs), max(GROUP_TILES), -1)

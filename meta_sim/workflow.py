@@ -35,6 +35,8 @@ class ModelSettings:
     nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
     train: dict = field(default_factory=dict)  # TrainConfig overrides
     seed: int = 0
+    # Add the roof-colour histograms to the features (meta_sim.roofcolour); needs the tiles' labels.
+    roof_colour: bool = True
 
     def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
         """Names the cached models: every input, with the training and model defaults resolved, so
@@ -45,7 +47,7 @@ class ModelSettings:
         nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, "hidden": hidden, **self.nams}).to_dict()
         # The architecture names blocks and predictor (filled in from the design space when training);
         # keys without them stay those of the models cached before architectures existed.
-        for name in ("blocks", "predictor"):
+        for name in ("blocks", "predictor", "colour_dims"):
             if name not in self.nams:
                 del nams[name]
         train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
@@ -53,6 +55,10 @@ class ModelSettings:
                   "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION}
         if self.architecture != "paper":  # models cached before the choice existed are the paper's
             inputs["architecture"] = self.architecture
+        if self.roof_colour:  # models without it keep the keys they had before it existed
+            from .roofcolour import VERSION
+
+            inputs["roof_colour"] = VERSION
         blob = json.dumps(inputs, sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:12]
 
@@ -87,6 +93,13 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
     seconds["render"] = time.perf_counter() - started
     extractor = make_extractor(settings.extractor, Path(settings.weights) if settings.weights else None)
     started = time.perf_counter()
+    if settings.roof_colour:
+        from .dataset import training_tiles
+        from .roofcolour import RoofColourExtractor, ensure_likelihood
+
+        paths = training_tiles(folder, config)
+        likelihood = ensure_likelihood(folder, paths, bar("roof colours", len(paths)) if bar else None)
+        extractor = RoofColourExtractor(extractor, likelihood)
     features = build_features(folder, config, extractor, settings.views,
                               bar("features", config.designs) if bar else None)
     seconds["features"] = time.perf_counter() - started
@@ -113,15 +126,15 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
         update = bar(f"train {kind}", train_config.max_epochs) if bar else None
         started = time.perf_counter()
         fit = trainer(features.encoded, features.features, config, trainer_config,
-                      (lambda report: update(1)) if update else None)
+                      (lambda report: update(1)) if update else None, features.hist_blocks)
         seconds[f"train_{kind}"] = time.perf_counter() - started
+        extra = {"designs": len(features.names), "views": features.views,
+                 "extractor_spec": settings.extractor, "seconds": seconds[f"train_{kind}"],
+                 "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m, "dataset": asdict(dataset)}
+        if features.roof_likelihood is not None:
+            extra["roof_likelihood"] = features.roof_likelihood
         save_checkpoint(out_dir / f"{kind}.pt", kind, fit.model, fit.model.config, features.space.to_dict(),
-                        fit.norm, features.extractor_id,
-                        extra={"designs": len(features.names), "views": features.views,
-                               "extractor_spec": settings.extractor, "seconds": seconds[f"train_{kind}"],
-                               "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m,
-                               "dataset": asdict(dataset)},
-                        history=fit.history)
+                        fit.norm, features.extractor_id, extra=extra, history=fit.history)
     return seconds
 
 

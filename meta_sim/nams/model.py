@@ -153,9 +153,14 @@ class NAMSConfig:
     # parameter's slice of z, "both" adds the two.
     blocks: tuple[int, ...] = ()
     predictor: str = "joint"
+    # The last ``colour_dims`` features are roof-colour histograms (FeatureNorm's histogram blocks):
+    # the search takes the geometric mean of their error and the other features' (nams.search).
+    colour_dims: int = 0
 
     def __post_init__(self):
         _check_sizes(self, ("design_dim", "feature_dim", "z_dim"))
+        if not 0 <= int(self.colour_dims) < self.feature_dim:
+            raise MetaSimError(f"colour_dims must be in [0, feature_dim), not {self.colour_dims}")
         object.__setattr__(self, "blocks", tuple(int(b) for b in self.blocks))
         if self.predictor not in PREDICTORS:
             raise MetaSimError(f"predictor must be one of {', '.join(PREDICTORS)}, not {self.predictor!r}")

@@ -103,6 +103,35 @@ def _check_common(S: int, r: float) -> None:
         raise MetaSimError(f"r (rejection rate) must be in [0, 1], not {r}")
 
 
+# --- the objective ------------------------------------------------------------------------------
+# Keeps the geometric mean's gradient finite where both errors are 0 (a target P predicts exactly).
+GEOMETRIC_MEAN_FLOOR = 1e-30
+
+
+def _block_mse(squares: torch.Tensor, colour_dims: int) -> tuple[torch.Tensor, ...]:
+    """Mean squared error over the features before the colour histograms, and over those (if any)."""
+    if not colour_dims:
+        return (squares.mean(dim=-1),)
+    return squares[..., :-colour_dims].mean(dim=-1), squares[..., -colour_dims:].mean(dim=-1)
+
+
+def _combined(*mses: torch.Tensor) -> torch.Tensor:
+    """The search's loss from the blocks' errors: the one error, or the geometric mean of two.
+
+    A product does not depend on either block's units, so it needs no
+    weight between them, and a far-off target (a texture the bank lacks),
+    whose whitened error is huge for every design, is still ranked by its
+    roof colours in proportion. Chosen with a linear stand-in for P on the
+    default training set, on a validation that needs no held-out textures
+    (E1 targets with their own texture barred from the answer, the HSV
+    top-10 of the others credited): the product did as well as the best of
+    the weighted sums tried.
+    """
+    if len(mses) == 1:
+        return mses[0]
+    return (mses[0] * mses[1] + GEOMETRIC_MEAN_FLOOR).sqrt()
+
+
 # --- voting --------------------------------------------------------------------------------------
 def _vote(space: DesignSpace, vectors: torch.Tensor) -> list[tuple[dict, dict]]:
     """Majority vote over ranked design vectors (T, S, dim), best first, per parameter.
@@ -192,6 +221,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
                           for m in (model.predictor, model.decoder))
     mean, std = model.z_mean.detach().float(), model.z_std.detach().float()
     feature_scale = model.feature_scale.detach().float()
+    colour_dims = model.config.colour_dims
     half_width = k * std
     # All starts are drawn up front, so grouping targets below cannot change them.
     starts = mean + (2 * torch.rand((len(targets), M, model.config.z_dim), generator=generator) - 1) * half_width
@@ -211,7 +241,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
 
         def objective(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
             pred = predictor(z.to(dtype)).float() / feature_scale * inv_scale[:, :, None]
-            mse_scaled = (pred - target_scaled).square().mean(dim=-1)
+            mse_scaled = _combined(*_block_mse((pred - target_scaled).square(), colour_dims))
             boundary = torch.relu((z - mean).abs() - half_width).sum(dim=-1)
             return mse_scaled, boundary
 
@@ -244,7 +274,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
 # --- exhaustive ----------------------------------------------------------------------------------
 class DesignTable(NamedTuple):
     """Every design of a space, encoded, with P(mu(E(d))) in units of the model's ``feature_scale``
-    and its squared norms (float64)."""
+    and its squared norms (float64; (n, 2): the features before the colour histograms, and those)."""
 
     designs: torch.Tensor
     features: torch.Tensor
@@ -291,7 +321,9 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
                               for i in range(0, n, batch)]) / model.feature_scale
     if not torch.isfinite(features).all():
         raise MetaSimError("the model predicts NaN/Inf features for some designs; the checkpoint is unusable")
-    table = DesignTable(designs, features, features.double().square().sum(dim=1))
+    lead = model.config.feature_dim - model.config.colour_dims
+    squares = features.double().square()
+    table = DesignTable(designs, features, torch.stack([squares[:, :lead].sum(dim=1), squares[:, lead:].sum(dim=1)], 1))
     if was_training:
         model.train()
     else:
@@ -313,11 +345,17 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
         raise MetaSimError(f"top must be at least 1, not {top}")
     table = design_table(model, space)
     targets = _targets(targets, model.config.feature_dim).double() / model.feature_scale.double()
-    n, feature_dim = table.features.shape
-    sq_targets = targets.square().sum(dim=1, keepdim=True)
-    losses = torch.cat([
-        (sq_targets - 2 * targets @ table.features[i:i + batch].double().T + table.sq_norms[i:i + batch])
-        for i in range(0, n, batch)], dim=1).clamp_min(0.0) / feature_dim
+    n = len(table.designs)
+    lead = model.config.feature_dim - model.config.colour_dims
+    blocks = [slice(0, lead)] + ([slice(lead, None)] if model.config.colour_dims else [])
+    sq_targets = [targets[:, b].square().sum(dim=1, keepdim=True) for b in blocks]
+
+    def block_mses(rows: slice) -> list[torch.Tensor]:
+        features = table.features[rows].double()
+        return [(sq - 2 * targets[:, b] @ features[:, b].T + table.sq_norms[rows, j]).clamp_min(0.0)
+                / features[:, b].shape[1] for j, (b, sq) in enumerate(zip(blocks, sq_targets))]
+
+    losses = torch.cat([_combined(*block_mses(slice(i, i + batch))) for i in range(0, n, batch)], dim=1)
     keep = min(max(S, top), n)
     kept_loss, kept = torch.topk(losses, keep, dim=1, largest=False, sorted=True)
     s = min(S, n)

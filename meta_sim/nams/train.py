@@ -139,16 +139,45 @@ class FeatureNorm:
     independent E1 targets (exhaustive, 100 groups of 9 tiles): E1 top-1
     0.84/0.43 whitened by the total spread, 0.79/0.50 by the noise; E2 top-10
     0.60/0.56 and 0.80/0.60.
+
+    Histogram blocks (``hist_blocks``, the widths of the features' trailing
+    histograms, e.g. ``roofcolour.RoofColourExtractor``'s two roof-colour
+    histograms) are neither standardised nor whitened: each is made to sum
+    to 1 and square-rooted (its Euclidean distances are then Hellinger
+    distances), and all are multiplied by one ``hist_scale`` that gives them
+    the same total variance over the training rows as the leading part. A
+    colour the training set never showed is then as far from every bank
+    texture as its histogram says, where whitening would keep only the
+    directions the training set varies in.
     """
 
     mean: torch.Tensor
     std: torch.Tensor
     components: torch.Tensor | None = None  # (k, dim): standardised features -> whitened components
     noise_whitened: bool = False
+    hist_blocks: tuple[int, ...] = ()
+    hist_scale: float = 1.0
 
     @classmethod
     def fit(cls, features: torch.Tensor, eps: float = 1e-6, whiten: int = 0,
-            designs: torch.Tensor | None = None, shrink: float = 0.03) -> "FeatureNorm":
+            designs: torch.Tensor | None = None, shrink: float = 0.03,
+            hist_blocks: tuple[int, ...] = ()) -> "FeatureNorm":
+        hist_blocks = tuple(int(b) for b in hist_blocks)
+        lead = features.shape[1] - sum(hist_blocks)
+        if min(hist_blocks, default=1) < 1 or lead < 1:
+            raise MetaSimError(f"histogram blocks {list(hist_blocks)} do not fit {features.shape[1]} features")
+        norm = cls._fit_lead(features[:, :lead], eps, whiten, designs, shrink)
+        if not hist_blocks:
+            return norm
+        lead_spread = norm.apply(features[:, :lead]).double().var(dim=0, unbiased=False).sum()
+        hists = _sqrt_histograms(features[:, lead:], hist_blocks).double()
+        hist_spread = hists.var(dim=0, unbiased=False).sum()
+        scale = float((lead_spread / hist_spread).sqrt()) if hist_spread > 0 and lead_spread > 0 else 1.0
+        return dataclasses.replace(norm, hist_blocks=hist_blocks, hist_scale=scale)
+
+    @classmethod
+    def _fit_lead(cls, features: torch.Tensor, eps: float, whiten: int, designs: torch.Tensor | None,
+                  shrink: float) -> "FeatureNorm":
         x = features.double()
         mean = x.mean(dim=0)
         std = x.std(dim=0, unbiased=False).clamp_min(eps)
@@ -172,23 +201,36 @@ class FeatureNorm:
         return cls(mean.float(), std.float(), components)
 
     @property
+    def hist_dim(self) -> int:
+        """How many of ``apply``'s values (the last ones) are histogram bins."""
+        return sum(self.hist_blocks)
+
+    @property
     def dim(self) -> int:
         """How many values ``apply`` returns per feature vector."""
-        return self.mean.shape[0] if self.components is None else self.components.shape[0]
+        return (self.mean.shape[0] if self.components is None else self.components.shape[0]) + self.hist_dim
 
     def apply(self, features: torch.Tensor) -> torch.Tensor:
         features = torch.as_tensor(features, dtype=torch.float32)
-        if features.shape[-1] != self.mean.shape[0]:
+        lead = self.mean.shape[0]
+        if features.shape[-1] != lead + self.hist_dim:
             raise MetaSimError(f"features have {features.shape[-1]} dimensions; this model was trained "
-                               f"on {self.mean.shape[0]} (was another feature extractor used?)")
-        standardised = (features - self.mean) / self.std
-        return standardised if self.components is None else standardised @ self.components.T
+                               f"on {lead + self.hist_dim} (was another feature extractor used?)")
+        standardised = (features[..., :lead] - self.mean) / self.std
+        out = standardised if self.components is None else standardised @ self.components.T
+        if not self.hist_blocks:
+            return out
+        hists = _sqrt_histograms(features[..., lead:], self.hist_blocks) * self.hist_scale
+        return torch.cat([out, hists], dim=-1)
 
     def to_dict(self) -> dict:
         out = {"mean": self.mean.clone(), "std": self.std.clone()}
         if self.components is not None:
             out["components"] = self.components.clone()
             out["noise_whitened"] = self.noise_whitened
+        if self.hist_blocks:
+            out["hist_blocks"] = list(self.hist_blocks)
+            out["hist_scale"] = self.hist_scale
         return out
 
     @classmethod
@@ -208,7 +250,23 @@ class FeatureNorm:
         if components is not None and (components.ndim != 2 or components.shape[1] != mean.shape[0]
                                        or not torch.isfinite(components).all()):
             raise MetaSimError("feature normalisation: the whitening components do not fit the features")
-        return cls(mean, std, components, bool(data.get("noise_whitened", False)))
+        hist_blocks = tuple(int(b) for b in data.get("hist_blocks", ()))
+        hist_scale = float(data.get("hist_scale", 1.0))
+        if min(hist_blocks, default=1) < 1 or not (math.isfinite(hist_scale) and hist_scale > 0):
+            raise MetaSimError("feature normalisation: the histogram blocks or their scale are invalid")
+        return cls(mean, std, components, bool(data.get("noise_whitened", False)), hist_blocks, hist_scale)
+
+
+# The smallest histogram total that is normalised; below it (no pixel counted) a histogram reads all 0.
+HIST_TOTAL_MIN = 1e-12
+
+
+def _sqrt_histograms(counts: torch.Tensor, blocks: tuple[int, ...]) -> torch.Tensor:
+    """Each block of ``counts`` (..., sum(blocks)) made to sum to 1 and square-rooted (non-finite -> 0)."""
+    counts = torch.nan_to_num(counts.float(), nan=0.0, posinf=0.0, neginf=0.0).clamp_min(0.0)
+    parts = [part / part.sum(dim=-1, keepdim=True).clamp_min(HIST_TOTAL_MIN)
+             for part in counts.split(list(blocks), dim=-1)]
+    return torch.cat(parts, dim=-1).sqrt()
 
 
 # A ridge just big enough to make the one-hot blocks and the intercept (collinear) solvable; a larger
@@ -267,19 +325,24 @@ Progress = Callable[[EpochReport], None]
 
 
 def train_nams(designs: torch.Tensor, features: torch.Tensor, model_config: NAMSConfig | None = None,
-               config: TrainConfig = TrainConfig(), progress: Progress | None = None) -> Fit:
-    """Train E, D and P; store the spread of the training embeddings for the search."""
+               config: TrainConfig = TrainConfig(), progress: Progress | None = None,
+               hist_blocks: tuple[int, ...] = ()) -> Fit:
+    """Train E, D and P; store the spread of the training embeddings for the search.
+
+    ``hist_blocks``: the widths of the features' trailing histograms (see FeatureNorm); the search
+    compares them apart from the rest (``NAMSConfig.colour_dims``)."""
     designs, features, dropped = _clean(designs, features)
     model_config = model_config or NAMSConfig(design_dim=designs.shape[1], feature_dim=features.shape[1])
-    return _fit("nams", model_config, designs, features, config, progress, dropped)
+    return _fit("nams", model_config, designs, features, config, progress, dropped, hist_blocks)
 
 
 def train_dr(designs: torch.Tensor, features: torch.Tensor, model_config: DRConfig | None = None,
-             config: TrainConfig = TrainConfig(), progress: Progress | None = None) -> Fit:
+             config: TrainConfig = TrainConfig(), progress: Progress | None = None,
+             hist_blocks: tuple[int, ...] = ()) -> Fit:
     """Train the direct-regression baseline: normalised features -> design vector, MSE."""
     designs, features, dropped = _clean(designs, features)
     model_config = model_config or DRConfig(feature_dim=features.shape[1], design_dim=designs.shape[1])
-    return _fit("dr", model_config, designs, features, config, progress, dropped)
+    return _fit("dr", model_config, designs, features, config, progress, dropped, hist_blocks)
 
 
 def _clean(designs, features) -> tuple[torch.Tensor, torch.Tensor, int]:
@@ -310,14 +373,16 @@ def _split(n: int, val_fraction: float, generator: torch.Generator) -> tuple[tor
 
 
 def _fit(kind: str, model_config, designs: torch.Tensor, features: torch.Tensor, config: TrainConfig,
-         progress: Progress | None, dropped: int) -> Fit:
+         progress: Progress | None, dropped: int, hist_blocks: tuple[int, ...] = ()) -> Fit:
     started = time.perf_counter()
     generator = torch.Generator().manual_seed(config.seed)
     train_rows, val_rows = _split(len(designs), config.val_fraction, generator)
     norm = FeatureNorm.fit(features[train_rows], config.norm_eps, config.whiten,
-                           designs[train_rows] if config.whiten_noise else None, config.noise_shrink)
+                           designs[train_rows] if config.whiten_noise else None, config.noise_shrink, hist_blocks)
     # With whitening the networks see principal components, as many as the training set has.
     model_config = dataclasses.replace(model_config, feature_dim=norm.dim)
+    if kind == "nams":
+        model_config = dataclasses.replace(model_config, colour_dims=norm.hist_dim)
     features = norm.apply(features)
     d_train, x_train = designs[train_rows], features[train_rows]
     d_val, x_val = designs[val_rows], features[val_rows]
@@ -430,4 +495,8 @@ def _store_search_stats(model: NAMS, train_designs: torch.Tensor, designs: torch
     model.z_mean.copy_(mu.mean(dim=0))
     model.z_std.copy_(mu.std(dim=0, unbiased=False).clamp_min(Z_STD_MIN))
     error = model.predict(model.encode(designs)[0]) - features
-    model.feature_scale.copy_(error.square().mean(dim=0).sqrt().clamp_min(FEATURE_SCALE_MIN))
+    scale = error.square().mean(dim=0)
+    colour = model.config.colour_dims
+    if colour:  # one scale for the histograms: per-bin scales would weigh rare colours up (see FeatureNorm)
+        scale[-colour:] = scale[-colour:].mean()
+    model.feature_scale.copy_(scale.sqrt().clamp_min(FEATURE_SCALE_MIN))

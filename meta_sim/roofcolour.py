@@ -1,0 +1,181 @@
+"""Roof colour: the colours of the pixels that are likely roofs, found without labels at inference.
+
+Why. The default features describe whole tiles, and the search weighs them
+by the simulation noise (``nams.train.FeatureNorm``): what tells one bank
+texture from another in a render. A target roofed with a texture the bank
+lacks (E2) then goes to the bank texture of the most similar *structure*,
+whatever its colour, while the E2 score -- and an artist -- asks for the
+nearest colour. So NAMS also sees, per roof kind, a colour histogram of the
+pixels likely to be roofs of that kind, and the search compares those
+histograms by their plain distance, not whitened by the noise (see
+``FeatureNorm`` and ``nams.search``).
+
+* ``RoofLikelihood``: p(flat roof | colour) and p(sloped roof | colour) for
+  each of 16^3 sRGB bins of 2x2-pixel means, counted on the training tiles'
+  label passes: ``(n_kind + PRIOR x PRIOR_COUNT) / (n + PRIOR_COUNT)``. A
+  colour the training tiles never showed reads PRIOR for each kind (half
+  "some roof"): in a city whose ground, roads and trees come from a fixed
+  palette, an unseen colour is more likely a roof than not.
+* ``RoofColourExtractor``: another extractor's features followed by, per
+  roof kind, the soft histogram of the tile's 2x2-pixel means in
+  ``ColourTexture``'s stretched HSV cone (its 488 reachable bins), each
+  pixel weighted by that kind's likelihood, divided by the pixel count. The
+  mean over a group's tiles therefore pools their pixels; ``FeatureNorm``
+  makes each histogram sum to 1 and takes its square root.
+
+The likelihood belongs to the training set it was counted on; the
+checkpoint stores it, so inference needs no labels.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import torch
+
+from .errors import MetaSimError
+from .features import ColourTexture, _cone_axes, _half, _reachable_cone_bins, _soft_histogram
+
+VERSION = 1
+BINS = 16  # per sRGB channel
+PRIOR = 0.25  # per roof kind, for a colour without evidence
+PRIOR_COUNT = 10.0  # pixels' worth of evidence the prior is worth
+KINDS = ("flat", "sloped")
+LIKELIHOOD_FILE = f"roof-likelihood-v{VERSION}.pt"
+
+
+def _bin_index(level1: torch.Tensor) -> torch.Tensor:
+    """(N, H, W) index of each pixel's 16^3 sRGB bin; ``level1`` is (N, 3, H, W) in [0, 1]."""
+    q = (level1.clamp(0.0, 1.0) * BINS).long().clamp_(max=BINS - 1)
+    return (q[:, 0] * BINS + q[:, 1]) * BINS + q[:, 2]
+
+
+def _level1(batch: torch.Tensor) -> torch.Tensor:
+    """2x2-pixel means of an (N, C, H, W) batch (a last odd row or column is left out)."""
+    h, w = batch.shape[-2] - batch.shape[-2] % 2, batch.shape[-1] - batch.shape[-1] % 2
+    return _half(batch[..., :h, :w])
+
+
+class RoofLikelihood:
+    """p(roof kind | colour of a 2x2-pixel mean), per 16^3 sRGB bin and roof kind."""
+
+    def __init__(self, tables: torch.Tensor, pixels: int):
+        tables = torch.as_tensor(tables, dtype=torch.float32)
+        if tables.shape != (len(KINDS), BINS ** 3) or not torch.isfinite(tables).all():
+            raise MetaSimError(f"a roof likelihood holds ({len(KINDS)}, {BINS ** 3}) finite probabilities, "
+                               f"got {tuple(tables.shape)}")
+        self.tables = tables
+        self.pixels = int(pixels)
+        digest = hashlib.sha256(tables.numpy().tobytes()).hexdigest()[:12]
+        self.id = f"roof-colour-v{VERSION}[{BINS}^3,prior{PRIOR:g}x{PRIOR_COUNT:g}]-{digest}"
+
+    @classmethod
+    def from_counts(cls, counts: torch.Tensor) -> "RoofLikelihood":
+        """From (3, 16^3) pixel counts: all pixels, flat-roof pixels, sloped-roof pixels per bin."""
+        counts = counts.double()
+        tables = (counts[1:] + PRIOR * PRIOR_COUNT) / (counts[:1] + PRIOR_COUNT)
+        return cls(tables.float(), int(round(float(counts[0].sum()))))
+
+    @classmethod
+    def fit(cls, paths, progress: Callable[[int], None] | None = None) -> "RoofLikelihood":
+        """Counted on meta-sim EXR tiles (their RGB as ``read_image`` gives it, and their roof labels)."""
+        from .imageio import linear_to_srgb
+        from .meshes import FLAT_ROOF, SLOPED_ROOF
+        from .tiles import read_tile
+
+        counts = torch.zeros(3, BINS ** 3, dtype=torch.float64)
+        n = 0
+        for path in paths:
+            tile = read_tile(path)
+            rgb = torch.from_numpy(linear_to_srgb(tile.rgb).astype(np.float32)).permute(2, 0, 1)[None]
+            labels = torch.from_numpy(np.stack([tile.roof_class == FLAT_ROOF, tile.roof_class == SLOPED_ROOF])
+                                      .astype(np.float32))[None]
+            index = _bin_index(_level1(rgb)).flatten()
+            shares = _level1(labels)[0].flatten(1).double()  # each mean's share of flat / sloped pixels
+            counts[0] += torch.bincount(index, minlength=BINS ** 3).double()
+            for k in range(len(KINDS)):
+                counts[k + 1] += torch.bincount(index, shares[k], minlength=BINS ** 3)
+            n += 1
+            if progress:
+                progress(1)
+        if n == 0:
+            raise MetaSimError("no training tiles to count roof colours on")
+        return cls.from_counts(counts)
+
+    def weights(self, level1: torch.Tensor) -> torch.Tensor:
+        """(N, kinds, H, W) likelihood of each roof kind for each pixel of an (N, 3, H, W) batch."""
+        return self.tables[:, _bin_index(level1)].permute(1, 0, 2, 3)
+
+    def to_dict(self) -> dict:
+        return {"version": VERSION, "tables": self.tables.clone(), "pixels": self.pixels}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "RoofLikelihood":
+        if data.get("version") != VERSION:
+            raise MetaSimError(f"roof likelihood version {data.get('version')!r}; this meta-sim reads "
+                               f"version {VERSION} (train the model again)")
+        return cls(data["tables"], data["pixels"])
+
+
+def ensure_likelihood(folder: Path, tile_paths: list[Path],
+                      progress: Callable[[int], None] | None = None) -> RoofLikelihood:
+    """The likelihood of a training set, counted once and cached in its ``folder``."""
+    path = Path(folder) / LIKELIHOOD_FILE
+    if path.is_file():
+        try:
+            data = torch.load(path, weights_only=True)
+            if data.get("tiles") == len(tile_paths):
+                return RoofLikelihood.from_dict(data)
+        except Exception:  # a damaged or outdated cache is counted again, never trusted
+            pass
+    likelihood = RoofLikelihood.fit(tile_paths, progress)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    torch.save({**likelihood.to_dict(), "tiles": len(tile_paths)}, tmp)
+    os.replace(tmp, path)
+    return likelihood
+
+
+class RoofColourExtractor:
+    """``base``'s features, then per roof kind the likelihood-weighted colour histogram (488 bins each)."""
+
+    def __init__(self, base, likelihood: RoofLikelihood):
+        self.base, self.likelihood = base, likelihood
+        self._keep = _reachable_cone_bins(ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
+        self.hist_blocks = (int(self._keep.sum()),) * len(KINDS)
+        self.base_dim = base.dim
+        self.dim = base.dim + sum(self.hist_blocks)
+        self.id = f"{base.id}+{likelihood.id}"
+        # The histograms do not change under the dihedral views either.
+        self.dihedral_invariant = getattr(base, "dihedral_invariant", False)
+
+    @torch.no_grad()
+    def __call__(self, batch: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.base(batch), self.roof_histograms(batch)], dim=1)
+
+    def roof_histograms(self, batch: torch.Tensor) -> torch.Tensor:
+        parts = []
+        for chunk in batch.split(ColourTexture.CHUNK):
+            level1 = _level1(torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0))
+            axes = _cone_axes(level1, ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
+            weights = self.likelihood.weights(level1)
+            parts.append(torch.cat([_soft_histogram(axes, weights[:, k])[:, self._keep]
+                                    for k in range(len(KINDS))], dim=1))
+        return torch.cat(parts)
+
+
+def checkpoint_extractor(ckpt, weights: Path | None = None):
+    """The extractor a checkpoint's features came from: its base extractor, with the roof colour
+    part when the checkpoint has one. ``weights``: a backbone's weights file, when it needs one."""
+    from .features import make_extractor
+
+    extractor = make_extractor(ckpt.extra.get("extractor_spec", "colour-texture"), weights)
+    if "roof_likelihood" in ckpt.extra:
+        extractor = RoofColourExtractor(extractor, RoofLikelihood.from_dict(ckpt.extra["roof_likelihood"]))
+    if extractor.id != ckpt.extractor_id:
+        raise MetaSimError(f"the model was trained on features {ckpt.extractor_id!r} but its extractor now gives "
+                           f"{extractor.id!r}; pass the same backbone weights (--weights)")
+    return extractor
