@@ -20,6 +20,11 @@ designs that the next synthetic dataset is rendered from; it does not change
 the vote. ``SearchResult.searched_design`` keeps the search's answer and
 ``rejected`` says whether ``design`` was replaced.
 
+The loss is the mean squared error of the predicted features in units of
+the model's ``feature_scale``; a model whose features end in roof-colour
+histograms (``NAMSConfig.colour_dims``, see ``meta_sim.roofcolour``) takes
+the geometric mean of the error over those and over the rest (``_combined``).
+
 Targets must be normalised with the checkpoint's ``FeatureNorm``. Every
 result is finite, or the call raises MetaSimError.
 """
