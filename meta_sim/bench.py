@@ -98,7 +98,7 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     import torch
 
     from .dataset import DatasetConfig
-    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method
+    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
     from .features import time_extractor
     from .roofcolour import checkpoint_extractor
     from .nams import ARCHITECTURES, load_checkpoint
@@ -134,12 +134,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
             name = f"nams_adjoint_M{starts}_it{iterations}"
             rows[name], _ = score_method(few, run)
             rows[name]["targets"] = len(few.jobs)
-        for architecture, ckpt in others.items():  # same targets and features
-            dim = ckpt.feature_norm.mean.shape[0] + ckpt.feature_norm.hist_dim
-            other = dataclasses.replace(ctx, nams=ckpt, features=ctx.features[:, :dim])
-            name = f"nams_exhaustive_{architecture}"
-            rows[name], _ = score_method(other, method_runs(other, seed, {})["nams_exhaustive"])
-            rows[name]["targets"] = len(ctx.jobs)
+        for name, ckpt in others.items():  # same targets and features
+            rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
         experiments[experiment] = rows
     result["experiments"] = experiments
     paper = experiments["e1"]["nams_adjoint_M1000_it200"]

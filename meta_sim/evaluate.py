@@ -23,7 +23,7 @@ the truth itself.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -256,6 +256,24 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
         ctx.nams.model, normed, space, generator=generator, **adjoint_settings)]
     runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)]
     return runs
+
+
+def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> dict:
+    """Score another NAMS checkpoint with the exhaustive search on ``ctx``'s targets and features.
+
+    The checkpoint must use the same extractor as ``ctx``'s model or its
+    leading part (a model trained without the roof-colour histograms): the
+    features are cut to the dimensions it was trained on.
+    """
+    norm = checkpoint.feature_norm
+    dim = norm.mean.shape[0] + norm.hist_dim
+    if dim > ctx.features.shape[-1]:
+        raise MetaSimError(f"the checkpoint was trained on {dim} feature dimensions; these targets have "
+                           f"{ctx.features.shape[-1]}")
+    other = replace(ctx, nams=checkpoint, features=ctx.features[:, :dim],
+                    tile_features=ctx.tile_features[..., :dim], pool=None)
+    metrics, _ = score_method(other, method_runs(other, seed, {}, S)["nams_exhaustive"])
+    return {**metrics, "targets": len(ctx.jobs)}
 
 
 def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:

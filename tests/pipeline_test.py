@@ -188,3 +188,26 @@ def test_train_with_the_papers_architecture(evaluated, tiny_env, tmp_path):
     assert default.model.config.architecture == "additive" and default.model.config.blocks == (40, 44)
     bad = CliRunner().invoke(cli, ["train", "--out", str(tmp_path), "--architecture", "deep"])
     assert bad.exit_code != 0 and "deep" in bad.output
+
+
+def test_a_model_without_roof_colour_is_scored_on_the_defaults_features(evaluated, tiny_env, tmp_path):
+    """bench-nams' row nams_exhaustive_no_roof_colour: the default's targets, MS2 pool included, cut to
+    the features the model without the roof-colour histograms was trained on."""
+    from meta_sim.dataset import DatasetConfig
+    from meta_sim.evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
+    from meta_sim.nams import load_checkpoint
+    from meta_sim.workflow import ModelSettings
+
+    result = _cli("train", "--out", tmp_path, "--no-roof-colour", "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    plain = load_checkpoint(tmp_path / "nams.pt", "nams")
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    ctx = prepare_eval("e1", dataset, settings, EvalSettings(targets=3), tiny_env)
+    assert ctx.pool is not None and plain.feature_norm.hist_dim == 0 < ctx.nams.feature_norm.hist_dim
+    row = score_other_model(ctx, plain, seed=1)
+    assert row["targets"] == 3 and 0.0 <= row["flat_top1"] <= row["flat_top10"] <= 1.0
+    # The default model through the same function scores as its own exhaustive run.
+    same = score_other_model(ctx, ctx.nams, seed=1)
+    own, _ = score_method(ctx, method_runs(ctx, 1, {})["nams_exhaustive"])
+    assert {k: same[k] for k in ("flat_top1", "sloped_top10")} == {k: own[k] for k in ("flat_top1", "sloped_top10")}
