@@ -217,6 +217,10 @@ def _dataset_options(command):
         click.option("--roof-colour/--no-roof-colour", default=True, show_default=True,
                      help="add colour histograms of the likely roof pixels to the features (counted on the "
                           "training tiles' labels; see `make bench-nams` for what they change)"),
+        click.option("--roof-finder", type=click.Choice(["segmenter", "colour"]), default="segmenter",
+                     show_default=True,
+                     help="what finds the roofs whose colours are counted: a small net learnt on the training "
+                          "tiles' labels (segmenter) or a pixel's colour alone (colour)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):
@@ -248,7 +252,7 @@ def _configs(o):
     train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] else {}
     return dataset, ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
                                   views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
-                                  roof_colour=o["roof_colour"])
+                                  roof_colour=o["roof_colour"], roof_finder=o["roof_finder"])
 
 
 @main.command("dataset")

@@ -71,7 +71,7 @@ class FeatureSet:
     extractor_id: str
     views: int
     # With roof colour (roofcolour.RoofColourExtractor): the widths of the features' trailing
-    # histograms, and the likelihood they were weighted by (its to_dict()), for the checkpoint.
+    # histograms, and the roof finder they were weighted by (its to_dict()), for the checkpoint.
     hist_blocks: tuple[int, ...] = ()
     roof_likelihood: dict | None = None
 
@@ -132,11 +132,11 @@ def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
                 progress(1)
         rows.append(cached[name])
     _save_cache(cache_path, cached, extractor.id, views, space)
-    likelihood = getattr(extractor, "likelihood", None)
+    finder = getattr(extractor, "finder", None)
     return FeatureSet(names=names, designs=designs, encoded=_encode(space, designs),
                       features=torch.stack(rows).float(), space=space, extractor_id=extractor.id, views=views,
                       hist_blocks=tuple(getattr(extractor, "hist_blocks", ())),
-                      roof_likelihood=likelihood.to_dict() if likelihood is not None else None)
+                      roof_likelihood=finder.to_dict() if finder is not None else None)
 
 
 def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int = 8,

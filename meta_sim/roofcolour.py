@@ -10,6 +10,11 @@ pixels likely to be roofs of that kind, and the search compares those
 histograms by their plain distance, not whitened by the noise (see
 ``FeatureNorm`` and ``nams.search``).
 
+* The roof finder gives each pixel a probability of being a flat and a
+  sloped roof. By default ``roofsegment.RoofSegmenter``, a small net learnt
+  on the training tiles' labels that sees roofs by shape and shading;
+  ``make bench-nams`` (row ``nams_exhaustive_colour_roof_finder``) measures
+  it against the colour-only finder below.
 * ``RoofLikelihood``: p(flat roof | colour) and p(sloped roof | colour) for
   each of 16^3 sRGB bins of 2x2-pixel means, counted on the training tiles'
   label passes: ``(n_kind + PRIOR x PRIOR_COUNT) / (n + PRIOR_COUNT)``. A
@@ -19,12 +24,12 @@ histograms by their plain distance, not whitened by the noise (see
 * ``RoofColourExtractor``: another extractor's features followed by, per
   roof kind, the soft histogram of the tile's 2x2-pixel means in
   ``ColourTexture``'s stretched HSV cone (its 488 reachable bins), each
-  pixel weighted by that kind's likelihood, divided by the pixel count. The
+  pixel weighted by the finder's probability of that kind, divided by the pixel count. The
   mean over a group's tiles therefore pools their pixels; ``FeatureNorm``
   makes each histogram sum to 1 and takes its square root.
 
-The likelihood belongs to the training set it was counted on; the
-checkpoint stores it, so inference needs no labels.
+The finder belongs to the training set it was learnt on; the checkpoint
+stores it, so inference needs no labels.
 """
 
 from __future__ import annotations
@@ -121,34 +126,53 @@ class RoofLikelihood:
         return cls(data["tables"], data["pixels"])
 
 
-def ensure_likelihood(folder: Path, tile_paths: list[Path],
-                      progress: Callable[[int], None] | None = None) -> RoofLikelihood:
-    """The likelihood of a training set, counted once and cached in its ``folder``."""
-    path = Path(folder) / LIKELIHOOD_FILE
+ROOF_FINDERS = ("segmenter", "colour")
+
+
+def roof_finder_from_dict(data: Mapping):
+    """A ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter`` from its ``to_dict()``."""
+    if data.get("kind") == "segmenter":
+        from .roofsegment import RoofSegmenter
+
+        return RoofSegmenter.from_dict(data)
+    return RoofLikelihood.from_dict(data)
+
+
+def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segmenter", seed: int = 0,
+                       progress: Callable[[int], None] | None = None):
+    """A training set's roof finder (``ROOF_FINDERS``: the segmenter, or the colour likelihood), learnt
+    once on its tiles and cached in its ``folder``. ``progress`` gets tiles counted or training steps."""
+    if finder not in ROOF_FINDERS:
+        raise MetaSimError(f"unknown roof finder {finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
+    from .roofsegment import RoofSegmenter, config_id
+
+    segmenter = finder == "segmenter"
+    path = Path(folder) / (f"roof-segmenter-{config_id()}-seed{seed}.pt" if segmenter else LIKELIHOOD_FILE)
     if path.is_file():
         try:
             data = torch.load(path, weights_only=True)
             if data.get("tiles") == len(tile_paths):
-                return RoofLikelihood.from_dict(data)
-        except Exception:  # a damaged or outdated cache is counted again, never trusted
+                return roof_finder_from_dict(data)
+        except Exception:  # a damaged or outdated cache is learnt again, never trusted
             pass
-    likelihood = RoofLikelihood.fit(tile_paths, progress)
+    found = RoofSegmenter.fit(tile_paths, seed, progress=progress) if segmenter else RoofLikelihood.fit(tile_paths, progress)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save({**likelihood.to_dict(), "tiles": len(tile_paths)}, tmp)
+    torch.save({**found.to_dict(), "tiles": len(tile_paths)}, tmp)
     os.replace(tmp, path)
-    return likelihood
+    return found
 
 
 class RoofColourExtractor:
-    """``base``'s features, then per roof kind the likelihood-weighted colour histogram (488 bins each)."""
+    """``base``'s features, then per roof kind the colour histogram (488 bins) of the pixels weighted by
+    ``finder``'s probability of that roof kind (a ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter``)."""
 
-    def __init__(self, base, likelihood: RoofLikelihood):
-        self.base, self.likelihood = base, likelihood
+    def __init__(self, base, finder):
+        self.base, self.finder = base, finder
         self._keep = _reachable_cone_bins(ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
         self.hist_blocks = (int(self._keep.sum()),) * len(KINDS)
         self.base_dim = base.dim
         self.dim = base.dim + sum(self.hist_blocks)
-        self.id = f"{base.id}+{likelihood.id}"
+        self.id = f"{base.id}+{finder.id}"
         # The histograms do not change under the dihedral views either.
         self.dihedral_invariant = getattr(base, "dihedral_invariant", False)
 
@@ -161,7 +185,7 @@ class RoofColourExtractor:
         for chunk in batch.split(ColourTexture.CHUNK):
             level1 = _level1(torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0))
             axes = _cone_axes(level1, ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
-            weights = self.likelihood.weights(level1)
+            weights = self.finder.weights(level1)
             parts.append(torch.cat([_soft_histogram(axes, weights[:, k])[:, self._keep]
                                     for k in range(len(KINDS))], dim=1))
         return torch.cat(parts)
@@ -174,7 +198,7 @@ def checkpoint_extractor(ckpt, weights: Path | None = None):
 
     extractor = make_extractor(ckpt.extra.get("extractor_spec", "colour-texture"), weights)
     if "roof_likelihood" in ckpt.extra:
-        extractor = RoofColourExtractor(extractor, RoofLikelihood.from_dict(ckpt.extra["roof_likelihood"]))
+        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(ckpt.extra["roof_likelihood"]))
     if extractor.id != ckpt.extractor_id:
         raise MetaSimError(f"the model was trained on features {ckpt.extractor_id!r} but its extractor now gives "
                            f"{extractor.id!r}; pass the same backbone weights (--weights)")

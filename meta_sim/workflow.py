@@ -37,6 +37,8 @@ class ModelSettings:
     seed: int = 0
     # Add the roof-colour histograms to the features (meta_sim.roofcolour); needs the tiles' labels.
     roof_colour: bool = True
+    # What finds the roofs they count: roofcolour.ROOF_FINDERS (the learnt segmenter, or colour alone).
+    roof_finder: str = "segmenter"
 
     def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
         """Names the cached models: every input, with the training and model defaults resolved, so
@@ -95,11 +97,17 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
     started = time.perf_counter()
     if settings.roof_colour:
         from .dataset import training_tiles
-        from .roofcolour import RoofColourExtractor, ensure_likelihood
+        from .roofcolour import RoofColourExtractor, ensure_roof_finder
 
         paths = training_tiles(folder, config)
-        likelihood = ensure_likelihood(folder, paths, bar("roof colours", len(paths)) if bar else None)
-        extractor = RoofColourExtractor(extractor, likelihood)
+        if settings.roof_finder == "segmenter":
+            from .roofsegment import STEPS
+
+            progress = bar("roof segmenter", STEPS) if bar else None
+        else:
+            progress = bar("roof colours", len(paths)) if bar else None
+        extractor = RoofColourExtractor(extractor, ensure_roof_finder(folder, paths, settings.roof_finder,
+                                                                      settings.seed, progress))
     features = build_features(folder, config, extractor, settings.views,
                               bar("features", config.designs) if bar else None)
     seconds["features"] = time.perf_counter() - started

@@ -13,7 +13,7 @@ from meta_sim.imageio import linear_to_srgb
 from meta_sim.nams import (FeatureNorm, NAMSConfig, TrainConfig, adjoint_search, design_table, exhaustive_search,
                            train_nams)
 from meta_sim.roofcolour import (BINS, PRIOR, RoofColourExtractor, RoofLikelihood, checkpoint_extractor,
-                                 ensure_likelihood)
+                                 ensure_roof_finder)
 from meta_sim.tiles import write_tile
 from toys import toy_space
 
@@ -50,7 +50,7 @@ def tiles(tmp_path_factory):
 
 
 def test_likelihood_is_counted_on_the_roof_labels(tiles, tmp_path):
-    likelihood = ensure_likelihood(tmp_path, tiles)
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
     flat, sloped = likelihood.tables
     red, blue, green = _bin(FLAT), _bin(SLOPED), _bin(GROUND)
     assert flat[red] > 0.9 and sloped[red] < 0.05
@@ -59,12 +59,12 @@ def test_likelihood_is_counted_on_the_roof_labels(tiles, tmp_path):
     assert flat[_bin((1.0, 1.0, 0.0))] == pytest.approx(PRIOR)  # a colour no tile showed
     assert likelihood.pixels == 3 * 16 * 16
     # Cached in the folder: the same tables, not counted again (the tiles may be gone).
-    again = ensure_likelihood(tmp_path, [tmp_path / "missing.exr"] * len(tiles))
+    again = ensure_roof_finder(tmp_path, [tmp_path / "missing.exr"] * len(tiles), "colour")
     assert again.id == likelihood.id and torch.equal(again.tables, likelihood.tables)
 
 
 def test_histograms_follow_the_likely_roofs(tiles, tmp_path):
-    extractor = RoofColourExtractor(ColourTexture(), ensure_likelihood(tmp_path, tiles))
+    extractor = RoofColourExtractor(ColourTexture(), ensure_roof_finder(tmp_path, tiles, "colour"))
     rgb, _ = _scene()
     batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
     out = extractor(batch)
@@ -183,7 +183,7 @@ def test_search_is_finite_at_the_extremes_with_colour(coloured):
 
 
 def test_checkpoint_extractor_needs_the_same_likelihood(tiles, tmp_path):
-    likelihood = ensure_likelihood(tmp_path, tiles)
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
 
     class Ckpt:
         extra = {"extractor_spec": "colour-texture", "roof_likelihood": likelihood.to_dict()}
