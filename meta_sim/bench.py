@@ -217,7 +217,10 @@ def stage_times(result: dict, render_bench: Path = Path("benchmarks/render.json"
         return []
     tiles = result["dataset"]["designs"] * result["dataset"]["tiles"]
     group = result["feature_seconds_per_group"] + result["experiments"]["e1"]["nams_exhaustive"]["seconds_per_target"]
+    segmenter = ([("learning the roof segmenter", result["roof_segmenter_seconds"], "-")]
+                 if "roof_segmenter_seconds" in result else [])
     return [(f"simulation: training set of {tiles} tiles", per_tile * tiles, "15,300 images, 1.6 s each"),
+            *segmenter,
             ("training NAMS", result["train_seconds"]["train_nams"], "13 h"),
             ("inference per target group of 9 tiles (features + exhaustive search)", group, "0.5 s per image"),
             ("inference per 5,000-image domain", group * 5000 / 9, "0.7 h")]

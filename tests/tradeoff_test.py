@@ -70,6 +70,10 @@ def test_stage_times_come_from_the_measured_parts(tmp_path):
     assert stages["training NAMS"] == 120.0
     assert stages["inference per target group of 9 tiles"] == pytest.approx(0.25)
     assert stages["inference per 5,000-image domain"] == pytest.approx(0.25 * 5000 / 9)
+    assert "learning the roof segmenter" not in stages
+    stages = dict((name, seconds) for name, seconds, _ in
+                  stage_times({**result, "roof_segmenter_seconds": 300.0}, render))
+    assert stages["learning the roof segmenter"] == 300.0
     assert stage_times(result, tmp_path / "missing.json") == []
 
 
