@@ -24,9 +24,9 @@ histograms by their plain distance, not whitened by the noise (see
 * ``RoofColourExtractor``: another extractor's features followed by, per
   roof kind, the soft histogram of the tile's 2x2-pixel means in
   ``ColourTexture``'s stretched HSV cone (its 488 reachable bins), each
-  pixel weighted by the finder's probability of that kind, divided by the pixel count. The
-  mean over a group's tiles therefore pools their pixels; ``FeatureNorm``
-  makes each histogram sum to 1 and takes its square root.
+  pixel weighted by the finder's probability of that kind, divided by the
+  pixel count. The mean over a group's tiles therefore pools their pixels;
+  ``FeatureNorm`` makes each histogram sum to 1 and takes its square root.
 
 The finder belongs to the training set it was learnt on; the checkpoint
 stores it, so inference needs no labels.
@@ -155,7 +155,10 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
                 return roof_finder_from_dict(data)
         except Exception:  # a damaged or outdated cache is learnt again, never trusted
             pass
-    found = RoofSegmenter.fit(tile_paths, seed, progress=progress) if segmenter else RoofLikelihood.fit(tile_paths, progress)
+    if segmenter:
+        found = RoofSegmenter.fit(tile_paths, seed, progress=progress)
+    else:
+        found = RoofLikelihood.fit(tile_paths, progress)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     torch.save({**found.to_dict(), "tiles": len(tile_paths)}, tmp)
     os.replace(tmp, path)
