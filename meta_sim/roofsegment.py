@@ -39,11 +39,14 @@ LR = 3e-3
 MAX_TILES = 1200  # tiles kept in memory for training (evenly spaced over the training set)
 CLASSES = 3  # other, flat roof, sloped roof
 RECOLOUR = 0.5  # share of the training crops whose roofs are recoloured
+# Convolutions in channels-last layout: the same net, learnt and run in about half the time on CPUs
+# (oneDNN's fastest layout); a layout gives slightly different rounding, so it is part of ``config_id``.
+MEMORY_FORMAT = torch.channels_last
 
 
 def config_id() -> str:
     """Names what a fit depends on besides the tiles and the seed (for caches)."""
-    settings = (VERSION, WIDTH, DILATIONS, STEPS, BATCH, CROP, LR, MAX_TILES, RECOLOUR)
+    settings = (VERSION, WIDTH, DILATIONS, STEPS, BATCH, CROP, LR, MAX_TILES, RECOLOUR, str(MEMORY_FORMAT))
     return hashlib.sha256(repr(settings).encode()).hexdigest()[:8]
 
 
@@ -99,6 +102,7 @@ class RoofSegmenter:
             raise MetaSimError(f"a roof segmenter's weights do not fit its network ({error}); "
                                "train the model again") from error
         self.net.eval()
+        self.net.to(memory_format=MEMORY_FORMAT)
         digest = hashlib.sha256(b"".join(v.numpy().tobytes() for v in self.net.state_dict().values()))
         self.id = f"roof-segmenter-v{VERSION}[w{WIDTH},d{'-'.join(map(str, DILATIONS))}]-{digest.hexdigest()[:12]}"
 
@@ -110,7 +114,7 @@ class RoofSegmenter:
         rgb, shares = _training_pixels(paths)
         generator = torch.Generator().manual_seed(int(seed))
         torch.manual_seed(int(seed))  # the layers' initial weights
-        net = _Net()
+        net = _Net().to(memory_format=MEMORY_FORMAT)
         optimiser = torch.optim.Adam(net.parameters(), lr=LR)
         schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=LR, total_steps=steps)
         n, h, w = rgb.shape[0], rgb.shape[-2], rgb.shape[-1]
@@ -129,7 +133,7 @@ class RoofSegmenter:
                 ys.append(_dihedral(shares[pick[i]][window], k, flip))
             x = torch.stack(xs).float() / 255.0
             y = torch.stack(ys).float() / 4.0
-            x = _recolour_roofs(x, y, generator)
+            x = _recolour_roofs(x, y, generator).contiguous(memory_format=MEMORY_FORMAT)
             target = torch.cat([(1.0 - y.sum(1, keepdim=True)).clamp_min(0.0), y], dim=1)
             loss = -(target * torch.log_softmax(net(x * 2.0 - 1.0), dim=1)).sum(1).mean()
             optimiser.zero_grad()
@@ -145,7 +149,8 @@ class RoofSegmenter:
     @torch.no_grad()
     def weights(self, level1: torch.Tensor) -> torch.Tensor:
         """(N, 2, H, W) p(flat roof), p(sloped roof) for each pixel of an (N, 3, H, W) sRGB batch."""
-        return torch.softmax(self.net(level1.float() * 2.0 - 1.0), dim=1)[:, 1:]
+        x = (level1.float() * 2.0 - 1.0).contiguous(memory_format=MEMORY_FORMAT)
+        return torch.softmax(self.net(x), dim=1)[:, 1:].contiguous()
 
     def to_dict(self) -> dict:
         return {"kind": "segmenter", "version": VERSION,
