@@ -5,7 +5,8 @@ A training set lives in one folder: ``tiles/`` (the EXR tiles and their
 extractor and view count, ``features-<key>.pt``, holding the design ids, the
 encoded designs, the design-space spec, the extractor id and one averaged
 feature vector per design. ``tile-features-<key>.pt`` beside it holds, in
-the same format, one feature vector per tile (the pool MS2 samples from).
+the same format, one feature vector per tile (the pool MS2 samples from);
+the design's vector is the mean of its tiles'.
 Rendering needs ``bpy``; everything after the caches (training, search)
 needs only torch.
 """
@@ -109,32 +110,26 @@ def training_tiles(root: Path, config: DatasetConfig) -> list[Path]:
     return [p for name in names for p in _existing_tiles(Path(root), name, config.tiles)]
 
 
-def group_features_of_paths(paths: list[Path], extractor, views: int) -> torch.Tensor:
-    """One feature vector for a group of image files: all tiles x views averaged."""
-    from .features import group_feature
-    from .imageio import read_image
-
-    return group_feature([read_image(p) for p in paths], extractor, n_views=views)
-
-
 def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
                    progress: Callable[[int], None] | None = None) -> FeatureSet:
-    """Features of every design of the training set, computing only what the cache lacks."""
+    """Features of every design of the training set, computing only what the cache lacks.
+
+    A design's feature is the mean of its tiles' features (every tile x view
+    weighs the same in it), so the tiles' features are computed once, cached
+    (``build_tile_features``, the pool MS2 samples from) and averaged here.
+    """
     root = Path(root)
     space, designs, names = _training_designs(config)
     cache_path = _cache_path(root, "features", extractor, views)
     cached = _load_cache(cache_path, extractor.id, views)
-    rows = []
-    for name in names:
-        if name not in cached:
-            cached[name] = group_features_of_paths(_existing_tiles(root, name, config.tiles), extractor, views)
-            if progress:
-                progress(1)
-        rows.append(cached[name])
-    _save_cache(cache_path, cached, extractor.id, views, space)
+    if any(name not in cached for name in names):
+        tiles = _tile_features(root, config, extractor, views, progress)
+        cached.update({name: tiles[name].mean(dim=0) for name in names if name not in cached})
+        _save_cache(cache_path, cached, extractor.id, views, space)
     finder = getattr(extractor, "finder", None)
     return FeatureSet(names=names, designs=designs, encoded=_encode(space, designs),
-                      features=torch.stack(rows).float(), space=space, extractor_id=extractor.id, views=views,
+                      features=torch.stack([cached[name] for name in names]).float(), space=space,
+                      extractor_id=extractor.id, views=views,
                       hist_blocks=tuple(getattr(extractor, "hist_blocks", ())),
                       roof_likelihood=finder.to_dict() if finder is not None else None)
 
@@ -146,23 +141,31 @@ def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int
     Cached per design beside ``build_features``'s cache, computing only what
     the cache lacks; ``progress(1)`` after each design computed.
     """
+    space, designs, names = _training_designs(config)
+    cached = _tile_features(Path(root), config, extractor, views, progress)
+    return TileFeatures(designs=designs, encoded=_encode(space, designs),
+                        features=torch.stack([cached[name] for name in names]).float())
+
+
+def _tile_features(root: Path, config: DatasetConfig, extractor, views: int,
+                   progress: Callable[[int], None] | None) -> dict[str, torch.Tensor]:
+    """Design name -> (tiles, F) features of its tiles, from the cache or computed (and cached)."""
     from .features import features_for_groups
     from .imageio import read_image
 
-    root = Path(root)
-    space, designs, names = _training_designs(config)
+    space, _, names = _training_designs(config)
     cache_path = _cache_path(root, "tile-features", extractor, views)
     cached = {name: tiles for name, tiles in _load_cache(cache_path, extractor.id, views).items()
               if len(tiles) == config.tiles}
-    for name in names:
-        if name not in cached:
-            paths = _existing_tiles(root, name, config.tiles)
-            cached[name] = features_for_groups([[read_image(p)] for p in paths], extractor, views)
-            if progress:
-                progress(1)
-    _save_cache(cache_path, cached, extractor.id, views, space)
-    return TileFeatures(designs=designs, encoded=_encode(space, designs),
-                        features=torch.stack([cached[name] for name in names]).float())
+    missing = [name for name in names if name not in cached]
+    for name in missing:
+        paths = _existing_tiles(root, name, config.tiles)
+        cached[name] = features_for_groups([[read_image(p)] for p in paths], extractor, views)
+        if progress:
+            progress(1)
+    if missing:
+        _save_cache(cache_path, cached, extractor.id, views, space)
+    return cached
 
 
 def _training_designs(config: DatasetConfig) -> tuple[DesignSpace, list[dict], list[str]]:

@@ -232,7 +232,7 @@ class CountingExtractor:
         return torch.cat([mean, mean.square()], dim=1)
 
 
-def test_tile_features_are_cached_beside_the_design_features(tmp_path):
+def test_design_features_are_the_means_of_the_cached_tile_features(tmp_path):
     from meta_sim import tiles
     from meta_sim.render import sample_designs
 
@@ -251,11 +251,12 @@ def test_tile_features_are_cached_beside_the_design_features(tmp_path):
 
     extractor = CountingExtractor()
     counted = []
-    out = build_tile_features(tmp_path, config, extractor, progress=counted.append)
+    per_design = build_features(tmp_path, config, extractor, progress=counted.append)
+    assert extractor.images == 6 and counted == [1, 1, 1]  # invariant: one view per tile
+    out = build_tile_features(tmp_path, config, extractor)  # computed once: the design features' pass
+    assert extractor.images == 6
     assert out.designs == designs and out.encoded.shape == (3, space.dim)
     assert out.features.shape == (3, 2, 6) and torch.isfinite(out.features).all()
-    assert extractor.images == 6 and counted == [1, 1, 1]  # invariant: one view per tile
-    per_design = build_features(tmp_path, config, extractor)
     assert torch.allclose(per_design.features, out.features.mean(dim=1), atol=1e-6)
     assert torch.equal(per_design.encoded, out.encoded)
     assert len(list(tmp_path.glob("tile-features-*.pt"))) == 1 and len(list(tmp_path.glob("features-*.pt"))) == 1
