@@ -116,12 +116,15 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     others["no_roof_colour"] = plain
     # The roof colours counted on the pixels a colour-only likelihood finds, instead of the segmenter's:
     # its features differ, so it is scored on targets featurised by its own extractor.
-    colour_finder = dataclasses.replace(settings, roof_finder="colour")
+    # Likewise each pixel weighted by the plain probability of its roof kind, not by its power.
+    own_features = {"colour_roof_finder": dataclasses.replace(settings, roof_finder="colour"),
+                    "roof_weight_power_1": dataclasses.replace(settings, roof_weight_power=1.0)}
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
               "architecture": settings.architecture,
               "train_seconds_other_architectures": {name: round(ckpt.extra["seconds"], 1)
                                                     for name, ckpt in others.items()},
               "roof_finder": settings.roof_finder,
+              "roof_weight_power": settings.roof_weight_power,
               "targets": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": EvalSettings.tiles,
               "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}}
     experiments = {}
@@ -140,10 +143,11 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
             rows[name]["targets"] = len(few.jobs)
         for name, ckpt in others.items():  # same targets and features
             rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
-        own = prepare_eval(experiment, dataset, colour_finder, EvalSettings(targets=targets, seed=seed, ms2=False),
-                           root, bar)
-        rows["nams_exhaustive_colour_roof_finder"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
-        rows["nams_exhaustive_colour_roof_finder"]["targets"] = len(own.jobs)
+        for name, variant in own_features.items():
+            own = prepare_eval(experiment, dataset, variant, EvalSettings(targets=targets, seed=seed, ms2=False),
+                               root, bar)
+            rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
+            rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
         experiments[experiment] = rows
     result["experiments"] = experiments
     paper = experiments["e1"]["nams_adjoint_M1000_it200"]
@@ -189,7 +193,10 @@ def format_nams_table(result: dict) -> str:
               f"NAMS architecture {result.get('architecture', 'paper')} (rows nams_exhaustive_NAME: the other "
               f"architectures; nams_exhaustive_no_roof_colour: the default without the roof-colour histograms; "
               f"nams_exhaustive_colour_roof_finder: roofs for those histograms found by colour alone, not by "
-              f"the {result.get('roof_finder', 'colour')} roof finder). "
+              f"the {result.get('roof_finder', 'colour')} roof finder"
+              + (f"; nams_exhaustive_roof_weight_power_1: each pixel counted with its plain roof probability, "
+                 f"not to the power {result['roof_weight_power']:g}" if "roof_weight_power" in result else "")
+              + "). "
               f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
               + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
                         for name, s in result.get("train_seconds_other_architectures", {}).items()) + ". "

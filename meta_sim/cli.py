@@ -221,6 +221,10 @@ def _dataset_options(command):
                      show_default=True,
                      help="what finds the roofs whose colours are counted: a small net learnt on the training "
                           "tiles' labels (segmenter) or a pixel's colour alone (colour)"),
+        click.option("--roof-weight-power", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
+                     show_default=True,
+                     help="a pixel counts p(roof kind) to this power in its kind's colour histogram: higher "
+                          "keeps only the pixels the roof finder is sure of (see `make bench-nams`)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):
@@ -252,7 +256,8 @@ def _configs(o):
     train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] else {}
     return dataset, ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
                                   views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
-                                  roof_colour=o["roof_colour"], roof_finder=o["roof_finder"])
+                                  roof_colour=o["roof_colour"], roof_finder=o["roof_finder"],
+                                  roof_weight_power=o["roof_weight_power"])
 
 
 @main.command("dataset")

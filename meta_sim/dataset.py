@@ -72,7 +72,7 @@ class FeatureSet:
     extractor_id: str
     views: int
     # With roof colour (roofcolour.RoofColourExtractor): the widths of the features' trailing
-    # histograms, and the roof finder they were weighted by (its to_dict()), for the checkpoint.
+    # histograms, and the roof finder and power they were weighted by (its to_dict()), for the checkpoint.
     hist_blocks: tuple[int, ...] = ()
     roof_likelihood: dict | None = None
 
@@ -126,12 +126,11 @@ def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
         tiles = _tile_features(root, config, extractor, views, progress)
         cached.update({name: tiles[name].mean(dim=0) for name in names if name not in cached})
         _save_cache(cache_path, cached, extractor.id, views, space)
-    finder = getattr(extractor, "finder", None)
     return FeatureSet(names=names, designs=designs, encoded=_encode(space, designs),
                       features=torch.stack([cached[name] for name in names]).float(), space=space,
                       extractor_id=extractor.id, views=views,
                       hist_blocks=tuple(getattr(extractor, "hist_blocks", ())),
-                      roof_likelihood=finder.to_dict() if finder is not None else None)
+                      roof_likelihood=extractor.to_dict() if hasattr(extractor, "finder") else None)
 
 
 def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int = 8,

@@ -24,9 +24,13 @@ histograms by their plain distance, not whitened by the noise (see
 * ``RoofColourExtractor``: another extractor's features followed by, per
   roof kind, the soft histogram of the tile's 2x2-pixel means in
   ``ColourTexture``'s stretched HSV cone (its 488 reachable bins), each
-  pixel weighted by the finder's probability of that kind, divided by the
-  pixel count. The mean over a group's tiles therefore pools their pixels;
-  ``FeatureNorm`` makes each histogram sum to 1 and takes its square root.
+  pixel weighted by the finder's probability of that kind raised to
+  ``WEIGHT_POWER``, divided by the pixel count. The mean over a group's
+  tiles therefore pools their pixels; ``FeatureNorm`` makes each histogram
+  sum to 1 and takes its square root. The power keeps the pixels the
+  finder is sure of and all but drops the doubtful ones (roof edges, the
+  other roof kind, roof-like ground): histograms compared once they sum to
+  1 gain more from a purer sample than from a larger one.
 
 The finder belongs to the training set it was learnt on; the checkpoint
 stores it, so inference needs no labels.
@@ -35,6 +39,7 @@ stores it, so inference needs no labels.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from pathlib import Path
 from typing import Callable, Mapping
@@ -50,6 +55,7 @@ BINS = 16  # per sRGB channel
 PRIOR = 0.25  # per roof kind, for a colour without evidence
 PRIOR_COUNT = 10.0  # pixels' worth of evidence the prior is worth
 KINDS = ("flat", "sloped")
+WEIGHT_POWER = 4.0  # a pixel counts p(kind) ** WEIGHT_POWER in its kind's histogram
 LIKELIHOOD_FILE = f"roof-likelihood-v{VERSION}.pt"
 
 
@@ -167,17 +173,25 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
 
 class RoofColourExtractor:
     """``base``'s features, then per roof kind the colour histogram (488 bins) of the pixels weighted by
-    ``finder``'s probability of that roof kind (a ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter``)."""
+    ``finder``'s probability of that roof kind (a ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter``)
+    raised to ``power``."""
 
-    def __init__(self, base, finder):
-        self.base, self.finder = base, finder
+    def __init__(self, base, finder, power: float = WEIGHT_POWER):
+        if not (math.isfinite(power) and power > 0):
+            raise MetaSimError(f"the roof weight power must be a positive number, got {power!r}")
+        self.base, self.finder, self.power = base, finder, float(power)
         self._keep = _reachable_cone_bins(ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
         self.hist_blocks = (int(self._keep.sum()),) * len(KINDS)
         self.base_dim = base.dim
         self.dim = base.dim + sum(self.hist_blocks)
-        self.id = f"{base.id}+{finder.id}"
+        self.id = f"{base.id}+{finder.id}" + (f"^{self.power:g}" if self.power != 1.0 else "")
         # The histograms do not change under the dihedral views either.
         self.dihedral_invariant = getattr(base, "dihedral_invariant", False)
+
+    def to_dict(self) -> dict:
+        """What a checkpoint keeps of the roof-colour part (``checkpoint_extractor`` reads it back):
+        the finder's ``to_dict()`` and the weight power."""
+        return {**self.finder.to_dict(), "weight_power": self.power}
 
     @torch.no_grad()
     def __call__(self, batch: torch.Tensor) -> torch.Tensor:
@@ -189,6 +203,8 @@ class RoofColourExtractor:
             level1 = _level1(torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0))
             axes = _cone_axes(level1, ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
             weights = self.finder.weights(level1)
+            if self.power != 1.0:
+                weights = weights ** self.power
             parts.append(torch.cat([_soft_histogram(axes, weights[:, k])[:, self._keep]
                                     for k in range(len(KINDS))], dim=1))
         return torch.cat(parts)
@@ -201,7 +217,8 @@ def checkpoint_extractor(ckpt, weights: Path | None = None):
 
     extractor = make_extractor(ckpt.extra.get("extractor_spec", "colour-texture"), weights)
     if "roof_likelihood" in ckpt.extra:
-        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(ckpt.extra["roof_likelihood"]))
+        roof = ckpt.extra["roof_likelihood"]  # RoofColourExtractor.to_dict(); no power before it was kept: 1
+        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(roof), roof.get("weight_power", 1.0))
     if extractor.id != ckpt.extractor_id:
         raise MetaSimError(f"the model was trained on features {ckpt.extractor_id!r} but its extractor now gives "
                            f"{extractor.id!r}; pass the same backbone weights (--weights)")

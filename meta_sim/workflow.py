@@ -39,6 +39,8 @@ class ModelSettings:
     roof_colour: bool = True
     # What finds the roofs they count: roofcolour.ROOF_FINDERS (the learnt segmenter, or colour alone).
     roof_finder: str = "segmenter"
+    # A pixel counts p(roof kind) ** roof_weight_power in that kind's histogram (1: the plain probability).
+    roof_weight_power: float = 4.0
 
     def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
         """Names the cached models: every input, with the training and model defaults resolved, so
@@ -107,7 +109,8 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
         else:
             progress = bar("roof colours", len(paths)) if bar else None
         extractor = RoofColourExtractor(extractor, ensure_roof_finder(folder, paths, settings.roof_finder,
-                                                                      settings.seed, progress))
+                                                                      settings.seed, progress),
+                                        settings.roof_weight_power)
     features = build_features(folder, config, extractor, settings.views,
                               bar("features", config.designs) if bar else None)
     seconds["features"] = time.perf_counter() - started

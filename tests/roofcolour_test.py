@@ -12,8 +12,8 @@ from meta_sim.features import ColourTexture
 from meta_sim.imageio import linear_to_srgb
 from meta_sim.nams import (FeatureNorm, NAMSConfig, TrainConfig, adjoint_search, design_table, exhaustive_search,
                            train_nams)
-from meta_sim.roofcolour import (BINS, PRIOR, RoofColourExtractor, RoofLikelihood, checkpoint_extractor,
-                                 ensure_roof_finder)
+from meta_sim.roofcolour import (BINS, PRIOR, WEIGHT_POWER, RoofColourExtractor, RoofLikelihood,
+                                 checkpoint_extractor, ensure_roof_finder)
 from meta_sim.tiles import write_tile
 from toys import toy_space
 
@@ -64,7 +64,7 @@ def test_likelihood_is_counted_on_the_roof_labels(tiles, tmp_path):
 
 
 def test_histograms_follow_the_likely_roofs(tiles, tmp_path):
-    extractor = RoofColourExtractor(ColourTexture(), ensure_roof_finder(tmp_path, tiles, "colour"))
+    extractor = RoofColourExtractor(ColourTexture(), ensure_roof_finder(tmp_path, tiles, "colour"), power=1.0)
     rgb, _ = _scene()
     batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
     out = extractor(batch)
@@ -182,13 +182,47 @@ def test_search_is_finite_at_the_extremes_with_colour(coloured):
             assert math.isfinite(result.best_loss) and result.best_loss >= 0
 
 
+def test_pixels_count_their_roof_probability_to_a_power(tiles, tmp_path):
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
+    rgb, _ = _scene()
+    batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
+    plain = RoofColourExtractor(ColourTexture(), likelihood, power=1.0)
+    sharp = RoofColourExtractor(ColourTexture(), likelihood)  # the default power, WEIGHT_POWER
+    assert sharp.power == WEIGHT_POWER > 1 and plain.id == f"{ColourTexture().id}+{likelihood.id}"
+    assert sharp.id == f"{plain.id}^{WEIGHT_POWER:g}"
+
+    class Squared:  # the likelihood's probabilities squared: power 2 of it is power 4 of the likelihood
+        id = "squared"
+
+        def weights(self, level1):
+            return likelihood.weights(level1) ** 2
+
+    assert torch.allclose(sharp.roof_histograms(batch),
+                          RoofColourExtractor(ColourTexture(), Squared(), power=2.0).roof_histograms(batch))
+    # Doubtful pixels (the prior's 0.25 for a colour never seen) all but vanish; sure ones stay.
+    odd = batch.clone()
+    odd[..., :4, :] = torch.tensor([1.0, 1.0, 0.0])[:, None, None]  # yellow: no training tile had it
+    for extractor, doubt in ((plain, PRIOR), (sharp, PRIOR ** WEIGHT_POWER)):
+        grown = extractor.roof_histograms(odd) - extractor.roof_histograms(batch)
+        assert float(grown[0, :extractor.hist_blocks[0]].sum()) == pytest.approx(doubt * 4 * 32 / 32 ** 2, rel=0.2)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(MetaSimError, match="weight power"):
+            RoofColourExtractor(ColourTexture(), likelihood, power=bad)
+
+
 def test_checkpoint_extractor_needs_the_same_likelihood(tiles, tmp_path):
     likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
 
     class Ckpt:
-        extra = {"extractor_spec": "colour-texture", "roof_likelihood": likelihood.to_dict()}
-        extractor_id = RoofColourExtractor(ColourTexture(), likelihood).id
+        extractor = RoofColourExtractor(ColourTexture(), likelihood, power=3.0)
+        extra = {"extractor_spec": "colour-texture", "roof_likelihood": extractor.to_dict()}
+        extractor_id = extractor.id
 
+    assert checkpoint_extractor(Ckpt()).id == Ckpt.extractor_id
+    assert checkpoint_extractor(Ckpt()).power == 3.0
+    # Checkpoints from before the power was kept counted the plain probability.
+    Ckpt.extra = {"extractor_spec": "colour-texture", "roof_likelihood": likelihood.to_dict()}
+    Ckpt.extractor_id = RoofColourExtractor(ColourTexture(), likelihood, power=1.0).id
     assert checkpoint_extractor(Ckpt()).id == Ckpt.extractor_id
     Ckpt.extra = {"extractor_spec": "colour-texture",
                   "roof_likelihood": RoofLikelihood(likelihood.tables * 0.5, 1).to_dict()}

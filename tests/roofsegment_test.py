@@ -78,9 +78,11 @@ def test_fit_is_deterministic_and_cached(tiles, tmp_path, monkeypatch):
 
 
 def test_checkpoints_carry_the_segmenter(segmenter):
+    made = RoofColourExtractor(ColourTexture(), segmenter)
+
     class Ckpt:
-        extra = {"extractor_spec": "colour-texture", "roof_likelihood": segmenter.to_dict()}
-        extractor_id = RoofColourExtractor(ColourTexture(), segmenter).id
+        extra = {"extractor_spec": "colour-texture", "roof_likelihood": made.to_dict()}
+        extractor_id = made.id
 
     extractor = checkpoint_extractor(Ckpt())
     assert extractor.id == Ckpt.extractor_id
