@@ -170,17 +170,28 @@ def _torch_threads(command):
 
 
 class _Bars:
-    """One tqdm bar per stage; opening the next closes the previous one."""
+    """One tqdm bar per stage; opening the next closes the previous one. A bar appears with the
+    stage's first step, so a stage that finds everything cached shows none."""
 
     def __init__(self):
         self.bar = None
+        self.stage = 0
 
     def __call__(self, label: str, total: int):
         from tqdm import tqdm
 
         self.close()
-        self.bar = tqdm(total=total, desc=label, unit="it", leave=True)
-        return self.bar.update
+        self.stage += 1
+        stage = self.stage
+
+        def update(n: int = 1) -> None:
+            if stage != self.stage:  # a stage already closed
+                return
+            if self.bar is None:
+                self.bar = tqdm(total=total, desc=label, unit="it", leave=True)
+            self.bar.update(n)
+
+        return update
 
     def close(self):
         if self.bar is not None:

@@ -211,3 +211,21 @@ def test_a_model_without_roof_colour_is_scored_on_the_defaults_features(evaluate
     same = score_other_model(ctx, ctx.nams, seed=1)
     own, _ = score_method(ctx, method_runs(ctx, 1, {})["nams_exhaustive"])
     assert {k: same[k] for k in ("flat_top1", "sloped_top10")} == {k: own[k] for k in ("flat_top1", "sloped_top10")}
+
+
+def test_a_stage_that_finds_everything_cached_shows_no_bar(capsys):
+    from meta_sim.cli import _Bars
+
+    bars = _Bars()
+    bars("cached stage", 600)
+    step = bars("working stage", 3)
+    step(1)
+    step(2)
+    late = bars("last stage", 1)
+    step(5)  # a closed stage's late steps are dropped, not drawn on a new bar
+    late(1)
+    bars.close()
+    err = capsys.readouterr().err
+    assert "cached stage" not in err
+    assert "working stage" in err and "3/3" in err and "last stage" in err and "1/1" in err
+    assert "5/3" not in err and "8/3" not in err
