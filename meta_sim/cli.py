@@ -360,7 +360,11 @@ def infer_command(ctx, target_dir, model, out, group_size, gsd, views, weights, 
     settings = InferSettings(group_size=group_size, method=method, M=M, k=k, S=S, iterations=iterations, lr=lr,
                              r=r, seed=seed, gsd=gsd, views=int(views) if views else None,
                              weights=str(weights) if weights else None)
-    report = infer(target_dir, model, out, settings)
+    bars = _Bars()
+    try:
+        report = infer(target_dir, model, out, settings, bars)
+    finally:
+        bars.close()
     for s in report["skipped"]:
         click.echo(f"skipped {s['path']}: {s['reason']}", err=True)
     click.echo((out / "report.md").read_text())

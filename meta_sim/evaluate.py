@@ -217,7 +217,9 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     started = time.perf_counter()
     # Every tile x view weighs the same in a group's mean, so the mean of the tiles' features is the group's.
     singles = [[read_image(p)] for job in jobs for p in job_tiles(folder, job.name, tiles)]
-    tile_feats = features_for_groups(singles, extractor, models_settings.views).reshape(len(jobs), tiles, -1)
+    tile_feats = features_for_groups(singles, extractor, models_settings.views,
+                                     progress=bar(f"{experiment} target features", len(singles)) if bar else False)
+    tile_feats = tile_feats.reshape(len(jobs), tiles, -1)
     feature_seconds = (time.perf_counter() - started) / len(jobs)
     ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
     pool = None

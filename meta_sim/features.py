@@ -23,7 +23,7 @@ import hashlib
 import math
 import time
 from pathlib import Path
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 import torch
@@ -403,13 +403,14 @@ def group_feature(tiles: list[np.ndarray], extractor: Extractor, n_views: int = 
 
 
 def features_for_groups(groups: list[list[np.ndarray]], extractor: Extractor, n_views: int = 8,
-                        batch_size: int = 32, progress: bool = False) -> torch.Tensor:
+                        batch_size: int = 32, progress: bool | Callable[[int], None] = False) -> torch.Tensor:
     """(G, dim) float32: ``group_feature`` of every group, with tiles of all groups batched together.
 
     Tiles are float (H, W, 3) arrays in [0, 1]; tiles of one shape are
     batched. Every tile x view counts once in its group's mean, whatever its
     size. An extractor whose features are ``dihedral_invariant`` is run on
     one view only: the mean of identical vectors is that vector.
+    ``progress``: True for a bar of its own, or a callable told each batch's tile count.
     """
     if n_views not in VIEW_COUNTS:
         raise MetaSimError(f"views must be one of {VIEW_COUNTS}, got {n_views!r}")
@@ -425,7 +426,7 @@ def features_for_groups(groups: list[list[np.ndarray]], extractor: Extractor, n_
     n_run = 1 if getattr(extractor, "dihedral_invariant", False) else n_views
     sums = torch.zeros(len(groups), extractor.dim, dtype=torch.float64)
     counts = torch.zeros(len(groups), dtype=torch.float64)
-    with tqdm(total=sum(len(t) for t in groups), unit="tile", disable=not progress) as bar:
+    with tqdm(total=sum(len(t) for t in groups), unit="tile", disable=progress is not True) as bar:
         for items in by_shape.values():
             for start in range(0, len(items), batch_size):
                 chunk = items[start:start + batch_size]
@@ -436,6 +437,8 @@ def features_for_groups(groups: list[list[np.ndarray]], extractor: Extractor, n_
                     sums.index_add_(0, index, extractor(view).double())
                 counts.index_add_(0, index, torch.full((len(chunk),), float(n_run), dtype=torch.float64))
                 bar.update(len(chunk))
+                if callable(progress):
+                    progress(len(chunk))
     return (sums / counts[:, None]).float()
 
 

@@ -27,6 +27,7 @@ import json
 import math
 import struct
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import OpenImageIO as oiio
@@ -343,12 +344,12 @@ def list_images(folder: str | Path) -> tuple[list[Path], list[tuple[Path, str]]]
     return paths, skipped
 
 
-def load_targets(paths, tile_px: int, gsd: float | None = None,
-                 render_gsd: float = RENDER_PIXEL_SIZE_M) -> list[tuple[Path, np.ndarray]]:
+def load_targets(paths, tile_px: int, gsd: float | None = None, render_gsd: float = RENDER_PIXEL_SIZE_M,
+                 progress: Callable[[int], None] | None = None) -> list[tuple[Path, np.ndarray]]:
     """Every image read, brought to the render pixel size and cut into tiles: ``(path, tile)`` pairs.
 
     The pixel size is ``gsd`` when given, else the file's own metadata,
-    else assumed equal to ``render_gsd``.
+    else assumed equal to ``render_gsd``. ``progress(1)`` after each image.
     """
     targets = []
     for path in map(Path, paths):
@@ -360,4 +361,6 @@ def load_targets(paths, tile_px: int, gsd: float | None = None,
             raise MetaSimError(f"{path}: {img.shape[1]}x{img.shape[0]} px at {render_gsd} m/px is smaller than "
                                f"the {MIN_TILE_PX} px minimum; remove it or use larger images")
         targets.extend((path, tile) for tile in cut_tiles(img, tile_px))
+        if progress:
+            progress(1)
     return targets

@@ -53,6 +53,19 @@ def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "target"
 
 
+def _steps_bar(progress: Callable[[str, int], Callable[[int], None]], label: str) -> Callable[[int, int], None]:
+    """A ``(done, total)`` callback (the adjoint search's) drawn on a ``progress`` bar, opened at its first call."""
+    state = {"update": None, "done": 0}
+
+    def report(done: int, total: int) -> None:
+        if state["update"] is None:
+            state["update"] = progress(label, total)
+        state["update"](done - state["done"])
+        state["done"] = done
+
+    return report
+
+
 def group_tiles(tiles: list, group_size: int) -> list[list]:
     """Consecutive groups of ``group_size`` (the last one may be smaller)."""
     if group_size < 1:
@@ -73,17 +86,19 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     paths, skipped = list_images(target_dir)
     tile_px = int(ckpt.extra.get("tile_px", 384))
     render_gsd = float(ckpt.extra.get("pixel_size_m", 0.3))
-    targets = load_targets(paths, tile_px, settings.gsd, render_gsd)
+    targets = load_targets(paths, tile_px, settings.gsd, render_gsd,
+                           progress("read target images", len(paths)) if progress else None)
     groups = group_tiles(targets, settings.group_size)
     views = settings.views or int(ckpt.extra.get("views", 8))
-    feats = features_for_groups([[t for _, t in g] for g in groups], extractor, views)
+    feats = features_for_groups([[t for _, t in g] for g in groups], extractor, views,
+                                progress=progress("target features", len(targets)) if progress else False)
     read_seconds = time.perf_counter() - started
 
     started = time.perf_counter()
     normed = ckpt.feature_norm.apply(feats)
     generator = torch.Generator().manual_seed(settings.seed)
     results = search(ckpt.model, normed, ckpt.space, settings.method, generator=generator,
-                     **settings.search_options())
+                     progress=_steps_bar(progress, "search") if progress else None, **settings.search_options())
     search_seconds = time.perf_counter() - started
 
     out_dir = Path(out_dir)
