@@ -288,3 +288,39 @@ def test_zero_variance_features_train_to_a_finite_model():
     fit = train_nams(designs, features, NAMSConfig(8, 12, hidden=SMALL), _quick(max_epochs=3))
     assert all(math.isfinite(v) for v in fit.history["train_loss"])
     assert torch.all(fit.norm.std[:4] == 1.0)
+
+
+_IN_A_FRESH_PROCESS = """
+import hashlib, sys
+import torch
+torch.set_num_threads({threads})
+sys.path.insert(0, {tests!r})
+from meta_sim.features import ColourTexture
+from meta_sim.nams import NAMSConfig, train_nams
+from nams_model_test import SMALL, _quick, _toy
+
+designs, features = _toy()
+fit = train_nams(designs, features, NAMSConfig(8, 12, hidden=SMALL), _quick(max_epochs=3))
+digest = hashlib.sha256()
+for value in fit.model.state_dict().values():
+    digest.update(value.numpy().tobytes())
+tiles = torch.rand(4, 3, 64, 64, generator=torch.Generator().manual_seed(0))
+digest.update(ColourTexture()(tiles).numpy().tobytes())
+print(digest.hexdigest())
+"""
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_fresh_process_trains_the_same_model_and_features(threads):
+    """The same seed and thread count give bit-identical weights and features in any process (no
+    state carried over from import order, hashing or the allocator); thread counts may differ."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = _IN_A_FRESH_PROCESS.format(threads=threads, tests=str(Path(__file__).parent))
+    digests = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                              env={**os.environ, "PYTHONHASHSEED": str(seed)}).stdout.strip()
+               for seed in (1, 2)}
+    assert len(digests) == 1, digests
