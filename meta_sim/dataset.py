@@ -123,7 +123,7 @@ def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
     cache_path = _cache_path(root, "features", extractor, views)
     cached = _load_cache(cache_path, extractor.id, views)
     if any(name not in cached for name in names):
-        tiles = _tile_features(root, config, extractor, views, progress)
+        tiles = _tile_features(root, config, space, names, extractor, views, progress)
         cached.update({name: tiles[name].mean(dim=0) for name in names if name not in cached})
         _save_cache(cache_path, cached, extractor.id, views, space)
     return FeatureSet(names=names, designs=designs, encoded=_encode(space, designs),
@@ -141,18 +141,18 @@ def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int
     the cache lacks; ``progress(1)`` after each design computed.
     """
     space, designs, names = _training_designs(config)
-    cached = _tile_features(Path(root), config, extractor, views, progress)
+    cached = _tile_features(Path(root), config, space, names, extractor, views, progress)
     return TileFeatures(designs=designs, encoded=_encode(space, designs),
                         features=torch.stack([cached[name] for name in names]).float())
 
 
-def _tile_features(root: Path, config: DatasetConfig, extractor, views: int,
+def _tile_features(root: Path, config: DatasetConfig, space: DesignSpace, names: list[str], extractor, views: int,
                    progress: Callable[[int], None] | None) -> dict[str, torch.Tensor]:
-    """Design name -> (tiles, F) features of its tiles, from the cache or computed (and cached)."""
+    """Design name -> (tiles, F) features of its tiles (``names``: the training set's designs, in
+    ``space``), from the cache or computed (and cached)."""
     from .features import features_for_groups
     from .imageio import read_image
 
-    space, _, names = _training_designs(config)
     cache_path = _cache_path(root, "tile-features", extractor, views)
     cached = {name: tiles for name, tiles in _load_cache(cache_path, extractor.id, views).items()
               if len(tiles) == config.tiles}
