@@ -10,12 +10,12 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all addon bench-render bench-nams bench-tradeoff bench-farm bench-reference clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[all,test]'
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -36,6 +36,11 @@ demo: setup
 # The fast default set plus one real end-to-end run (slow-marked tests run in `test-all`).
 test: setup
 	$(BIN)/python -m pytest -q
+
+# ruff (style, pyflakes, isort, bugbear) and import-linter (the layer rule in pyproject.toml).
+lint: setup
+	$(BIN)/ruff check .
+	$(BIN)/lint-imports
 
 test-all: setup
 	$(BIN)/python -m pytest -q -m ''

@@ -14,15 +14,16 @@ from pathlib import Path
 
 import bpy
 
-from ..meta_sim import meshes
 from ..meta_sim.blender.scene import CITY_TAG, CityScene, city_buildings, remove_city, set_roofs
-from ..meta_sim.errors import MetaSimError
-from ..meta_sim.layout import LayoutParams, layout_for_tiles
-from ..meta_sim.preview import label_image, to_srgb8
-from ..meta_sim.render import resolve_textures
-from ..meta_sim.render_presets import get_preset
-from ..meta_sim.textures import write_png
-from ..meta_sim.worker import RENDER_OPTIONS
+from ..meta_sim.core.errors import MetaSimError
+from ..meta_sim.core.fileio import write_text_atomic
+from ..meta_sim.render.loop import resolve_textures
+from ..meta_sim.render.options import RENDER_OPTIONS
+from ..meta_sim.sim import meshes
+from ..meta_sim.sim.layout import LayoutParams, layout_for_tiles
+from ..meta_sim.sim.preview import label_image, to_srgb8
+from ..meta_sim.sim.quality import get_preset
+from ..meta_sim.sim.textures import write_png
 from . import library as libraries
 from . import previews
 
@@ -201,14 +202,14 @@ def export_job(settings, library, job_dir: Path) -> Path:
     argv = [item for opt in RENDER_OPTIONS if options.get(opt.dest) is not None
             for item in (opt.flag, str(options[opt.dest]))]
     job = {"format": JOB_FORMAT, "version": 1, "options": options, "argv": argv,
-           "command": shlex.join(["python", "-m", "meta_sim.worker", *argv]),
+           "command": shlex.join(["python", "-m", "meta_sim.render.worker", *argv]),
            "blender_command": shlex.join(["blender", "-b", "--python-exit-code", "1", "--python",
                                           "jobs/render_tiles.py", "--", *argv]),
            "design": chosen, "city": params}
     path = job_dir / JOB_FILE
     try:
-        space_path.write_text(json.dumps(space, indent=1) + "\n")
-        path.write_text(json.dumps(job, indent=1) + "\n")
+        write_text_atomic(space_path, json.dumps(space, indent=1) + "\n")
+        write_text_atomic(path, json.dumps(job, indent=1) + "\n")
     except OSError as exc:
         raise MetaSimError(f"cannot write the job into {job_dir}: {exc.strerror}; choose another folder") from None
     return path

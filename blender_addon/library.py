@@ -14,9 +14,9 @@ from pathlib import Path
 
 import bpy
 
-from ..meta_sim.design import DesignSpace
-from ..meta_sim.errors import MetaSimError
-from ..meta_sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank
+from ..meta_sim.core.errors import MetaSimError
+from ..meta_sim.sim.design import DesignSpace
+from ..meta_sim.sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank
 
 # The extension's root package (``bl_ext.<repository>.meta_sim``): Blender keys user folders by it.
 EXTENSION = __package__.rpartition(".")[0]

@@ -8,8 +8,8 @@ import bpy
 from bpy.props import IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..meta_sim.errors import MetaSimError
-from ..meta_sim.presets import DesignPreset, save_preset
+from ..meta_sim.core.errors import MetaSimError
+from ..meta_sim.sim.presets import DesignPreset, save_preset
 from . import city, presets_ui
 from . import library as libraries
 
@@ -108,7 +108,7 @@ class META_SIM_OT_render_preview(_Reporting, bpy.types.Operator):
 
 
 class META_SIM_OT_export_job(_Reporting, bpy.types.Operator):
-    """Write a render job for the farm (python -m meta_sim.worker or blender -b) from the city and design"""
+    """Write a render job for the farm (python -m meta_sim.render.worker or blender -b) from the city and design"""
 
     bl_idname = "meta_sim.export_job"
     bl_label = "Export Render Job"

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import bpy
 
-from ..meta_sim.errors import MetaSimError
-from ..meta_sim.presets import DesignPreset, load_preset
+from ..meta_sim.core.errors import MetaSimError
+from ..meta_sim.sim.presets import DesignPreset, load_preset
 from . import library as libraries
 from . import previews
 

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import (CollectionProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import CollectionProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from ..meta_sim.layout import LayoutParams
-from ..meta_sim.render_presets import PRESETS
+from ..meta_sim.sim.layout import LayoutParams
+from ..meta_sim.sim.quality import PRESETS
 from . import library, previews
 
 _DEFAULTS = LayoutParams()

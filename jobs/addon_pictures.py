@@ -25,11 +25,12 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=4242, help="city seed")
     args = parser.parse_args()
 
-    import bpy  # first: it puts Blender's script modules (addon_utils) on the path
     import addon_utils
+    import bpy  # first: it puts Blender's script modules (addon_utils) on the path
 
-    from meta_sim.textures.pngio import read_rgb8, write_png
-    from meta_sim.textures.sheet import render_sheet
+    from meta_sim.sim.imageio import read_rgb8
+    from meta_sim.sim.textures.pngio import write_png
+    from meta_sim.sim.textures.sheet import render_sheet
 
     with tempfile.TemporaryDirectory() as tmp:
         subprocess.run([sys.executable, str(ROOT / "jobs" / "build_addon.py"), "--out", tmp], check=True,

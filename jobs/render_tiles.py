@@ -1,6 +1,6 @@
 """Render-farm entry point: `blender -b --python-exit-code 1 --python jobs/render_tiles.py -- ARGS`.
 
-ARGS are those of `meta-sim render` (see `python -m meta_sim.worker --help`).
+ARGS are those of `meta-sim render` (see `python -m meta_sim.render.worker --help`).
 Blender's Python needs numpy and OpenImageIO (both ship with Blender 4+) and
 this repository on its path, which this script adds.
 """
@@ -10,7 +10,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from meta_sim.worker import blender_argv, main  # noqa: E402
+from meta_sim.render.worker import blender_argv, main  # noqa: E402
 
 code = main(blender_argv(sys.argv))
 if code:

@@ -19,13 +19,13 @@ def pytest_sessionfinish(session, exitstatus):
 
 @pytest.fixture(scope="session")
 def bank():
-    from meta_sim.textures import ensure_default_bank
+    from meta_sim.sim.textures import ensure_default_bank
 
     return ensure_default_bank()
 
 
 @pytest.fixture(scope="session")
 def heldout_bank():
-    from meta_sim.textures import ensure_heldout_bank
+    from meta_sim.sim.textures import ensure_heldout_bank
 
     return ensure_heldout_bank()

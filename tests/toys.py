@@ -1,6 +1,6 @@
 """Helpers the torch-side tests share (a module, not fixtures: they are called with arguments)."""
 
-from meta_sim.design import DesignSpace
+from meta_sim.sim.design import DesignSpace
 
 
 def toy_space(*widths, continuous=False) -> DesignSpace:

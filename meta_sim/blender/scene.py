@@ -36,9 +36,9 @@ import bpy
 import numpy as np
 import OpenImageIO as oiio
 
-from .. import meshes
-from ..errors import MetaSimError
-from ..render_presets import RenderPreset
+from ..core.errors import MetaSimError
+from ..sim import meshes
+from ..sim.quality import RenderPreset
 
 LABEL_ATTRIBUTE = "label"
 UV_NAME = "UVMap"
@@ -46,6 +46,10 @@ UV_METRES = "UVMetres"  # the design-independent UVs; a design divides them by i
 CITY_TAG = "meta_sim_city"  # custom property: the key of the city a datablock belongs to
 ROLE_TAG = "meta_sim_role"
 TEXTURE_TAG = "meta_sim_texture"
+
+
+def blender_version() -> str:
+    return bpy.app.version_string
 
 
 @dataclass(frozen=True)

@@ -1,2 +1,3 @@
-"""Render farm: job manifests (``manifest``), executors that run them locally or on Dask
-(``executors``), exports for farm managers (``flamenco``) and the farm benchmark (``bench``)."""
+"""Render farm: job manifests (``manifest``), the worker that renders their tasks (``worker``),
+executors that run them locally or on Dask (``executors``) and exports for farm managers
+(``flamenco``)."""

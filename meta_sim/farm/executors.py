@@ -1,8 +1,8 @@
 """Executors: run a job manifest's tasks in Blender worker processes, on this machine or on Dask.
 
 The unit of work is a batch: up to ``recycle`` tasks rendered by one fresh
-worker process (``python -m meta_sim.worker --job FILE`` with the bpy module,
-or a ``blender -b`` binary running ``jobs/render_tiles.py``), so Blender's
+worker process (``python -m meta_sim.farm.worker --job FILE`` with the bpy module,
+or a ``blender -b`` binary running ``jobs/farm_shard.py``), so Blender's
 growth in memory over many renders is cut off every ``recycle`` tasks, a hung
 or crashed process takes down one batch only, and a time-out can kill it.
 The machine that ran a batch checks its tiles (readable, complete, metadata
@@ -32,12 +32,13 @@ from concurrent import futures as cf
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import MetaSimError
+from ..core.errors import MetaSimError
+from ..core.extras import require
 from . import manifest as farm
 
 EXECUTORS = ("local", "dask")
 BLENDER_ENV = "META_SIM_BLENDER"
-RENDER_SCRIPT = Path(__file__).resolve().parents[2] / "jobs" / "render_tiles.py"
+SHARD_SCRIPT = Path(__file__).resolve().parents[2] / "jobs" / "farm_shard.py"
 
 
 @dataclass(frozen=True)
@@ -49,9 +50,9 @@ class Runner:
 
     def command(self, job_file: Path) -> list[str]:
         if self.blender:
-            return [self.blender, "-b", "--python-exit-code", "1", "--python", str(RENDER_SCRIPT),
-                    "--", "--job", str(job_file)]
-        return [sys.executable, "-m", "meta_sim.worker", "--job", str(job_file)]
+            return [self.blender, "-b", "--python-exit-code", "1", "--python", str(SHARD_SCRIPT),
+                    "--", "--manifest", str(job_file)]
+        return [sys.executable, "-m", "meta_sim.farm.worker", "--job", str(job_file)]
 
 
 @dataclass(frozen=True)
@@ -170,10 +171,7 @@ class _DaskPool:
     threads (the render is a subprocess anyway, so worker processes would add nothing)."""
 
     def __init__(self, workers: int, scheduler: str | None):
-        try:
-            from distributed import Client, LocalCluster
-        except ImportError:
-            raise MetaSimError("the dask executor needs dask.distributed: pip install 'dask[distributed]'") from None
+        from distributed import Client, LocalCluster
         self.cluster = None
         try:
             if scheduler:
@@ -215,6 +213,10 @@ def _check(options: RunOptions) -> Runner:
     if blender and options.executor == "local" and shutil.which(blender) is None:
         raise MetaSimError(f"no Blender executable at {blender!r}; give --blender PATH "
                            f"(or unset {BLENDER_ENV} to use the bpy module)")
+    if options.executor == "dask":
+        require("distributed", "the dask executor")
+    elif not blender:
+        require("bpy", "rendering in local worker processes without --blender")
     return Runner(blender=blender, timeout=options.timeout)
 
 

@@ -19,8 +19,8 @@ import json
 import re
 from pathlib import Path
 
-from ..errors import MetaSimError
-from ..fileio import write_text_atomic
+from ..core.errors import MetaSimError
+from ..core.fileio import write_text_atomic
 from .manifest import Manifest
 
 REPOSITORY = Path(__file__).resolve().parents[2]

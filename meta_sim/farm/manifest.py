@@ -20,8 +20,8 @@ import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..errors import MetaSimError
-from ..fileio import write_text_atomic
+from ..core.errors import MetaSimError
+from ..core.fileio import write_text_atomic
 
 FORMAT = "meta-sim-farm-job"
 VERSION = 1
@@ -122,8 +122,8 @@ def plan(options: dict, out_dir: Path) -> Manifest:
     planned job fails on bad input now rather than on the farm. Duplicate tasks (a random
     design drawn twice for one city) are planned once.
     """
-    from ..render import tile_path
-    from ..worker import plan as plan_render
+    from ..render.jobs import tile_path
+    from ..render.plan import plan as plan_render
 
     jobs, settings = plan_render({**options, "out": out_dir, "preview": False})
     shared = {"space": settings.space.name, "preset": settings.preset.name, "n_tiles": settings.n_tiles,
@@ -173,13 +173,13 @@ def load(path: Path) -> Manifest:
 def render_setup(manifest: Manifest, with_banks: bool = True):
     """(jobs, RenderSettings) for the manifest's tasks. Without banks the settings serve only
     to check tiles (their expected metadata), which needs no texture images."""
-    from ..design import DesignSpace
-    from ..render import Job, RenderSettings
-    from ..render_presets import get_preset
+    from ..render.jobs import Job, RenderSettings
+    from ..sim.design import DesignSpace
+    from ..sim.quality import get_preset
 
     banks = []
     if with_banks:
-        from ..textures import ensure_default_bank, ensure_heldout_bank, load_bank
+        from ..sim.textures import ensure_default_bank, ensure_heldout_bank, load_bank
 
         banks = [load_bank(manifest.bank) if manifest.bank else ensure_default_bank(), ensure_heldout_bank()]
     settings = RenderSettings(space=DesignSpace.from_dict(manifest.space), banks=banks,
@@ -218,8 +218,8 @@ def check(manifest: Manifest, threads: int = 8) -> Status:
     """
     from concurrent.futures import ThreadPoolExecutor
 
-    from .. import tiles
-    from ..render import expected_meta, tile_path
+    from ..render.jobs import expected_meta, tile_path
+    from ..sim import tiles
 
     jobs, settings = render_setup(manifest, with_banks=False)
     items = [(job, j, tile_path(settings.out_dir, job, j)) for job in jobs for j in job.tiles]
@@ -239,11 +239,11 @@ def check(manifest: Manifest, threads: int = 8) -> Status:
 
 
 def temporaries(manifest: Manifest) -> list[Path]:
-    """Half-written tiles a killed worker left (``.NAME_tNN.tmpPID.exr``); never read as tiles."""
+    """Half-written tiles a killed worker left (``.NAME_tNN.tmpXXXXXXXX.exr``); never read as tiles."""
     out_dir = Path(manifest.out_dir)
     if not out_dir.is_dir():
         return []
     names = {t.name for t in manifest.tasks}
-    pattern = re.compile(r"\.(.+)_t\d+\.tmp\d+\.exr")
+    pattern = re.compile(r"\.(.+)_t\d+\.tmp\w+\.exr")
     return sorted(p for p in out_dir.glob(".*.tmp*.exr")
                   if (m := pattern.fullmatch(p.name)) and m[1] in names)

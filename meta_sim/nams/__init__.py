@@ -2,15 +2,33 @@
 ``checkpoint``), and design inference (``search``). Never imports bpy."""
 
 from .checkpoint import Checkpoint, load_checkpoint, model_id, save_checkpoint
-from .model import (ARCHITECTURES, DEFAULT_ARCHITECTURE, DirectRegression, DRConfig, NAMS, NAMSConfig,
-                    architecture_options, build_model)
+from .model import (
+    ARCHITECTURES,
+    DEFAULT_ARCHITECTURE,
+    NAMS,
+    DirectRegression,
+    DRConfig,
+    NAMSConfig,
+    architecture_options,
+    build_model,
+)
 from .ms2 import MS2Config, ms2_search
-from .search import (SearchResult, adjoint_search, design_table, dr_predict, exhaustive_search, search,
-                     time_search, uniform_predict)
-from .train import EpochReport, FeatureNorm, Fit, TrainConfig, train_dr, train_nams
+from .norm import FeatureNorm
+from .search import (
+    SearchResult,
+    adjoint_search,
+    design_table,
+    dr_predict,
+    exhaustive_search,
+    search,
+    time_search,
+    uniform_predict,
+)
+from .train import EpochReport, Fit, TrainConfig, train_dr, train_nams
 
 __all__ = [
-    "ARCHITECTURES", "DEFAULT_ARCHITECTURE", "architecture_options", "Checkpoint", "DRConfig", "DirectRegression", "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS",
+    "ARCHITECTURES", "DEFAULT_ARCHITECTURE", "architecture_options", "Checkpoint", "DRConfig", "DirectRegression",
+    "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS",
     "NAMSConfig", "SearchResult", "TrainConfig", "adjoint_search", "build_model", "design_table", "dr_predict",
     "exhaustive_search", "load_checkpoint", "model_id", "ms2_search", "save_checkpoint", "search", "time_search",
     "train_dr", "train_nams", "uniform_predict",

@@ -28,18 +28,17 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
 import torch
 
-from ..design import DesignSpace
-from ..errors import MetaSimError
-from .model import MODELS, DirectRegression, NAMS, build_model
-from .train import FeatureNorm
+from ..core.errors import MetaSimError
+from ..core.fileio import write_bytes_atomic
+from ..sim.design import DesignSpace
+from .model import MODELS, NAMS, DirectRegression, build_model
+from .norm import FeatureNorm
 
 FORMAT = "meta-sim-checkpoint"
 FORMAT_VERSION = 2
@@ -90,18 +89,7 @@ def save_checkpoint(path: str | Path, kind: str, model: NAMS | DirectRegression,
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     data = buffer.getvalue()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes_atomic(path, data)
     return _model_id(data)
 
 

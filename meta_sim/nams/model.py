@@ -29,7 +29,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ..errors import MetaSimError
+from ..core.errors import MetaSimError
 
 
 def _from_dict(cls, data: Mapping):

@@ -57,12 +57,12 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Callable
 
 import torch
 
-from ..design import Categorical, DesignSpace
-from ..errors import MetaSimError
+from ..core.errors import MetaSimError
+from ..core.progress import Bars
+from ..sim.design import Categorical, DesignSpace
 from .search import SearchResult
 
 BANDWIDTH_RULES = ("scott", "median")
@@ -107,7 +107,7 @@ class MS2Config:
 
 def ms2_search(pool_features, pool_designs, target_groups, space: DesignSpace, config: MS2Config = MS2Config(),
                generator: torch.Generator | None = None,
-               progress: Callable[[int, int], None] | None = None) -> list[SearchResult]:
+               bars: Bars | None = None) -> list[SearchResult]:
     """MS2 for each target group; one SearchResult per group.
 
     ``pool_features`` (P, F): one feature vector per pool tile;
@@ -153,7 +153,8 @@ def ms2_search(pool_features, pool_designs, target_groups, space: DesignSpace, c
 
     optimiser = torch.optim.Adam([logits], lr=config.lr)
     baseline = None
-    for step in range(config.iterations):
+    progress = bars("MS2 search", config.iterations) if bars is not None else None
+    for _step in range(config.iterations):
         loss, log_prob = draw()
         kl = loss.mean(dim=1)
         baseline = kl if baseline is None else baseline
@@ -162,7 +163,7 @@ def ms2_search(pool_features, pool_designs, target_groups, space: DesignSpace, c
         optimiser.step()
         baseline = config.baseline_alpha * baseline + (1 - config.baseline_alpha) * kl
         if progress is not None:
-            progress(step + 1, config.iterations)
+            progress(1)
     with torch.no_grad():
         final_kl = draw()[0].mean(dim=1)
     if not torch.isfinite(final_kl).all():

@@ -37,15 +37,33 @@ import math
 import statistics
 import time
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import torch
 
-from ..design import Categorical, DesignSpace
-from ..errors import MetaSimError
-from .model import DirectRegression, NAMS
+from ..core.errors import MetaSimError
+from ..core.progress import Bars
+from ..sim.design import Categorical, DesignSpace
+from .model import NAMS, DirectRegression
 
 MAX_EXHAUSTIVE_DESIGNS = 200_000
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """The neural-adjoint search's settings (the paper's defaults), shared by `infer` and `eval`:
+    ``M`` starts drawn in mean +- ``k`` std of the training embeddings, ``iterations`` steps of rate
+    ``lr``, the ``S`` best kept, and diversify-with-rejection ``r`` (see ``adjoint_search``)."""
+
+    M: int = 1000
+    k: float = 3.0
+    S: int = 50
+    iterations: int = 200
+    lr: float = 0.01
+    r: float = 0.0
+
+    def search_options(self) -> dict:
+        return {name: getattr(self, name) for name in ("M", "k", "S", "iterations", "lr", "r")}
 
 
 @dataclass
@@ -193,7 +211,7 @@ def _diversify(results: list[SearchResult], space: DesignSpace, r: float,
 def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: float = 3.0, S: int = 50,
                    iterations: int = 200, lr: float = 0.01, r: float = 0.0,
                    generator: torch.Generator | None = None, dtype: torch.dtype = torch.float32,
-                   boundary_weight: float = 0.1, progress: Callable[[int, int], None] | None = None,
+                   boundary_weight: float = 0.1, bars: Bars | None = None,
                    max_rows: int = 16384) -> list[SearchResult]:
     """Neural-adjoint search for every target row; one SearchResult per row.
 
@@ -232,9 +250,9 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     starts = mean + (2 * torch.rand((len(targets), M, model.config.z_dim), generator=generator) - 1) * half_width
     per_group = max(1, max_rows // M)
     groups = [slice(i, i + per_group) for i in range(0, len(targets), per_group)]
-    total_steps = iterations * len(groups)
+    progress = bars("search", iterations * len(groups)) if bars is not None and iterations else None
     results: list[SearchResult] = []
-    for g, rows in enumerate(groups):
+    for rows in groups:
         z = starts[rows].clone().requires_grad_(True)
         target = targets[rows].double() / feature_scale.double()
         # A huge target would overflow the squared error in float32. Dividing each
@@ -244,21 +262,22 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
         target_scaled = (target / scale64).float()[:, None, :]
         inv_scale = (1 / scale64).float()
 
-        def objective(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        def objective(z: torch.Tensor, inv_scale=inv_scale,
+                      target_scaled=target_scaled) -> tuple[torch.Tensor, torch.Tensor]:
             pred = predictor(z.to(dtype)).float() / feature_scale * inv_scale[:, :, None]
             mse_scaled = _combined(*_block_mse((pred - target_scaled).square(), colour_dims))
             boundary = torch.relu((z - mean).abs() - half_width).sum(dim=-1)
             return mse_scaled, boundary
 
         optimiser = torch.optim.Adam([z], lr=lr, betas=(0.9, 0.999))
-        for step in range(iterations):
+        for _ in range(iterations):
             mse_scaled, boundary = objective(z)
             loss = (mse_scaled + boundary_weight * boundary * inv_scale.square()).sum()
             (grad,) = torch.autograd.grad(loss, z)
             z.grad = grad
             optimiser.step()
             if progress is not None:
-                progress(g * iterations + step + 1, total_steps)
+                progress(1)
         with torch.no_grad():
             mse_scaled, boundary = objective(z)
             losses = mse_scaled.double() * scale64.square() + boundary_weight * boundary.double()
@@ -389,12 +408,12 @@ def resolve_method(space: DesignSpace, method: str) -> str:
 def search(model: NAMS, targets, space: DesignSpace, method: str = "auto", *, S: int = 50, r: float = 0.0,
            generator: torch.Generator | None = None, top: int = 10, M: int = 1000, k: float = 3.0,
            iterations: int = 200, lr: float = 0.01, dtype: torch.dtype = torch.float32,
-           boundary_weight: float = 0.1, progress: Callable[[int, int], None] | None = None) -> list[SearchResult]:
+           boundary_weight: float = 0.1, bars: Bars | None = None) -> list[SearchResult]:
     """Search designs for the target rows with ``method``; adjoint-only options are ignored by exhaustive."""
     if resolve_method(space, method) == "exhaustive":
         return exhaustive_search(model, targets, space, S=S, top=top, r=r, generator=generator)
     return adjoint_search(model, targets, space, M=M, k=k, S=S, iterations=iterations, lr=lr, r=r,
-                          generator=generator, dtype=dtype, boundary_weight=boundary_weight, progress=progress)
+                          generator=generator, dtype=dtype, boundary_weight=boundary_weight, bars=bars)
 
 
 @torch.no_grad()

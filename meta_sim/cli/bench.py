@@ -1,0 +1,121 @@
+"""`meta-sim bench`: the benchmarks behind docs/benchmarks.md."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..experiments.publish import DOCS, publish
+from .base import _Bars, _torch_threads, main
+
+
+def _docs_option(command):
+    return click.option("--docs/--no-docs", default=True, show_default=True,
+                        help=f"also replace this benchmark's table in {DOCS}")(command)
+
+
+def _publish(result: dict, out: Path, table: str, section: str, docs: bool, *more: Path) -> None:
+    written = publish(result, out, table, section, DOCS if docs else None)
+    click.echo(table)
+    click.echo("wrote " + ", ".join(str(p) for p in [*written, *more]))
+
+
+@main.group()
+def bench():
+    """Measure speed; results go to benchmarks/*.json."""
+
+
+@bench.command("render")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/render.json"), show_default=True)
+@click.option("--designs", type=int, default=4, show_default=True, help="designs rendered per preset")
+@click.option("--tiles", type=int, default=9, show_default=True, help="tiles per design")
+@click.option("--repeats", type=int, default=3, show_default=True, help="runs per preset; medians are reported")
+@click.option("--presets", default="fast,balanced,quality", show_default=True, help="comma-separated presets")
+def bench_render(out, docs, designs, tiles, repeats, presets):
+    """Seconds per tile per preset (render + label pass + EXR write) and city build time."""
+    from ..experiments.bench import bench_render as run
+    from ..experiments.bench import format_render_table
+
+    result = run(designs=designs, tiles=tiles, repeats=repeats, presets=presets.split(","))
+    _publish(result, out, format_render_table(result), "render", docs)
+
+
+@bench.command("nams")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/nams.json"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--adjoint-targets", type=int, default=20, show_default=True,
+              help="target groups for the (slow) neural-adjoint settings")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_torch_threads
+def bench_nams_command(out, docs, targets, adjoint_targets, cache):
+    """Training, feature and search time, and E1/E2 accuracy per method and search setting (default scale)."""
+    from ..experiments.bench import bench_nams, format_nams_table
+
+    bars = _Bars()
+    result = bench_nams(targets=targets, adjoint_targets=adjoint_targets, root=cache, bars=bars)
+    bars.close()
+    _publish(result, out, format_nams_table(result), "nams", docs)
+
+
+@bench.command("reference")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+def bench_reference_command(out, docs, targets, cache):
+    """E1/E2 of the roof-colour reference: how far the renders' roof colours (found with the roof labels)
+    agree with the swatch similarity that scores every method."""
+    from ..experiments.reference import bench_reference, format_reference_table
+
+    bars = _Bars()
+    result = bench_reference(targets=targets, root=cache, bars=bars)
+    bars.close()
+    _publish(result, out, format_reference_table(result), "reference", docs)
+
+
+@bench.command("tradeoff")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.json"), show_default=True)
+@click.option("--plot", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.png"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True, help="E1 target groups of 9 tiles")
+@click.option("--adjoint-targets", type=int, default=20, show_default=True,
+              help="target groups for the (slow) neural-adjoint settings")
+@click.option("--presets", default="fast,balanced", show_default=True, help="render presets to compare")
+@click.option("--profiles", default="fast,balanced,paper", show_default=True,
+              help="profiles measured end to end (paper renders 15,300 tiles)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_torch_threads
+def bench_tradeoff_command(out, docs, plot, targets, adjoint_targets, presets, profiles, cache):
+    """E1 accuracy against time for every knob that costs time, and the fast/balanced/paper profiles."""
+    from ..experiments.tradeoff import bench_tradeoff, format_tradeoff_table, plot_tradeoff
+    from ..pipeline.profiles import get_profile
+
+    names = [p for p in profiles.split(",") if p]
+    for name in names:
+        get_profile(name)
+    bars = _Bars()
+    result = bench_tradeoff(targets=targets, adjoint_targets=adjoint_targets, root=cache,
+                            presets=[p for p in presets.split(",") if p], profiles=names, bars=bars)
+    bars.close()
+    plot_tradeoff(result, plot)
+    _publish(result, out, format_tradeoff_table(result), "tradeoff", docs, plot)
+
+
+@bench.command("farm")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/farm.json"), show_default=True)
+@click.option("--designs", type=int, default=16, show_default=True, help="tasks of the job (one design each)")
+@click.option("--tiles", type=int, default=4, show_default=True, help="tiles per task")
+def bench_farm_command(out, docs, designs, tiles):
+    """Tiles per second and peak memory per worker: 1 and 2 local workers, and a Dask LocalCluster."""
+    from ..experiments.farm_bench import bench_farm, format_farm_table
+
+    result = bench_farm(designs=designs, tiles=tiles)
+    _publish(result, out, format_farm_table(result), "farm", docs)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,208 @@
+"""`meta-sim dataset | train | infer | eval`: the torch pipeline and the paper's experiments."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..core.errors import MetaSimError
+from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
+
+
+def _dataset_options(command):
+    for decorator in reversed([
+        click.option("--designs", type=int, default=None, help="training designs [default: 600; paper: 1700]"),
+        click.option("--tiles", type=int, default=None, help="tiles per design [default: 2; paper: 9]"),
+        click.option("--paper-scale", is_flag=True, help="the paper's scale: 1,700 designs x 9 tiles"),
+        click.option("--profile", type=click.Choice(["fast", "balanced", "paper"]), default=None,
+                     help="a recommended training set (see `make bench-tradeoff`); --designs/--tiles override it"),
+        click.option("--dataset-seed", type=int, default=1, show_default=True, help="design sampling and city seed"),
+        click.option("--cities", type=int, default=8, show_default=True, help="cities the designs are spread over"),
+        click.option("--preset", default="fast", show_default=True, help="render preset of the training tiles"),
+        click.option("--tile-px", type=int, default=384, show_default=True, help="training tile size in pixels"),
+        click.option("--gsd", type=float, default=0.3, show_default=True, help="training tiles' metres per pixel"),
+        click.option("--extractor", default="colour-texture", show_default=True,
+                     help="features: colour-texture, torchscript:FILE, export:FILE or torchvision:NAME"),
+        click.option("--weights", type=click.Path(path_type=Path), default=None,
+                     help="weights file for a torchvision backbone"),
+        click.option("--views", type=click.Choice(["1", "2", "4", "8"]), default="8", show_default=True,
+                     help="augmentation views per tile (rotations x flip) averaged into a design's features"),
+        click.option("--max-epochs", type=int, default=None, help="training epochs at most (early stopping)"),
+        click.option("--architecture", type=click.Choice(list(ARCHITECTURE_NAMES)), default="additive",
+                     show_default=True,
+                     help="NAMS networks: paper (joint E, D, P), factorised (E and D per design parameter) or "
+                          "additive (factorised, P a sum over parameters)"),
+        click.option("--hidden", default=None,
+                     help="hidden layer sizes of each network, e.g. 1024,2048 (default: the architecture's, "
+                          "1024,2048 for paper, 512,1024 for the factorised ones)"),
+        click.option("--roof-colour/--no-roof-colour", default=True, show_default=True,
+                     help="add colour histograms of the likely roof pixels to the features (counted on the "
+                          "training tiles' labels; see `make bench-nams` for what they change)"),
+        click.option("--roof-finder", type=click.Choice(["segmenter", "colour"]), default="segmenter",
+                     show_default=True,
+                     help="what finds the roofs whose colours are counted: a small net learnt on the training "
+                          "tiles' labels (segmenter) or a pixel's colour alone (colour)"),
+        click.option("--roof-weight-power", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
+                     show_default=True,
+                     help="a pixel counts p(roof kind) to this power in its kind's colour histogram: higher "
+                          "keeps only the pixels the roof finder is sure of (see `make bench-nams`)"),
+        click.option("--cache", type=click.Path(path_type=Path), default=None,
+                     help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
+    ]):
+        command = decorator(command)
+    return command
+
+
+def _configs(o):
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.workflow import ModelSettings
+
+    if o["profile"] and o["paper_scale"]:
+        raise MetaSimError("give --profile or --paper-scale, not both")
+    if o["profile"]:
+        from ..pipeline.profiles import get_profile
+
+        base = get_profile(o["profile"]).dataset
+    else:
+        base = DatasetConfig.paper() if o["paper_scale"] else DatasetConfig()
+    overrides = {k: v for k, v in (("designs", o["designs"]), ("tiles", o["tiles"])) if v is not None}
+    dataset = DatasetConfig(**{**base.__dict__, **overrides, "seed": o["dataset_seed"], "cities": o["cities"],
+                               "preset": o["preset"], "tile_px": o["tile_px"], "pixel_size_m": o["gsd"]})
+    nams = {}
+    if o["hidden"]:
+        try:
+            nams["hidden"] = [int(x) for x in o["hidden"].split(",")]
+        except ValueError:
+            raise MetaSimError("--hidden takes comma-separated integers, e.g. 1024,2048") from None
+    train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] else {}
+    return dataset, ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
+                                  views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
+                                  roof_colour=o["roof_colour"], roof_finder=o["roof_finder"],
+                                  roof_weight_power=o["roof_weight_power"])
+
+
+@main.command("dataset")
+@_dataset_options
+@_torch_threads
+def dataset_command(**o):
+    """Render a training set of uniformly sampled designs and cache its features (resumable)."""
+    from ..pipeline.workflow import dataset_dir, prepare_features
+
+    dataset, settings = _configs(o)
+    bars = _Bars()
+    features, seconds = prepare_features(dataset, settings, o["cache"], bars)
+    bars.close()
+    click.echo(f"{len(features.names)} designs x {dataset.tiles} tiles, features {tuple(features.features.shape)} "
+               f"in {dataset_dir(dataset, o['cache'])} (render {seconds['render']:.0f} s, "
+               f"features {seconds['features']:.0f} s)")
+
+
+@main.command("train")
+@_dataset_options
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for nams.pt and dr.pt")
+@_torch_threads
+def train_command(out, **o):
+    """Train NAMS (and the DR baseline) on the training set; builds the set first if needed."""
+    import shutil
+
+    from ..pipeline.workflow import ensure_models
+
+    dataset, settings = _configs(o)
+    bars = _Bars()
+    models = ensure_models(dataset, settings, o["cache"], bars)
+    bars.close()
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(models.nams_path, out / "nams.pt")
+    shutil.copy2(models.dr_path, out / "dr.pt")
+    click.echo(f"wrote {out / 'nams.pt'} ({settings.architecture} NAMS) and {out / 'dr.pt'} "
+               + ", ".join(f"{k} {v:.0f} s" for k, v in models.seconds.items()))
+
+
+def _search_options(command):
+    for decorator in reversed([
+        click.option("-M", "--starts", "M", type=int, default=1000, show_default=True, help="adjoint: random starts"),
+        click.option("-k", type=float, default=3.0, show_default=True, help="adjoint: starts within +-k sigma"),
+        click.option("-S", "--keep", "S", type=int, default=50, show_default=True, help="best results voting"),
+        click.option("--iterations", type=int, default=200, show_default=True, help="adjoint: Adam steps"),
+        click.option("--lr", type=float, default=0.01, show_default=True, help="adjoint: Adam learning rate"),
+        click.option("-r", "--rejection", "r", type=float, default=0.0, show_default=True,
+                     help="diversify with rejection rate (paper: 0.25 on real imagery)"),
+    ]):
+        command = decorator(command)
+    return command
+
+
+@main.command("infer")
+@click.argument("target_dir", type=click.Path(path_type=Path))
+@click.option("--model", type=click.Path(path_type=Path), required=True, help="NAMS checkpoint (nams.pt)")
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for presets and report")
+@click.option("--group-size", type=int, default=9, show_default=True, help="target tiles per inferred design")
+@click.option("--gsd", type=float, default=None,
+              help="metres per pixel of the targets (default: GeoTIFF/EXR metadata, else the render's)")
+@click.option("--views", type=click.Choice(["1", "2", "4", "8"]), default=None,
+              help="augmentation views per tile (default: as trained)")
+@click.option("--weights", type=click.Path(path_type=Path), default=None, help="backbone weights, if needed")
+@click.option("--seed", type=int, default=0, show_default=True, help="search seed")
+@click.option("--search", "method", type=click.Choice(["auto", "adjoint", "exhaustive"]), default="auto",
+              show_default=True, help="exhaustive evaluates every design; adjoint is the paper's search")
+@click.option("--profile", type=click.Choice(["fast", "balanced", "paper"]), default=None,
+              help="recommended search settings (fast/balanced: exhaustive; paper: adjoint M=1000, 200 "
+                   "iterations, 8 views); options given explicitly win")
+@_search_options
+@click.pass_context
+@_torch_threads
+def infer_command(ctx, target_dir, model, out, group_size, gsd, views, weights, seed, method, profile, M, k, S,
+                  iterations, lr, r):
+    """Infer rooftop designs for a folder of target images; write presets and a report."""
+    from ..pipeline.infer import InferSettings, infer
+
+    if profile:
+        from ..pipeline.profiles import get_profile
+
+        chosen = get_profile(profile)
+        given = {name for name in ctx.params
+                 if ctx.get_parameter_source(name) is not click.core.ParameterSource.DEFAULT}
+        method = method if "method" in given else chosen.method
+        M = M if "M" in given else chosen.M
+        iterations = iterations if "iterations" in given else chosen.iterations
+        views = views if "views" in given else str(chosen.views)
+        group_size = group_size if "group_size" in given else chosen.group_size
+    settings = InferSettings(group_size=group_size, method=method, M=M, k=k, S=S, iterations=iterations, lr=lr,
+                             r=r, seed=seed, gsd=gsd, views=int(views) if views else None,
+                             weights=str(weights) if weights else None)
+    bars = _Bars()
+    try:
+        report = infer(target_dir, model, out, settings, bars)
+    finally:
+        bars.close()
+    for s in report["skipped"]:
+        click.echo(f"skipped {s['path']}: {s['reason']}", err=True)
+    click.echo((out / "report.md").read_text())
+    click.echo(f"{report['group_count']} presets in {out / 'presets'}, population in {out / 'population.json'}")
+
+
+@main.command("eval")
+@click.argument("experiment", type=click.Choice(["e1", "e2"]))
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for results and nams.pt")
+@click.option("--targets", type=int, default=20, show_default=True, help="target groups")
+@click.option("--target-tiles", type=int, default=9, show_default=True,
+              help="tiles per target group (the paper's groups have 9)")
+@click.option("--seed", type=int, default=1, show_default=True, help="target seed")
+@click.option("--ms2/--no-ms2", default=True, show_default=True,
+              help="run the MS2 baseline (computes and caches features of every training tile once)")
+@_dataset_options
+@_search_options
+@_torch_threads
+def eval_command(experiment, out, targets, target_tiles, seed, ms2, M, k, S, iterations, lr, r, **o):
+    """E1 (bank designs, unseen cities) or E2 (held-out textures): top-1/top-10 for all methods."""
+    from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
+
+    dataset, settings = _configs(o)
+    bars = _Bars()
+    results = run_eval(experiment, out, dataset, settings,
+                       EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
+                                    iterations=iterations, lr=lr, r=r), o["cache"], bars)
+    bars.close()
+    click.echo(results_markdown(results))
+    click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}")

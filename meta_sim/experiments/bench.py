@@ -1,0 +1,237 @@
+"""Benchmarks behind the README's tables (`make bench-*`). Medians over repeats."""
+
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ..core.progress import Bars
+
+
+def _blender_import_seconds() -> float:
+    """Start-up cost of a worker process: a fresh Python importing bpy."""
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import bpy"], check=True, capture_output=True)
+    return time.perf_counter() - started
+
+
+def bench_render(designs: int = 4, tiles: int = 9, repeats: int = 3, presets=("fast", "balanced", "quality"),
+                 seed: int = 101) -> dict:
+    """Seconds per tile (render + label pass + EXR write) for each preset, one city of ``designs`` designs."""
+    from ..render.jobs import RenderSettings, design_jobs, sample_designs
+    from ..render.loop import render_jobs
+    from ..sim.design import DesignSpace
+    from ..sim.quality import get_preset
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+
+    space = DesignSpace.load()
+    banks = [ensure_default_bank(), ensure_heldout_bank()]
+    jobs = design_jobs(space, sample_designs(space, designs, seed), seed, cities=1)
+    startup = statistics.median(_blender_import_seconds() for _ in range(repeats))
+    result = {"presets": {}, "designs_per_city": designs, "tiles_per_design": tiles, "repeats": repeats,
+              "blender_import_seconds": round(startup, 3),
+              "machine": {"cpus": os.cpu_count(), "python": platform.python_version()}}
+    builds, first_frames = [], []
+    for name in presets:
+        preset = get_preset(name)
+        runs = []
+        for repeat in range(repeats + 1):  # run 0 warms up the engine (GL context, kernels)
+            with tempfile.TemporaryDirectory() as out:
+                settings = RenderSettings(space=space, banks=banks, preset=preset, out_dir=Path(out),
+                                          n_tiles=tiles)
+                started = time.perf_counter()
+                summary = render_jobs(jobs, settings)
+                wall = time.perf_counter() - started
+            if repeat == 0:
+                first_frames.append(wall)
+                continue
+            s = summary.seconds
+            n = summary.written
+            runs.append({"seconds_per_tile": (s["render"] + s["labels"] + s["write"]) / n,
+                         "render_seconds_per_tile": s["render"] / n,
+                         "label_seconds_per_tile": s["labels"] / n,
+                         "write_seconds_per_tile": s["write"] / n,
+                         "wall_seconds_per_tile": wall / n})
+            builds.append(s["layout"] + s["build"])
+        entry = {key: round(statistics.median(r[key] for r in runs), 4) for key in runs[0]}
+        entry.update(engine=preset.engine, samples=preset.samples, description=preset.description)
+        result["presets"][name] = entry
+    result["city_build_seconds"] = round(statistics.median(builds), 4)
+    return result
+
+
+def format_render_table(result: dict) -> str:
+    lines = ["| preset | engine | s/tile (render+labels+write) | render | labels | EXR write |",
+             "|---|---|---|---|---|---|"]
+    for name, p in result["presets"].items():
+        lines.append(f"| {name} | {p['engine']} {p['samples']} spp | {p['seconds_per_tile']:.3f} | "
+                     f"{p['render_seconds_per_tile']:.3f} | {p['label_seconds_per_tile']:.3f} | "
+                     f"{p['write_seconds_per_tile']:.3f} |")
+    lines.append("")
+    lines.append(f"City build (layout + Blender geometry, {result['tiles_per_design']} tiles): "
+                 f"{result['city_build_seconds']:.3f} s; Blender start-up (import bpy): "
+                 f"{result['blender_import_seconds']:.2f} s; "
+                 f"{result['designs_per_city']} designs per city, medians of {result['repeats']} runs, "
+                 f"{result['machine']['cpus']} CPUs.")
+    return "\n".join(lines)
+
+
+# Adjoint settings swept by bench_nams, paper first: (starts M, iterations).
+ADJOINT_SWEEP = ((1000, 200), (250, 200), (250, 100), (64, 100), (64, 50), (16, 50))
+
+
+def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, root: Path | None = None,
+               bars: Bars | None = None) -> dict:
+    """Training time, feature time per target group, and search time and E1/E2 accuracy per method.
+
+    Uses the default training set and model (built or reused from the cache);
+    training is timed on a fresh run into a temporary folder. Target groups
+    have 9 tiles, as in the paper. The neural-adjoint settings run on the
+    first ``adjoint_targets`` groups only: at the paper's setting a group
+    costs seconds, not milliseconds.
+    """
+    import dataclasses
+
+    import torch
+
+    from ..core.cache import cache_root
+    from ..nams import ARCHITECTURES, load_checkpoint
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.features import time_extractor
+    from ..pipeline.roofcolour import checkpoint_extractor
+    from ..pipeline.workflow import ModelSettings, ensure_models, train_models
+    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
+
+    root = Path(root or cache_root())
+    dataset, settings = DatasetConfig(), ModelSettings()
+    # The other NAMS architectures on the same training set, scored below with the exhaustive search.
+    others = {name: load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, architecture=name),
+                                                  root, bars).nams_path, "nams")
+              for name in ARCHITECTURES if name != settings.architecture}
+    # The default without the roof-colour histograms: its features are the default's leading part.
+    plain = load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, roof_colour=False),
+                                          root, bars).nams_path, "nams")
+    others["no_roof_colour"] = plain
+    # The roof colours counted on the pixels a colour-only likelihood finds, instead of the segmenter's:
+    # its features differ, so it is scored on targets featurised by its own extractor.
+    # Likewise each pixel weighted by the plain probability of its roof kind, not by its power.
+    own_features = {"colour_roof_finder": dataclasses.replace(settings, roof_finder="colour"),
+                    "roof_weight_power_1": dataclasses.replace(settings, roof_weight_power=1.0)}
+    result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
+              "architecture": settings.architecture,
+              "train_seconds_other_architectures": {name: round(ckpt.extra["seconds"], 1)
+                                                    for name, ckpt in others.items()},
+              "roof_finder": settings.roof_finder,
+              "roof_weight_power": settings.roof_weight_power,
+              "targets": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": EvalSettings.tiles,
+              "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}}
+    experiments = {}
+    for experiment in ("e1", "e2"):
+        ctx = prepare_eval(experiment, dataset, settings, EvalSettings(targets=targets, seed=seed), root, bars)
+        few = dataclasses.replace(ctx, jobs=ctx.jobs[:adjoint_targets], features=ctx.features[:adjoint_targets])
+        rows = {}
+        for name, run in method_runs(ctx, seed, {}).items():
+            if name != "nams_adjoint":
+                rows[name], _ = score_method(ctx, run)
+                rows[name]["targets"] = len(ctx.jobs)
+        for starts, iterations in ADJOINT_SWEEP:
+            run = method_runs(few, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
+            name = f"nams_adjoint_M{starts}_it{iterations}"
+            rows[name], _ = score_method(few, run)
+            rows[name]["targets"] = len(few.jobs)
+        for name, ckpt in others.items():  # same targets and features
+            rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
+        for name, variant in own_features.items():
+            own = prepare_eval(experiment, dataset, variant, EvalSettings(targets=targets, seed=seed, ms2=False),
+                               root, bars)
+            rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
+            rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
+        experiments[experiment] = rows
+    result["experiments"] = experiments
+    paper = experiments["e1"]["nams_adjoint_M1000_it200"]
+    keeps = [(s, i) for s, i in ADJOINT_SWEEP
+             if all(experiments["e1"][f"nams_adjoint_M{s}_it{i}"][k] >= paper[k] - 0.05
+                    for k in ("flat_top1", "sloped_top1"))]
+    fastest = min(keeps, key=lambda si: experiments["e1"][f"nams_adjoint_M{si[0]}_it{si[1]}"]["seconds_per_target"])
+    result["fastest_adjoint_keeping_e1"] = {"M": fastest[0], "iterations": fastest[1]}
+    extractor = checkpoint_extractor(load_checkpoint(ensure_models(dataset, settings, root).nams_path, "nams"))
+    result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, 9, 8), 4)
+    if settings.roof_colour and settings.roof_finder == "segmenter":
+        from ..pipeline.dataset import training_tiles
+        from ..pipeline.roofsegment import RoofSegmenter
+        from ..pipeline.workflow import dataset_dir
+
+        started = time.perf_counter()
+        RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed)
+        result["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
+    with tempfile.TemporaryDirectory() as out:
+        from ..pipeline.workflow import prepare_features
+
+        feature_set, _ = prepare_features(dataset, settings, root)
+        result["train_seconds"] = {k: round(v, 2) for k, v in
+                                   train_models(feature_set, Path(out), settings, dataset).items()}
+    return result
+
+
+def format_nams_table(result: dict) -> str:
+    lines = ["| experiment | method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target "
+             "| targets | top-1 flat / sloped, unseen designs |", "|---|---|---|---|---|---|---|---|---|"]
+    for experiment, rows in result["experiments"].items():
+        for name, m in rows.items():
+            unseen = (f"{m['unseen']['flat_top1']:.3f} / {m['unseen']['sloped_top1']:.3f} ({m['unseen_targets']})"
+                      if m.get("unseen") else "-")
+            lines.append(f"| {experiment.upper()} | {name} | {m['flat_top1']:.3f} | {m['flat_top10']:.3f} | "
+                         f"{m['sloped_top1']:.3f} | {m['sloped_top10']:.3f} | {m['seconds_per_target']:.4f} "
+                         f"| {m.get('targets', result['targets'])} | {unseen} |")
+    t = result["train_seconds"]
+    f = result["fastest_adjoint_keeping_e1"]
+    lines += ["", f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
+              f"({result['dataset']['preset']}); target groups of {result.get('tiles_per_target', 4)} tiles "
+              f"in unseen cities. "
+              f"NAMS architecture {result.get('architecture', 'paper')} (rows nams_exhaustive_NAME: the other "
+              f"architectures; nams_exhaustive_no_roof_colour: the default without the roof-colour histograms; "
+              f"nams_exhaustive_colour_roof_finder: roofs for those histograms found by colour alone, not by "
+              f"the {result.get('roof_finder', 'colour')} roof finder"
+              + (f"; nams_exhaustive_roof_weight_power_1: each pixel counted with its plain roof probability, "
+                 f"not to the power {result['roof_weight_power']:g}" if "roof_weight_power" in result else "")
+              + "). "
+              f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
+              + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
+                        for name, s in result.get("train_seconds_other_architectures", {}).items()) + ". "
+              f"Features: {result['feature_seconds_per_group']:.3f} s per group of 9 tiles x 8 views"
+              + (f"; the roof segmenter learns in {result['roof_segmenter_seconds']:.0f} s, once per training set"
+                 if "roof_segmenter_seconds" in result else "") + ". "
+              f"Fastest adjoint setting within 0.05 of the paper setting's E1 top-1: "
+              f"M={f['M']}, {f['iterations']} iterations."]
+    stages = stage_times(result)
+    if stages:
+        lines += ["", "| stage (E4) | seconds | paper |", "|---|---|---|"]
+        lines += [f"| {name} | {seconds:.3f} | {paper} |" if seconds < 10 else f"| {name} | {seconds:.0f} | {paper} |"
+                  for name, seconds, paper in stages]
+    return "\n".join(lines)
+
+
+def stage_times(result: dict, render_bench: Path = Path("benchmarks/render.json")) -> list[tuple[str, float, str]]:
+    """The paper's E4 (time per stage) from measured parts: rendering from ``make bench-render``'s
+    seconds per tile, training and features from this benchmark, search from its exhaustive row."""
+    import json
+
+    try:
+        per_tile = json.loads(render_bench.read_text())["presets"][result["dataset"]["preset"]]["seconds_per_tile"]
+    except (OSError, ValueError, KeyError):
+        return []
+    tiles = result["dataset"]["designs"] * result["dataset"]["tiles"]
+    group = result["feature_seconds_per_group"] + result["experiments"]["e1"]["nams_exhaustive"]["seconds_per_target"]
+    segmenter = ([("learning the roof segmenter", result["roof_segmenter_seconds"], "-")]
+                 if "roof_segmenter_seconds" in result else [])
+    return [(f"simulation: training set of {tiles} tiles", per_tile * tiles, "15,300 images, 1.6 s each"),
+            *segmenter,
+            ("training NAMS", result["train_seconds"]["train_nams"], "13 h"),
+            ("inference per target group of 9 tiles (features + exhaustive search)", group, "0.5 s per image"),
+            ("inference per 5,000-image domain", group * 5000 / 9, "0.7 h")]

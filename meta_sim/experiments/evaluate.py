@@ -1,0 +1,375 @@
+"""E1 and E2 of the paper on our simulator: can a method recover the rooftop design of targets?
+
+* E1: synthetic targets whose design is in the bank, rendered in city seeds
+  the training set never used, with designs drawn independently of the
+  training set's (at the default scale about 1 in 6 is a training design by
+  chance, 300 of 1,760).
+* E2: synthetic targets made with held-out textures (the design gap): the
+  best a method can do is name the bank texture nearest to the truth.
+
+Methods, all in one harness: uniform sampling, direct regression (DR), MS2
+(REINFORCE over a categorical design distribution with KDE feature
+distributions, drawing simulations from the training set's tiles; see
+``meta_sim/nams/ms2.py``), and NAMS with the neural-adjoint and the
+exhaustive search.
+
+Scoring follows the paper (section 5.4): rank the bank's textures by the HSV
+similarity to the true texture (``meta_sim/sim/textures/similarity.py``); a
+prediction is a top-n hit when it is among the n nearest, with ties at the
+n-th place shared fairly (``Ranking.credit``). In E1 the nearest texture is
+the truth itself.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import MetaSimError
+from ..core.fileio import write_text_atomic
+from ..core.progress import Bars
+from ..nams.search import SearchOptions
+from ..render.jobs import Job
+from ..sim.design import DesignSpace
+
+TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
+# Designs are drawn from np.random.default_rng([seed, stream]). Training sets use stream 1
+# (render.sample_designs): E1 targets once did too, and with the default seed of both they were the
+# training set's first designs. Version 2 of the targets draws E1 from a stream of its own.
+TARGET_DESIGN_STREAM = {"e1": 3, "e2": 2}
+TARGETS_VERSION = 2
+KIND_OF = {"flat_roof": "flat", "sloped_roof": "sloped"}
+METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
+
+
+def target_jobs(experiment: str, space: DesignSpace, heldout, n: int, seed: int) -> list[Job]:
+    """``n`` target designs, each in its own unseen city."""
+    if experiment not in TARGET_DESIGN_STREAM:
+        raise MetaSimError(f"unknown experiment {experiment!r}; choose e1 or e2")
+    rng = np.random.default_rng([seed, TARGET_DESIGN_STREAM[experiment]])
+    if experiment == "e1":
+        designs = space.sample(rng, n)
+    else:
+        designs = []
+        for _ in range(n):
+            design = {}
+            for param in space.parameters:
+                ids = heldout.ids(param.texture_kind)
+                design[param.name] = ids[int(rng.integers(len(ids)))]
+            designs.append(design)
+    return [Job(design, TARGET_CITY_SEED + seed * 1000 + k, f"{experiment}-{k:04d}")
+            for k, design in enumerate(designs)]
+
+
+@dataclass(frozen=True)
+class Ranking:
+    """The bank's textures of one kind by similarity to one true texture, nearest first."""
+
+    ids: tuple[str, ...]
+    similarity: tuple[float, ...]
+
+    def credit(self, predicted: str, n: int) -> float:
+        """1 when ``predicted`` is among the ``n`` nearest textures, else 0. Textures tied with the
+        n-th nearest share the places left (a tie decided by a fair coin, in expectation): a held-out
+        texture whose colours no bank texture has is equally far (similarity 0) from dozens, and
+        deciding such ties by bank order would make a hit depend on where a texture is listed."""
+        if predicted not in self.ids:
+            return 0.0
+        if n >= len(self.ids):
+            return 1.0
+        mine = self.similarity[self.ids.index(predicted)]
+        edge = self.similarity[n - 1]
+        if mine != edge:
+            return float(mine > edge)
+        better = sum(1 for v in self.similarity if v > edge)
+        tied = sum(1 for v in self.similarity if v == edge)
+        return (n - better) / tied
+
+
+def rankings(experiment: str, bank, heldout) -> dict:
+    """Per roof kind: true texture id -> its ``Ranking`` of the bank's textures of that kind."""
+    from ..sim.textures import SIMILARITY_FILE, SIMILARITY_TO_DEFAULT_FILE, load_similarity, rank_by_similarity
+
+    sim = load_similarity(Path(heldout.root if experiment == "e2" else bank.root) /
+                          (SIMILARITY_TO_DEFAULT_FILE if experiment == "e2" else SIMILARITY_FILE))
+    truth_bank = heldout if experiment == "e2" else bank
+
+    def ranking(truth: str, kind: str) -> Ranking:
+        order = rank_by_similarity(truth, bank.ids(kind), sim)
+        return Ranking(tuple(order), tuple(sim.value(truth, t) for t in order))
+
+    return {kind: {t: ranking(t, kind) for t in truth_bank.ids(kind)} for kind in ("flat", "sloped")}
+
+
+def score(predicted: dict, truth: dict, ranks: dict) -> dict:
+    """top-1 / top-10 hits (tie-aware, see ``Ranking.credit``) for each roof parameter the space has."""
+    out = {}
+    for param, kind in KIND_OF.items():
+        if param not in truth:
+            continue
+        ranking = ranks[kind][truth[param]]
+        out[f"{kind}_top1"] = ranking.credit(predicted[param], 1)
+        out[f"{kind}_top10"] = ranking.credit(predicted[param], 10)
+    return out
+
+
+def unseen_rows(rows: list[dict], jobs: list[Job], training_designs) -> list[dict]:
+    """The score rows of the targets whose design is not one of the training set's."""
+    return [row for row, job in zip(rows, jobs) if job.design not in training_designs]
+
+
+def mean_scores(rows: list[dict]) -> dict:
+    return {key: float(np.mean([r[key] for r in rows])) for key in rows[0]} if rows else {}
+
+
+def results_markdown(results: dict) -> str:
+    experiment = results["experiment"].upper()
+    lines = [f"### {experiment}: rate of inferring one of the n nearest textures "
+             f"({results['targets']} target groups of {results['tiles_per_target']} tiles)", "",
+             "| method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target |",
+             "|---|---|---|---|---|---|"]
+    for name, m in results["methods"].items():
+        cells = " | ".join(f"{m[k]:.3f}" if k in m else "-" for k in METRICS)
+        lines.append(f"| {name} | {cells} | {m['seconds_per_target']:.4f} |")
+    unseen = {name: m for name, m in results["methods"].items() if m.get("unseen")}
+    if unseen:
+        n = next(iter(unseen.values()))["unseen_targets"]
+        lines += ["", f"Only the {n} targets whose design is not in the training set:", "",
+                  "| method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 |", "|---|---|---|---|---|"]
+        for name, m in unseen.items():
+            lines.append(f"| {name} | " + " | ".join(f"{m['unseen'][k]:.3f}" for k in METRICS) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(out: Path, results: dict) -> None:
+    write_text_atomic(out / "results.json", json.dumps(results, indent=2) + "\n")
+    write_text_atomic(out / "results.md", results_markdown(results))
+
+
+def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, root: Path,
+                   tile_px: int = 384, pixel_size_m: float = 0.3, bars: Bars | None = None) -> tuple[list[Job], Path]:
+    """Render (or reuse) the target groups of an experiment; returns the jobs and their tile folder."""
+    from ..render.jobs import RenderSettings
+    from ..render.loop import render_jobs
+    from ..sim.quality import get_preset
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+
+    space = DesignSpace.load()
+    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    jobs = target_jobs(experiment, space, heldout, n, seed)
+    name = f"{experiment}-v{TARGETS_VERSION}-n{n}-t{tiles}-s{seed}-{preset}-{tile_px}px-{pixel_size_m}m"
+    folder = Path(root) / "targets" / name
+    settings = RenderSettings(space=space, banks=[bank, heldout], preset=get_preset(preset), out_dir=folder,
+                              n_tiles=tiles, tile_px=tile_px, pixel_size_m=pixel_size_m)
+    render_jobs(jobs, settings, bars(f"render {experiment} targets", n * tiles) if bars else None)
+    return jobs, folder
+
+
+@dataclass(frozen=True)
+class EvalSettings(SearchOptions):
+    targets: int = 20
+    tiles: int = 9  # per target group, as in the paper (and `meta-sim infer`'s default group size)
+    ms2: bool = True  # run the MS2 baseline (needs the training set's per-tile features)
+    seed: int = 1
+    preset: str | None = None  # default: the training set's render preset
+    sheet_rows: int = 6
+
+
+@dataclass
+class EvalContext:
+    """Everything the methods of one experiment are scored with."""
+
+    experiment: str
+    models: object  # workflow.Models
+    nams: object  # nams.Checkpoint
+    dr: object
+    jobs: list
+    folder: Path
+    tiles: int
+    features: object  # (targets, F) tensor: each group's tiles x views averaged
+    tile_features: object  # (targets, tiles, F) tensor: each tile's views averaged
+    feature_seconds: float
+    ranks: dict
+    pool: object = None  # dataset.TileFeatures of the training set: MS2's pre-rendered simulations
+    training_designs: list = ()  # the training set's designs: E1 also scores the targets it lacks
+
+
+def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
+                 bars: Bars | None = None) -> EvalContext:
+    """Build or reuse the training set and models; render the targets and compute their features."""
+    import time
+
+    from ..nams import load_checkpoint
+    from ..pipeline.dataset import job_tiles
+    from ..pipeline.features import features_for_groups
+    from ..pipeline.roofcolour import checkpoint_extractor
+    from ..pipeline.workflow import ensure_models
+    from ..render.jobs import sample_designs
+    from ..sim.imageio import read_image
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+
+    models = ensure_models(dataset, models_settings, root, bars)
+    nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
+    tiles = settings.tiles
+    jobs, folder = render_targets(experiment, settings.targets, tiles, settings.seed,
+                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bars)
+    extractor = checkpoint_extractor(nams, Path(models_settings.weights) if models_settings.weights else None)
+    started = time.perf_counter()
+    # Every tile x view weighs the same in a group's mean, so the mean of the tiles' features is the group's.
+    singles = [[read_image(p)] for job in jobs for p in job_tiles(folder, job.name, tiles)]
+    tile_feats = features_for_groups(singles, extractor, models_settings.views,
+                                     progress=bars(f"{experiment} target features", len(singles)) if bars else None)
+    tile_feats = tile_feats.reshape(len(jobs), tiles, -1)
+    feature_seconds = (time.perf_counter() - started) / len(jobs)
+    ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
+    pool = None
+    if settings.ms2:
+        from ..pipeline.dataset import build_tile_features
+        from ..pipeline.workflow import dataset_dir
+
+        pool = build_tile_features(dataset_dir(dataset, root), dataset, extractor, models_settings.views,
+                                   bars("MS2 pool: training tile features", dataset.designs) if bars else None)
+    training_designs = sample_designs(nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
+    return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, tile_feats.mean(dim=1), tile_feats,
+                       feature_seconds, ranks, pool, training_designs)
+
+
+def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
+    """Method name -> a function returning one design per target (searches batched over targets)."""
+    import torch
+
+    from ..nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
+
+    space, feats, n = ctx.nams.space, ctx.features, len(ctx.jobs)
+    generator = torch.Generator().manual_seed(seed)
+    norm = ctx.nams.feature_norm
+    normed = norm.apply(feats)
+    runs = {
+        "uniform": lambda: uniform_predict(space, n, generator),
+        "dr": lambda: [r.design for r in dr_predict(ctx.dr.model, ctx.dr.feature_norm.apply(feats), space)],
+    }
+    if ctx.pool is not None:
+        # MS2 compares distributions of single tiles, in the space NAMS searches in (see nams/ms2.py).
+        pool = norm.apply(ctx.pool.features.reshape(-1, ctx.pool.features.shape[-1]))
+        pool_designs = ctx.pool.encoded.repeat_interleave(ctx.pool.features.shape[1], dim=0)
+        runs["ms2"] = lambda: [r.design for r in ms2_search(
+            pool, pool_designs, [norm.apply(t) for t in ctx.tile_features], space, generator=generator)]
+    runs["nams_adjoint"] = lambda: [r.design for r in adjoint_search(
+        ctx.nams.model, normed, space, generator=generator, **adjoint_settings)]
+    runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)]
+    return runs
+
+
+def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> dict:
+    """Score another NAMS checkpoint with the exhaustive search on ``ctx``'s targets and features.
+
+    The checkpoint must use the same extractor as ``ctx``'s model or its
+    leading part (a model trained without the roof-colour histograms): the
+    features are cut to the dimensions it was trained on.
+    """
+    norm = checkpoint.feature_norm
+    dim = norm.mean.shape[0] + norm.hist_dim
+    if dim > ctx.features.shape[-1]:
+        raise MetaSimError(f"the checkpoint was trained on {dim} feature dimensions; these targets have "
+                           f"{ctx.features.shape[-1]}")
+    other = replace(ctx, nams=checkpoint, features=ctx.features[:, :dim],
+                    tile_features=ctx.tile_features[..., :dim], pool=None)
+    metrics, _ = score_method(other, method_runs(other, seed, {}, S)["nams_exhaustive"])
+    return {**metrics, "targets": len(ctx.jobs)}
+
+
+def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
+    """Mean top-1/top-10 rates and seconds per target of one method.
+
+    In E1 also ``unseen``: the rates over the targets whose design is not one
+    of the training set's (``unseen_targets`` of them). A method that only
+    recalls the designs it was trained on scores well overall and poorly there.
+    """
+    import time
+
+    started = time.perf_counter()
+    designs = run()
+    seconds = (time.perf_counter() - started) / len(ctx.jobs)
+    rows = [score(p, job.design, ctx.ranks) for p, job in zip(designs, ctx.jobs)]
+    metrics = {**mean_scores(rows), "seconds_per_target": seconds}
+    if ctx.training_designs:
+        unseen = unseen_rows(rows, ctx.jobs, ctx.training_designs)
+        metrics.update(unseen=mean_scores(unseen), unseen_targets=len(unseen))
+    return metrics, designs
+
+
+def run_eval(experiment: str, out: Path, dataset, models_settings, settings: EvalSettings = EvalSettings(),
+             root: Path | None = None, bars: Bars | None = None) -> dict:
+    """Build or reuse the training set and models, render targets, score every method."""
+    import shutil
+
+    from ..core.cache import cache_root
+    from ..render.jobs import RenderSettings
+    from ..sim.quality import get_preset
+
+    root = Path(root or cache_root())
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = prepare_eval(experiment, dataset, models_settings, settings, root, bars)
+    adjoint = settings.search_options()
+    methods, predictions = {}, {}
+    for name, run in method_runs(ctx, settings.seed, adjoint, settings.S).items():
+        methods[name], predictions[name] = score_method(ctx, run)
+    results = {"experiment": experiment, "targets": len(ctx.jobs), "tiles_per_target": ctx.tiles,
+               "feature_seconds_per_target": ctx.feature_seconds, "methods": methods,
+               "adjoint": adjoint, "training": {"designs": dataset.designs, "tiles": dataset.tiles,
+                                                "preset": dataset.preset, "seconds": ctx.models.seconds},
+               "model_id": ctx.nams.model_id, "architecture": ctx.nams.model.config.architecture,
+               "targets_detail": [{"name": j.name, "truth": j.design,
+                                   "predicted": {m: predictions[m][i] for m in predictions}}
+                                  for i, j in enumerate(ctx.jobs)]}
+    write_results(out, results)
+    shutil.copy2(ctx.models.nams_path, out / "nams.pt")
+    shutil.copy2(ctx.models.dr_path, out / "dr.pt")
+    banks = _banks()
+    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, predictions["nams_exhaustive"],
+                     RenderSettings(space=DesignSpace.load(), banks=banks,
+                                    preset=get_preset(settings.preset or dataset.preset),
+                                    out_dir=root / "targets" / "inferred", n_tiles=ctx.tiles,
+                                    tile_px=dataset.tile_px, pixel_size_m=dataset.pixel_size_m))
+    return results
+
+
+def _banks() -> list:
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+
+    return [ensure_default_bank(), ensure_heldout_bank()]
+
+
+def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted: list[dict],
+                     settings) -> None:
+    """Each target's first tile beside the same city rendered with the inferred design, and the textures."""
+    from ..pipeline.dataset import job_tiles
+    from ..render.loop import render_jobs
+    from ..sim.imageio import read_image
+    from ..sim.textures.pngio import write_png
+    from ..sim.textures.sheet import render_sheet
+
+    space, banks, folder, tiles = settings.space, settings.banks, settings.out_dir, settings.n_tiles
+    inferred = [Job(design, job.city_seed, f"{job.name}-inferred")
+                for job, design in zip(jobs, predicted)]
+    render_jobs(inferred, settings)
+
+    def srgb8(path):
+        return np.floor(read_image(path) * 255 + 0.5).astype(np.uint8)
+
+    def swatch(texture_id):
+        return next(b for b in banks if b.contains(texture_id)).load_image(texture_id)
+
+    rows = []
+    for job, guess in zip(jobs, inferred):
+        row = [("TARGET", srgb8(job_tiles(target_folder, job.name, tiles)[0])),
+               ("INFERRED", srgb8(job_tiles(folder, guess.name, tiles)[0]))]
+        for param in space.names:
+            kind = KIND_OF[param][0].upper()
+            row += [(f"{kind} TRUE", swatch(job.design[param])), (f"{kind} NAMS", swatch(guess.design[param]))]
+        rows.append(row)
+    write_png(path, render_sheet(rows, 160, len(rows[0])))

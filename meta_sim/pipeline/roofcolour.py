@@ -1,0 +1,224 @@
+"""Roof colour: the colours of the pixels that are likely roofs, found without labels at inference.
+
+Why. The default features describe whole tiles, and the search weighs them
+by the simulation noise (``nams.train.FeatureNorm``): what tells one bank
+texture from another in a render. A target roofed with a texture the bank
+lacks (E2) then goes to the bank texture of the most similar *structure*,
+whatever its colour, while the E2 score -- and an artist -- asks for the
+nearest colour. So NAMS also sees, per roof kind, a colour histogram of the
+pixels likely to be roofs of that kind, and the search compares those
+histograms by their plain distance, not whitened by the noise (see
+``FeatureNorm`` and ``nams.search``).
+
+* The roof finder gives each pixel a probability of being a flat and a
+  sloped roof. By default ``roofsegment.RoofSegmenter``, a small net learnt
+  on the training tiles' labels that sees roofs by shape and shading;
+  ``make bench-nams`` (row ``nams_exhaustive_colour_roof_finder``) measures
+  it against the colour-only finder below.
+* ``RoofLikelihood``: p(flat roof | colour) and p(sloped roof | colour) for
+  each of 16^3 sRGB bins of 2x2-pixel means, counted on the training tiles'
+  label passes: ``(n_kind + PRIOR x PRIOR_COUNT) / (n + PRIOR_COUNT)``. A
+  colour the training tiles never showed reads PRIOR for each kind (half
+  "some roof"): in a city whose ground, roads and trees come from a fixed
+  palette, an unseen colour is more likely a roof than not.
+* ``RoofColourExtractor``: another extractor's features followed by, per
+  roof kind, the soft histogram of the tile's 2x2-pixel means in
+  ``ColourTexture``'s stretched HSV cone (its 488 reachable bins), each
+  pixel weighted by the finder's probability of that kind raised to
+  ``WEIGHT_POWER``, divided by the pixel count. The mean over a group's
+  tiles therefore pools their pixels; ``FeatureNorm`` makes each histogram
+  sum to 1 and takes its square root. The power keeps the pixels the
+  finder is sure of and all but drops the doubtful ones (roof edges, the
+  other roof kind, roof-like ground): histograms compared once they sum to
+  1 gain more from a purer sample than from a larger one.
+
+The finder belongs to the training set it was learnt on; the checkpoint
+stores it, so inference needs no labels.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import torch
+
+from ..core.errors import MetaSimError
+from ..core.fileio import atomic_path
+from .features import ColourTexture, _cone_axes, _half, _reachable_cone_bins, _soft_histogram
+
+VERSION = 1
+BINS = 16  # per sRGB channel
+PRIOR = 0.25  # per roof kind, for a colour without evidence
+PRIOR_COUNT = 10.0  # pixels' worth of evidence the prior is worth
+KINDS = ("flat", "sloped")
+WEIGHT_POWER = 4.0  # a pixel counts p(kind) ** WEIGHT_POWER in its kind's histogram
+LIKELIHOOD_FILE = f"roof-likelihood-v{VERSION}.pt"
+
+
+def _bin_index(level1: torch.Tensor) -> torch.Tensor:
+    """(N, H, W) index of each pixel's 16^3 sRGB bin; ``level1`` is (N, 3, H, W) in [0, 1]."""
+    q = (level1.clamp(0.0, 1.0) * BINS).long().clamp_(max=BINS - 1)
+    return (q[:, 0] * BINS + q[:, 1]) * BINS + q[:, 2]
+
+
+def _level1(batch: torch.Tensor) -> torch.Tensor:
+    """2x2-pixel means of an (N, C, H, W) batch (a last odd row or column is left out)."""
+    h, w = batch.shape[-2] - batch.shape[-2] % 2, batch.shape[-1] - batch.shape[-1] % 2
+    return _half(batch[..., :h, :w])
+
+
+class RoofLikelihood:
+    """p(roof kind | colour of a 2x2-pixel mean), per 16^3 sRGB bin and roof kind."""
+
+    def __init__(self, tables: torch.Tensor, pixels: int):
+        tables = torch.as_tensor(tables, dtype=torch.float32)
+        if tables.shape != (len(KINDS), BINS ** 3) or not torch.isfinite(tables).all():
+            raise MetaSimError(f"a roof likelihood holds ({len(KINDS)}, {BINS ** 3}) finite probabilities, "
+                               f"got {tuple(tables.shape)}")
+        self.tables = tables
+        self.pixels = int(pixels)
+        digest = hashlib.sha256(tables.numpy().tobytes()).hexdigest()[:12]
+        self.id = f"roof-colour-v{VERSION}[{BINS}^3,prior{PRIOR:g}x{PRIOR_COUNT:g}]-{digest}"
+
+    @classmethod
+    def from_counts(cls, counts: torch.Tensor) -> "RoofLikelihood":
+        """From (3, 16^3) pixel counts: all pixels, flat-roof pixels, sloped-roof pixels per bin."""
+        counts = counts.double()
+        tables = (counts[1:] + PRIOR * PRIOR_COUNT) / (counts[:1] + PRIOR_COUNT)
+        return cls(tables.float(), int(round(float(counts[0].sum()))))
+
+    @classmethod
+    def fit(cls, paths, progress: Callable[[int], None] | None = None) -> "RoofLikelihood":
+        """Counted on meta-sim EXR tiles (their RGB as ``read_image`` gives it, and their roof labels)."""
+        from ..sim.imageio import linear_to_srgb
+        from ..sim.meshes import FLAT_ROOF, SLOPED_ROOF
+        from ..sim.tiles import read_tile
+
+        counts = torch.zeros(3, BINS ** 3, dtype=torch.float64)
+        n = 0
+        for path in paths:
+            tile = read_tile(path)
+            rgb = torch.from_numpy(linear_to_srgb(tile.rgb).astype(np.float32)).permute(2, 0, 1)[None]
+            labels = torch.from_numpy(np.stack([tile.roof_class == FLAT_ROOF, tile.roof_class == SLOPED_ROOF])
+                                      .astype(np.float32))[None]
+            index = _bin_index(_level1(rgb)).flatten()
+            shares = _level1(labels)[0].flatten(1).double()  # each mean's share of flat / sloped pixels
+            counts[0] += torch.bincount(index, minlength=BINS ** 3).double()
+            for k in range(len(KINDS)):
+                counts[k + 1] += torch.bincount(index, shares[k], minlength=BINS ** 3)
+            n += 1
+            if progress:
+                progress(1)
+        if n == 0:
+            raise MetaSimError("no training tiles to count roof colours on")
+        return cls.from_counts(counts)
+
+    def weights(self, level1: torch.Tensor) -> torch.Tensor:
+        """(N, kinds, H, W) likelihood of each roof kind for each pixel of an (N, 3, H, W) batch."""
+        return self.tables[:, _bin_index(level1)].permute(1, 0, 2, 3)
+
+    def to_dict(self) -> dict:
+        return {"version": VERSION, "tables": self.tables.clone(), "pixels": self.pixels}
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "RoofLikelihood":
+        if data.get("version") != VERSION:
+            raise MetaSimError(f"roof likelihood version {data.get('version')!r}; this meta-sim reads "
+                               f"version {VERSION} (train the model again)")
+        return cls(data["tables"], data["pixels"])
+
+
+ROOF_FINDERS = ("segmenter", "colour")
+
+
+def roof_finder_from_dict(data: Mapping):
+    """A ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter`` from its ``to_dict()``."""
+    if data.get("kind") == "segmenter":
+        from .roofsegment import RoofSegmenter
+
+        return RoofSegmenter.from_dict(data)
+    return RoofLikelihood.from_dict(data)
+
+
+def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segmenter", seed: int = 0,
+                       progress: Callable[[int], None] | None = None):
+    """A training set's roof finder (``ROOF_FINDERS``: the segmenter, or the colour likelihood), learnt
+    once on its tiles and cached in its ``folder``. ``progress`` gets tiles counted or training steps."""
+    if finder not in ROOF_FINDERS:
+        raise MetaSimError(f"unknown roof finder {finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
+    from .roofsegment import RoofSegmenter, config_id
+
+    segmenter = finder == "segmenter"
+    path = Path(folder) / (f"roof-segmenter-{config_id()}-seed{seed}.pt" if segmenter else LIKELIHOOD_FILE)
+    if path.is_file():
+        try:
+            data = torch.load(path, weights_only=True)
+            if data.get("tiles") == len(tile_paths):
+                return roof_finder_from_dict(data)
+        except Exception:  # a damaged or outdated cache is learnt again, never trusted
+            pass
+    if segmenter:
+        found = RoofSegmenter.fit(tile_paths, seed, progress=progress)
+    else:
+        found = RoofLikelihood.fit(tile_paths, progress)
+    with atomic_path(path) as tmp:
+        torch.save({**found.to_dict(), "tiles": len(tile_paths)}, tmp)
+    return found
+
+
+class RoofColourExtractor:
+    """``base``'s features, then per roof kind the colour histogram (488 bins) of the pixels weighted by
+    ``finder``'s probability of that roof kind (a ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter``)
+    raised to ``power``."""
+
+    def __init__(self, base, finder, power: float = WEIGHT_POWER):
+        if not (math.isfinite(power) and power > 0):
+            raise MetaSimError(f"the roof weight power must be a positive number, got {power!r}")
+        self.base, self.finder, self.power = base, finder, float(power)
+        self._keep = _reachable_cone_bins(ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
+        self.hist_blocks = (int(self._keep.sum()),) * len(KINDS)
+        self.base_dim = base.dim
+        self.dim = base.dim + sum(self.hist_blocks)
+        self.id = f"{base.id}+{finder.id}" + (f"^{self.power:g}" if self.power != 1.0 else "")
+        # The histograms do not change under the dihedral views either.
+        self.dihedral_invariant = getattr(base, "dihedral_invariant", False)
+
+    def to_dict(self) -> dict:
+        """What a checkpoint keeps of the roof-colour part (``checkpoint_extractor`` reads it back):
+        the finder's ``to_dict()`` and the weight power."""
+        return {**self.finder.to_dict(), "weight_power": self.power}
+
+    @torch.no_grad()
+    def __call__(self, batch: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.base(batch), self.roof_histograms(batch)], dim=1)
+
+    def roof_histograms(self, batch: torch.Tensor) -> torch.Tensor:
+        parts = []
+        for chunk in batch.split(ColourTexture.CHUNK):
+            level1 = _level1(torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0))
+            axes = _cone_axes(level1, ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
+            weights = self.finder.weights(level1)
+            if self.power != 1.0:
+                weights = weights ** self.power
+            parts.append(torch.cat([_soft_histogram(axes, weights[:, k])[:, self._keep]
+                                    for k in range(len(KINDS))], dim=1))
+        return torch.cat(parts)
+
+
+def checkpoint_extractor(ckpt, weights: Path | None = None):
+    """The extractor a checkpoint's features came from: its base extractor, with the roof colour
+    part when the checkpoint has one. ``weights``: a backbone's weights file, when it needs one."""
+    from .features import make_extractor
+
+    extractor = make_extractor(ckpt.extra.get("extractor_spec", "colour-texture"), weights)
+    if "roof_likelihood" in ckpt.extra:
+        roof = ckpt.extra["roof_likelihood"]  # RoofColourExtractor.to_dict(); no power before it was kept: 1
+        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(roof), roof.get("weight_power", 1.0))
+    if extractor.id != ckpt.extractor_id:
+        raise MetaSimError(f"the model was trained on features {ckpt.extractor_id!r} but its extractor now gives "
+                           f"{extractor.id!r}; pass the same backbone weights (--weights)")
+    return extractor

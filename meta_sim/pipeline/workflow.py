@@ -1,0 +1,159 @@
+"""Training set -> features -> NAMS and DR checkpoints, cached by what went in.
+
+`meta-sim train`, `meta-sim eval` and `make demo` share this path. A cached
+model is reused only when the dataset configuration, the extractor, the view
+count and the training settings are all unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+
+from ..core.cache import cache_root
+from ..core.errors import MetaSimError
+from ..core.progress import Bars
+from ..nams.model import DEFAULT_ARCHITECTURE, architecture_options
+from .dataset import DatasetConfig, FeatureSet, build_features, render_training_set
+
+# Bumped when training changes in a way no setting shows (e.g. how features are normalised).
+MODEL_CODE_VERSION = 2
+
+
+@dataclass(frozen=True)
+class ModelSettings:
+    architecture: str = DEFAULT_ARCHITECTURE  # a name from nams.ARCHITECTURES
+    extractor: str = "colour-texture"
+    weights: str | None = None
+    views: int = 8
+    nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
+    train: dict = field(default_factory=dict)  # TrainConfig overrides
+    seed: int = 0
+    # Add the roof-colour histograms to the features (meta_sim.roofcolour); needs the tiles' labels.
+    roof_colour: bool = True
+    # What finds the roofs they count: roofcolour.ROOF_FINDERS (the learnt segmenter, or colour alone).
+    roof_finder: str = "segmenter"
+    # A pixel counts p(roof kind) ** roof_weight_power in that kind's histogram (1: the plain probability).
+    roof_weight_power: float = 4.0
+
+    def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
+        """Names the cached models: every input, with the training and model defaults resolved, so
+        that a change of a default (not only of an override) trains afresh."""
+        from ..nams import NAMSConfig, TrainConfig
+
+        hidden = architecture_options(self.architecture, ())["hidden"]  # an unknown name: an error here
+        nams = NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, "hidden": hidden, **self.nams}).to_dict()
+        # The architecture names blocks and predictor (filled in from the design space when training);
+        # keys without them stay those of the models cached before architectures existed.
+        for name in ("blocks", "predictor", "colour_dims"):
+            if name not in self.nams:
+                del nams[name]
+        train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
+        inputs = {"dataset": dataset.identity(), "extractor": extractor_id, "views": self.views,
+                  "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION}
+        if self.architecture != "paper":  # models cached before the choice existed are the paper's
+            inputs["architecture"] = self.architecture
+        if self.roof_colour:  # models without it keep the keys they had before it existed
+            from .roofcolour import VERSION
+
+            inputs["roof_colour"] = VERSION
+        blob = json.dumps(inputs, sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()[:12]
+
+
+@dataclass
+class Models:
+    nams_path: Path
+    dr_path: Path
+    features: FeatureSet
+    seconds: dict
+
+
+def dataset_dir(config: DatasetConfig, root: Path | None = None) -> Path:
+    return Path(root or cache_root()) / "datasets" / config.key()
+
+
+def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
+                     bars: Bars | None = None) -> tuple[FeatureSet, dict]:
+    """Render what is missing of the training set and compute what is missing of its features."""
+    from .features import make_extractor
+
+    folder = dataset_dir(config, root)
+    seconds = {}
+    started = time.perf_counter()
+    render_training_set(folder, config, bars("render training set", config.designs * config.tiles) if bars else None)
+    seconds["render"] = time.perf_counter() - started
+    extractor = make_extractor(settings.extractor, Path(settings.weights) if settings.weights else None)
+    started = time.perf_counter()
+    if settings.roof_colour:
+        from .dataset import training_tiles
+        from .roofcolour import RoofColourExtractor, ensure_roof_finder
+
+        paths = training_tiles(folder, config)
+        if settings.roof_finder == "segmenter":
+            from .roofsegment import STEPS
+
+            progress = bars("roof segmenter", STEPS) if bars else None
+        else:
+            progress = bars("roof colours", len(paths)) if bars else None
+        extractor = RoofColourExtractor(extractor, ensure_roof_finder(folder, paths, settings.roof_finder,
+                                                                      settings.seed, progress),
+                                        settings.roof_weight_power)
+    features = build_features(folder, config, extractor, settings.views,
+                              bars("features", config.designs) if bars else None)
+    seconds["features"] = time.perf_counter() - started
+    return features, seconds
+
+
+def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, dataset: DatasetConfig,
+                 bars: Bars | None = None) -> dict:
+    """Train NAMS and the DR baseline on a feature set; write ``nams.pt`` and ``dr.pt``."""
+    from ..nams import NAMSConfig, TrainConfig, save_checkpoint, train_dr, train_nams
+
+    torch.manual_seed(settings.seed)
+    train_config = TrainConfig.from_dict({"seed": settings.seed, **settings.train})
+    architecture = architecture_options(settings.architecture, features.space.widths())
+    nams_config = NAMSConfig.from_dict({"design_dim": features.encoded.shape[1],
+                                        "feature_dim": features.features.shape[1], **architecture, **settings.nams})
+    seconds = {}
+    out_dir = Path(out_dir)
+    # DR keeps per-feature standardisation: whitening is there for the search's metric, and DR
+    # has no search (it is the paper's baseline as measured; `make bench-nams` has its E1/E2 rows).
+    jobs = (("nams", train_nams, nams_config, train_config),
+            ("dr", train_dr, None, dataclasses.replace(train_config, whiten=0)))
+    for kind, trainer, config, trainer_config in jobs:
+        update = bars(f"train {kind}", train_config.max_epochs) if bars else None
+        started = time.perf_counter()
+        fit = trainer(features.encoded, features.features, config, trainer_config,
+                      (lambda report, update=update: update(1)) if update else None, features.hist_blocks)
+        seconds[f"train_{kind}"] = time.perf_counter() - started
+        extra = {"designs": len(features.names), "views": features.views,
+                 "extractor_spec": settings.extractor, "seconds": seconds[f"train_{kind}"],
+                 "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m, "dataset": asdict(dataset)}
+        if features.roof_likelihood is not None:
+            extra["roof_likelihood"] = features.roof_likelihood
+        save_checkpoint(out_dir / f"{kind}.pt", kind, fit.model, fit.model.config, features.space.to_dict(),
+                        fit.norm, features.extractor_id, extra=extra, history=fit.history)
+    return seconds
+
+
+def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
+                  bars: Bars | None = None) -> Models:
+    """The cached NAMS and DR checkpoints for these inputs, trained first if they are missing."""
+    from ..nams import load_checkpoint
+
+    features, seconds = prepare_features(config, settings, root, bars)
+    folder = Path(root or cache_root()) / "models" / settings.key(config, features.extractor_id)
+    paths = {kind: folder / f"{kind}.pt" for kind in ("nams", "dr")}
+    try:
+        for kind, path in paths.items():
+            load_checkpoint(path, kind)
+    except MetaSimError:
+        seconds.update(train_models(features, folder, settings, config, bars))
+    return Models(paths["nams"], paths["dr"], features, seconds)

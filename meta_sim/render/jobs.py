@@ -1,0 +1,103 @@
+"""What a render is asked to do: jobs (one design in one city), their settings, tile names,
+the metadata a finished tile carries, and ``designs.json`` beside the tiles. No bpy here."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..core.fileio import write_text_atomic
+from ..sim import tiles
+from ..sim.design import DesignSpace
+from ..sim.quality import RenderPreset
+
+
+@dataclass(frozen=True)
+class Job:
+    """One design to render in one city: tiles ``{name}_t{j:02d}.exr``.
+
+    ``tiles`` restricts the job to some tile indices (a farm task); None means all of them.
+    """
+
+    design: dict
+    city_seed: int
+    name: str
+    tiles: tuple | None = None
+
+    def tile_indices(self, n_tiles: int) -> tuple:
+        return tuple(range(n_tiles)) if self.tiles is None else tuple(self.tiles)
+
+
+@dataclass
+class RenderSettings:
+    space: DesignSpace
+    banks: list  # TextureBank objects; a texture id is looked up in each in turn
+    preset: RenderPreset
+    out_dir: Path
+    n_tiles: int = 9
+    tile_px: int = 384
+    pixel_size_m: float = 0.3
+    preview: bool = False
+
+    @property
+    def tile_m(self) -> float:
+        return self.tile_px * self.pixel_size_m
+
+
+@dataclass
+class RenderSummary:
+    written: int = 0
+    skipped: int = 0
+    cities: int = 0
+    seconds: dict = field(default_factory=lambda: defaultdict(float))
+    paths: list = field(default_factory=list)
+
+
+def tile_path(out_dir: Path, job: Job, index: int) -> Path:
+    return Path(out_dir) / f"{job.name}_t{index:02d}.exr"
+
+
+def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
+    """The metadata a valid tile of ``job`` carries (``tiles.is_valid_tile`` compares it)."""
+    return {"design": job.design, "design_space": settings.space.name, "city_seed": job.city_seed,
+            "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
+            "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
+            "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields()}
+
+
+def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int) -> list[Job]:
+    """Jobs for a training set: design k is rendered in city ``seed + k % cities``."""
+    return [Job(design, seed + k % cities, f"d{k:05d}") for k, design in enumerate(designs)]
+
+
+def single_job(space: DesignSpace, design: dict, seed: int) -> Job:
+    name = "+".join(str(design[n]) for n in space.names)
+    return Job(design, seed, f"{name}_s{seed}")
+
+
+def sample_designs(space: DesignSpace, n: int, seed: int) -> list[dict]:
+    """``n`` uniform designs; the first k do not depend on n (a larger set extends a smaller)."""
+    return space.sample(np.random.default_rng([seed, 1]), n)
+
+
+def write_job_manifest(out_dir: Path, jobs: list[Job], settings: RenderSettings) -> Path:
+    """``designs.json`` beside the tiles: every job rendered into the folder, with its design,
+    city seed, settings and tile names (jobs already listed by an earlier run are kept)."""
+    path = Path(out_dir) / "designs.json"
+    entries = {}
+    if path.is_file():
+        try:
+            entries = {e["name"]: e for e in json.loads(path.read_text()).get("jobs", [])}
+        except (ValueError, KeyError, TypeError, AttributeError):
+            entries = {}  # a damaged manifest is rebuilt from this run
+    for job in jobs:
+        entries[job.name] = {"name": job.name, "design": job.design, "city_seed": job.city_seed,
+                             "design_space": settings.space.name, "preset": settings.preset.name,
+                             "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m,
+                             "tiles": [tile_path(out_dir, job, j).name for j in range(settings.n_tiles)]}
+    data = {"format": "meta-sim-render-job", "version": 1, "jobs": [entries[k] for k in sorted(entries)]}
+    return write_text_atomic(path, json.dumps(data, indent=1) + "\n")

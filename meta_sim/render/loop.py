@@ -1,0 +1,176 @@
+"""The render loop: jobs x tiles -> one EXR per tile (RGB + exact labels + metadata).
+
+Runs wherever ``bpy`` imports: the ``bpy`` module in a virtual environment
+(``python -m meta_sim.render.worker``) or Blender's own Python
+(``blender -b --python jobs/render_tiles.py -- ...``). No torch here.
+
+Work is grouped by city: a city's geometry is built once and its labels are
+rendered once; each design then only swaps the roof materials. Tiles are
+rendered in blocks of up to 3 x 3 adjacent tiles and cut afterwards. A tile
+that already exists, reads back completely and carries the same metadata is
+skipped, so a rerun resumes an interrupted job.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Callable
+
+from ..core.errors import MetaSimError
+from ..core.extras import require
+from ..sim import meshes, tiles
+from ..sim.design import DesignSpace
+from ..sim.layout import LayoutParams, layout_for_tiles
+from ..sim.preview import write_mosaic, write_previews
+from .jobs import Job, RenderSettings, RenderSummary, expected_meta, tile_path, write_job_manifest
+
+BLOCK_TILES = 3  # tiles per block side: a 1152 px render amortises Blender's per-frame cost
+
+
+def resolve_textures(space: DesignSpace, design: dict, banks) -> dict:
+    """Roof slot -> (texture entry, image path) for a design's texture parameters."""
+    out = {}
+    for kind, slot in (("flat", meshes.FLAT_ROOF), ("sloped", meshes.SLOPED_ROOF)):
+        param = space.texture_parameter(kind)
+        if param is None:
+            continue
+        texture_id = design[param.name]
+        for bank in banks:
+            if bank.contains(texture_id):
+                entry = bank.by_id(texture_id)
+                if entry.kind != kind:
+                    raise MetaSimError(f"{param.name}: texture {texture_id!r} is a {entry.kind} texture, "
+                                       f"not a {kind} one")
+                path = Path(bank.image_path(texture_id))
+                if not path.is_file():
+                    raise MetaSimError(f"texture file {path} of {texture_id!r} is missing; "
+                                       "rebuild the bank with `meta-sim textures build`")
+                out[slot] = (entry, str(path))
+                break
+        else:
+            raise MetaSimError(f"{param.name}: texture {texture_id!r} is in none of the texture banks given")
+    return out
+
+
+def blocks_of(n_tiles: int, cols: int) -> list[list[int]]:
+    """Tile indices grouped into blocks of up to BLOCK_TILES x BLOCK_TILES adjacent tiles."""
+    groups = defaultdict(list)
+    for index in range(n_tiles):
+        row, col = divmod(index, cols)
+        groups[(row // BLOCK_TILES, col // BLOCK_TILES)].append(index)
+    return [groups[key] for key in sorted(groups)]
+
+
+def _layout_params(space: DesignSpace, design: dict) -> LayoutParams:
+    overrides = space.layout_overrides(design)
+    try:
+        return LayoutParams(**overrides)
+    except TypeError as exc:
+        raise MetaSimError(f"design space {space.name!r} sets an unknown layout field: {exc}") from None
+
+
+def render_jobs(jobs: list[Job], settings: RenderSettings,
+                progress: Callable[[int], None] | None = None, record: bool = True) -> RenderSummary:
+    """Render every missing tile of every job; returns counts and stage timings.
+
+    ``record`` writes ``designs.json`` beside the tiles; a farm turns it off, since its
+    manifest lists the folder's jobs and concurrent workers would race on that file.
+    """
+    require("bpy", "rendering")
+    from ..blender.scene import CityScene, Rect, blender_version, bounding_rect  # bpy only when rendering
+
+    out_dir = Path(settings.out_dir)
+    _check_writable(out_dir)
+    software = tiles.software_versions(blender=blender_version())
+    summary = RenderSummary()
+    by_city: dict = defaultdict(list)
+    for job in jobs:
+        params = _layout_params(settings.space, job.design)
+        textures = resolve_textures(settings.space, job.design, settings.banks)  # fail early
+        wanted = job.tile_indices(settings.n_tiles)
+        pending = [j for j in wanted
+                   if not tiles.is_valid_tile(tile_path(out_dir, job, j), expected_meta(settings, job, j))]
+        summary.skipped += len(wanted) - len(pending)
+        if progress and len(wanted) - len(pending):
+            progress(len(wanted) - len(pending))
+        if pending:
+            by_city[(job.city_seed, params)].append((job, textures, pending))
+    if record:
+        write_job_manifest(out_dir, jobs, settings)
+
+    for (city_seed, params), work in by_city.items():
+        clock = time.perf_counter()
+        layout, rects = layout_for_tiles(city_seed, settings.n_tiles, settings.tile_m, params)
+        summary.seconds["layout"] += time.perf_counter() - clock
+        cols = _grid_columns(rects)
+        needed = sorted({j for _, _, pending in work for j in pending})
+        blocks = [b for b in blocks_of(settings.n_tiles, cols) if set(b) & set(needed)]
+        clock = time.perf_counter()
+        # The scene always holds every requested tile, whichever are pending, so a resumed
+        # job renders the same pixels as an uninterrupted one.
+        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m)
+        summary.seconds["build"] += time.perf_counter() - clock
+        summary.cities += 1
+        try:
+            block_rects = [bounding_rect([Rect(*rects[j]) for j in block]) for block in blocks]
+            clock = time.perf_counter()
+            labels = [scene.render_labels(rect) for rect in block_rects]
+            summary.seconds["labels"] += time.perf_counter() - clock
+            for job, textures, pending in work:
+                scene.set_roofs(textures)
+                for block, rect, (instance, roof_class) in zip(blocks, block_rects, labels):
+                    todo = [j for j in block if j in pending]
+                    if not todo:
+                        continue
+                    clock = time.perf_counter()
+                    rgb = scene.render_rgb(rect, settings.preset)
+                    summary.seconds["render"] += time.perf_counter() - clock
+                    clock = time.perf_counter()
+                    for j in todo:
+                        cut = _cut(rect, Rect(*rects[j]), settings)
+                        path = tile_path(out_dir, job, j)
+                        meta = tiles.tile_metadata(
+                            design=job.design, space=settings.space.name, city_seed=job.city_seed,
+                            tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
+                            pixel_size_m=settings.pixel_size_m, preset=settings.preset,
+                            software=software)
+                        tiles.write_tile(path, rgb[cut], instance[cut], roof_class[cut], meta)
+                        if settings.preview:
+                            write_previews(path, rgb[cut], instance[cut], roof_class[cut])
+                        summary.written += 1
+                        summary.paths.append(path)
+                        if progress:
+                            progress(1)
+                    summary.seconds["write"] += time.perf_counter() - clock
+                if settings.preview:
+                    images = [tiles.read_tile(tile_path(out_dir, job, j)).rgb for j in range(settings.n_tiles)]
+                    write_mosaic(out_dir / f"{job.name}_mosaic.png", images, rects, settings.pixel_size_m)
+        finally:
+            scene.close()
+    return summary
+
+
+def _grid_columns(rects) -> int:
+    """Columns of the row-major tile grid (tiles of the first row share its y)."""
+    first_y = rects[0][1]
+    return sum(1 for r in rects if abs(r[1] - first_y) < 1e-6)
+
+
+def _cut(block, tile, settings: RenderSettings):
+    """Row/column slices of ``tile`` inside the render of ``block`` (row 0 = north)."""
+    col = int(round((tile.x0 - block.x0) / settings.pixel_size_m))
+    row = int(round((block.y1 - tile.y1) / settings.pixel_size_m))
+    return slice(row, row + settings.tile_px), slice(col, col + settings.tile_px)
+
+
+def _check_writable(out_dir: Path) -> None:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out_dir):  # a unique name: concurrent workers share the folder
+            pass
+    except OSError as exc:
+        raise MetaSimError(f"cannot write to output folder {out_dir}: {exc.strerror}; "
+                           "choose another --out") from None

@@ -1,0 +1,42 @@
+"""The render options, declared once as data.
+
+Blender's own Python has neither click nor tqdm: a worker reads these options with argparse, the
+click CLI builds its ``render`` command from the same table, and the add-on writes them into the
+command lines of an exported render job.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class Option:
+    flag: str
+    type: type
+    default: object
+    help: str
+    is_flag: bool = False
+
+    @property
+    def dest(self) -> str:
+        return self.flag.lstrip("-").replace("-", "_")
+
+
+RENDER_OPTIONS = (
+    Option("--design", str, None, "design to render, e.g. flat_roof=3,sloped_roof=sloped-clay-red "
+           "(0-based index or texture id; held-out texture ids are accepted)"),
+    Option("--random-designs", int, None, "render N uniformly sampled designs (a training set) instead"),
+    Option("--seed", int, 1, "city seed (random designs: also the design sampling seed)"),
+    Option("--cities", int, 8, "random designs: design k is rendered in city seed + (k mod CITIES)"),
+    Option("--tiles", int, 9, "tiles per design (a near-square grid of adjacent tiles)"),
+    Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
+    Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),
+    Option("--bank", Path, None, "texture bank folder (default: the built-in bank, built on first use)"),
+    Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1, "
+           "or with --bank, one parameter per roof kind of that bank)"),
+    Option("--tile-px", int, 384, "tile width and height in pixels"),
+    Option("--gsd", float, 0.3, "ground sampling distance: metres per pixel"),
+    Option("--preview", bool, False, "also write an RGB PNG and a colour-coded label PNG per tile", True),
+)

@@ -1,0 +1,297 @@
+"""The design space: which scene parameters a design sets, and their values.
+
+A design space is declared in a versioned JSON file (see ``meta_sim/sim/spaces``):
+
+    {"format": "meta-sim-design-space", "version": 1, "name": "rooftops",
+     "parameters": [
+        {"name": "flat_roof", "type": "categorical", "texture_kind": "flat",
+         "choices": ["flat-gravel-light", ...]},
+        {"name": "building_density", "type": "continuous", "low": 0.3, "high": 0.9,
+         "layout_field": "building_density"}],
+     "layout": {"sloped_share": 0.0}}
+
+A categorical parameter with ``texture_kind`` sets the material of every roof
+of that kind; a continuous parameter with ``layout_field`` sets that field of
+the city layout. ``layout`` holds fixed layout overrides the scene needs (a
+space without sloped roofs builds none).
+
+A design is a plain ``dict``: parameter name -> choice id (categorical) or
+float (continuous). Encoding concatenates a one-hot block per categorical
+parameter and one value in [0, 1] per continuous parameter, in declaration
+order: the default space encodes to the paper's 40 + 44 = 84-D vector.
+
+Pure Python and numpy: imported by the add-on, the renderer and the torch side.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from ..core.errors import MetaSimError
+
+FORMAT = "meta-sim-design-space"
+VERSION = 1
+SPACES_DIR = Path(__file__).parent / "spaces"
+DEFAULT_SPACE = "rooftops-v1"
+
+
+@dataclass(frozen=True)
+class Categorical:
+    name: str
+    choices: tuple[str, ...]
+    texture_kind: str | None = None
+
+    @property
+    def width(self) -> int:
+        return len(self.choices)
+
+    def resolve(self, value, extra: Iterable[str] = ()) -> str:
+        """A choice id from an id or a 0-based index (int or digit string).
+
+        ``extra`` ids are accepted as well (held-out textures may be rendered,
+        though they cannot be encoded).
+        """
+        if isinstance(value, (int, np.integer)) or (isinstance(value, str) and value.isdigit()):
+            index = int(value)
+            if not 0 <= index < len(self.choices):
+                raise MetaSimError(
+                    f"{self.name}: index {index} is out of range; use 0..{len(self.choices) - 1} "
+                    f"or a choice id such as {self.choices[0]!r}")
+            return self.choices[index]
+        if isinstance(value, str) and (value in self.choices or value in set(extra)):
+            return value
+        raise MetaSimError(
+            f"{self.name}: unknown choice {value!r}; use a 0-based index or one of "
+            f"{_preview(self.choices)} (`meta-sim textures list` shows all)")
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "type": "categorical", "choices": list(self.choices)}
+        if self.texture_kind:
+            out["texture_kind"] = self.texture_kind
+        return out
+
+
+@dataclass(frozen=True)
+class Continuous:
+    name: str
+    low: float
+    high: float
+    layout_field: str | None = None
+
+    @property
+    def width(self) -> int:
+        return 1
+
+    def resolve(self, value, extra: Iterable[str] = ()) -> float:
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise MetaSimError(f"{self.name}: {value!r} is not a number") from None
+        if not (self.low <= number <= self.high):
+            raise MetaSimError(
+                f"{self.name}: {number} is out of range [{self.low}, {self.high}]")
+        return number
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "type": "continuous", "low": self.low, "high": self.high}
+        if self.layout_field:
+            out["layout_field"] = self.layout_field
+        return out
+
+
+Parameter = Categorical | Continuous
+
+
+def _preview(choices: tuple[str, ...], n: int = 3) -> str:
+    shown = ", ".join(repr(c) for c in choices[:n])
+    return shown + (", ..." if len(choices) > n else "")
+
+
+@dataclass(frozen=True)
+class DesignSpace:
+    name: str
+    parameters: tuple[Parameter, ...]
+    layout: Mapping[str, float] = field(default_factory=dict)
+    version: int = VERSION
+
+    # --- declaration -------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "DesignSpace":
+        if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+            raise MetaSimError(f"not a design-space file (expected \"format\": \"{FORMAT}\")")
+        version = data.get("version")
+        if version != VERSION:
+            raise MetaSimError(
+                f"design-space version {version!r} is not supported (this meta-sim reads {VERSION})")
+        params: list[Parameter] = []
+        for raw in data.get("parameters", []):
+            name, kind = raw.get("name"), raw.get("type")
+            if not isinstance(name, str) or not name.isidentifier():
+                raise MetaSimError(f"design-space parameter name {name!r} must be an identifier")
+            if kind == "categorical":
+                choices = tuple(raw.get("choices") or ())
+                if not choices or len(set(choices)) != len(choices):
+                    raise MetaSimError(f"{name}: choices must be a non-empty list of unique ids")
+                params.append(Categorical(name, choices, raw.get("texture_kind")))
+            elif kind == "continuous":
+                low, high = float(raw["low"]), float(raw["high"])
+                if not low < high:
+                    raise MetaSimError(f"{name}: low ({low}) must be below high ({high})")
+                params.append(Continuous(name, low, high, raw.get("layout_field")))
+            else:
+                raise MetaSimError(f"{name}: type must be 'categorical' or 'continuous', not {kind!r}")
+        if not params:
+            raise MetaSimError("a design space needs at least one parameter")
+        if len({p.name for p in params}) != len(params):
+            raise MetaSimError("design-space parameter names must be unique")
+        kinds = [p.texture_kind for p in params if isinstance(p, Categorical) and p.texture_kind]
+        if len(set(kinds)) != len(kinds):
+            raise MetaSimError("at most one parameter may set each roof kind's material")
+        return cls(str(data.get("name", "unnamed")), tuple(params), dict(data.get("layout", {})))
+
+    def to_dict(self) -> dict:
+        return {"format": FORMAT, "version": self.version, "name": self.name,
+                "parameters": [p.to_dict() for p in self.parameters],
+                "layout": dict(self.layout)}
+
+    @classmethod
+    def load(cls, path_or_name: str | Path = DEFAULT_SPACE) -> "DesignSpace":
+        """Load a space from a JSON file, or a built-in one by name."""
+        path = Path(path_or_name)
+        if not path.suffix:
+            path = SPACES_DIR / f"{path_or_name}.json"
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            builtin = ", ".join(sorted(p.stem for p in SPACES_DIR.glob("*.json")))
+            raise MetaSimError(f"design space {str(path_or_name)!r} not found; "
+                               f"give a JSON file or one of: {builtin}") from None
+        except json.JSONDecodeError as exc:
+            raise MetaSimError(f"{path}: not valid JSON ({exc})") from None
+        return cls.from_dict(data)
+
+    @classmethod
+    def for_textures(cls, name: str, flat_ids, sloped_ids) -> "DesignSpace":
+        """The rooftop space of a texture bank: one parameter per roof kind the bank has.
+
+        A bank without sloped textures gives a flat-only space whose cities build no sloped roofs.
+        """
+        params = [Categorical(n, tuple(ids), kind) for n, ids, kind in
+                  (("flat_roof", flat_ids, "flat"), ("sloped_roof", sloped_ids, "sloped")) if ids]
+        if not params:
+            raise MetaSimError(f"texture bank {name!r} has no flat or sloped textures")
+        layout = {} if sloped_ids else {"sloped_share": 0.0}
+        return cls(name, tuple(params), layout)
+
+    # --- lookup ------------------------------------------------------------
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def dim(self) -> int:
+        return sum(p.width for p in self.parameters)
+
+    def parameter(self, name: str) -> Parameter:
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        raise MetaSimError(f"unknown design parameter {name!r}; this space has {', '.join(self.names)}")
+
+    def texture_parameter(self, kind: str) -> Categorical | None:
+        for p in self.parameters:
+            if isinstance(p, Categorical) and p.texture_kind == kind:
+                return p
+        return None
+
+    def blocks(self) -> list[tuple[Parameter, slice]]:
+        """Each parameter with its slice of the encoded vector."""
+        out, start = [], 0
+        for p in self.parameters:
+            out.append((p, slice(start, start + p.width)))
+            start += p.width
+        return out
+
+    # --- designs -----------------------------------------------------------
+    def widths(self) -> list[int]:
+        """Each parameter's width in the encoded vector, in order."""
+        return [p.width for p in self.parameters]
+
+    def validate(self, design: Mapping, extra: Mapping[str, Iterable[str]] | None = None) -> dict:
+        """A complete, canonical design (choice ids, floats), or MetaSimError."""
+        extra = extra or {}
+        unknown = set(design) - set(self.names)
+        if unknown:
+            raise MetaSimError(f"unknown design parameter(s) {', '.join(sorted(unknown))}; "
+                               f"this space has {', '.join(self.names)}")
+        missing = [n for n in self.names if n not in design]
+        if missing:
+            raise MetaSimError(f"design is missing {', '.join(missing)}")
+        return {p.name: p.resolve(design[p.name], extra.get(p.name, ())) for p in self.parameters}
+
+    def parse(self, text: str, extra: Mapping[str, Iterable[str]] | None = None) -> dict:
+        """Parse ``flat_roof=3,sloped_roof=sloped-clay-red`` into a design."""
+        design = {}
+        for item in filter(None, (s.strip() for s in text.split(","))):
+            name, sep, value = item.partition("=")
+            if not sep or not value.strip():
+                raise MetaSimError(f"bad design item {item!r}: write name=value, e.g. flat_roof=3")
+            if name.strip() in design:
+                raise MetaSimError(f"design parameter {name.strip()!r} is given twice")
+            design[name.strip()] = value.strip()
+        return self.validate(design, extra)
+
+    def sample(self, rng: np.random.Generator, n: int) -> list[dict]:
+        """``n`` designs drawn uniformly; design k depends only on the generator state."""
+        out = []
+        for _ in range(n):
+            design = {}
+            for p in self.parameters:
+                if isinstance(p, Categorical):
+                    design[p.name] = p.choices[int(rng.integers(len(p.choices)))]
+                else:
+                    design[p.name] = float(rng.uniform(p.low, p.high))
+            out.append(design)
+        return out
+
+    def encode(self, design: Mapping) -> np.ndarray:
+        design = self.validate(design)
+        vec = np.zeros(self.dim, dtype=np.float32)
+        for p, sl in self.blocks():
+            if isinstance(p, Categorical):
+                vec[sl.start + p.choices.index(design[p.name])] = 1.0
+            else:
+                vec[sl.start] = (design[p.name] - p.low) / (p.high - p.low)
+        return vec
+
+    def decode(self, vec) -> dict:
+        """The design nearest to a vector: argmax per categorical block, clipped values."""
+        vec = np.asarray(vec, dtype=np.float64).reshape(-1)
+        if vec.shape[0] != self.dim:
+            raise MetaSimError(f"design vector has {vec.shape[0]} entries; this space needs {self.dim}")
+        if not np.all(np.isfinite(vec)):
+            raise MetaSimError("design vector contains NaN or Inf")
+        design = {}
+        for p, sl in self.blocks():
+            if isinstance(p, Categorical):
+                design[p.name] = p.choices[int(np.argmax(vec[sl]))]
+            else:
+                design[p.name] = float(p.low + np.clip(vec[sl.start], 0.0, 1.0) * (p.high - p.low))
+        return design
+
+    def format(self, design: Mapping) -> str:
+        """The inverse of ``parse``: ``flat_roof=<id>,sloped_roof=<id>``."""
+        return ",".join(f"{n}={design[n]}" for n in self.names)
+
+    def layout_overrides(self, design: Mapping) -> dict:
+        """Fixed layout overrides plus the design's layout-bound values."""
+        out = dict(self.layout)
+        for p in self.parameters:
+            if isinstance(p, Continuous) and p.layout_field:
+                out[p.layout_field] = float(design[p.name])
+        return out

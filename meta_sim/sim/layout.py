@@ -1,0 +1,863 @@
+"""Procedural city layout from a seed: roads, blocks, lots, buildings, trees.
+
+Pure Python and numpy, no ``bpy``: the Blender builder turns a `CityLayout`
+into a scene and the label passes take roof classes and instance ids from it.
+
+Coordinates are metres, X east, Y north, ground at z = 0; the city covers
+``[0, width_m] x [0, height_m]``. The rules follow Synthinel-1 (CityEngine):
+a jittered street grid with some blocks merged and a few wider avenues;
+blocks cut along their long side into 16-30 m frontages, two rows back to
+back; building kinds residential / apartment / office / industrial /
+highrise in about 63 / 5 / 13 / 10 / 9 percent of buildings over a 1-2 km
+city (highrises only near the centre, industrial on whole-depth lots);
+residential eave heights 3-3.5 or 5-6.5 m times a height factor; roof pitch
+15-25 degrees, overhang 0.2-0.6 m.
+
+Every stage draws from its own generator spawned from the seed, so changing
+`LayoutParams.tree_density` leaves roads and buildings unchanged, and
+`sloped_share` changes roofs only. All stored floats are rounded to 0.1 mm so
+the JSON of a layout is stable.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from ..core.errors import MetaSimError
+
+LAYOUT_VERSION = 1
+TILE_M = 115.2  # 384 px at 0.3 m per pixel
+
+KINDS = ("residential", "apartment", "office", "industrial", "highrise")
+ROOFS = ("flat", "gable", "hip")
+SHAPES = ("rect", "L", "T")
+# Eave height ranges in metres; generate_layout keeps every building inside its kind's range.
+HEIGHT_RANGES_M = {
+    "residential": (2.8, 10.0),
+    "apartment": (9.0, 24.0),
+    "office": (10.0, 30.0),
+    "industrial": (6.0, 12.0),
+    "highrise": (40.0, 120.0),
+}
+PITCH_RANGE_DEG = (15.0, 25.0)
+OVERHANG_RANGE_M = (0.2, 0.6)
+PARAPET_RANGE_M = (0.3, 1.0)
+
+VERGE_M = 5.0  # sidewalk and planting strip between kerb and lots; street trees stand here
+# Roof outlines keep this far inside their lot, so outlines on neighbouring lots are >= 1 m apart.
+BUILDING_MARGIN_M = 0.5
+MIN_BUILDING_SIDE_M = 6.0
+MIN_EDGE_BLOCK_M = 20.0  # a street closer than this to the city edge would leave an unusable sliver
+AVENUE_PROBABILITY = 0.12
+AVENUE_WIDTH_FACTOR = 1.8
+MERGE_PROBABILITY = 0.1  # per cell and direction: merged cells make the grid irregular
+CENTRAL_RADIUS_SHARE = 0.3  # of the shorter city side: highrises stand only this close to the centre
+
+Point = tuple[float, float]
+Polygon = tuple[Point, ...]
+Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
+
+
+@dataclass(frozen=True)
+class _Zone:
+    """How a block of one land use is cut into lots and what stands on them."""
+
+    frontage_m: tuple[float, float]
+    min_row_depth_m: float  # two rows back to back only if each is at least this deep
+    kinds: dict[str, float]  # building kind -> probability, given the lot is built on
+
+
+ZONES = {
+    "residential": _Zone((16.0, 30.0), 12.0, {"residential": 0.95, "apartment": 0.05}),
+    "commercial": _Zone((24.0, 45.0), 20.0, {"office": 0.8, "apartment": 0.2}),
+    "downtown": _Zone((24.0, 45.0), 20.0, {"highrise": 0.6, "office": 0.4}),
+    "industrial": _Zone((30.0, 70.0), 40.0, {"industrial": 1.0}),
+}
+
+
+@dataclass(frozen=True)
+class _Massing:
+    """Footprint size rules of one building kind, in lot-local frontage (u) / depth (v)."""
+
+    fill_scale: tuple[float, float]  # multiplies the density fill of the usable lot
+    max_size_m: tuple[float, float]  # (u, v) caps: houses stay house-sized on deep lots
+    setback_m: tuple[float, float]  # from the lot front
+    notch_probability: float  # share of L / T footprints (always flat-roofed)
+
+
+MASSING = {
+    "residential": _Massing((0.8, 1.0), (20.0, 16.0), (2.0, 6.0), 0.0),
+    "apartment": _Massing((0.9, 1.1), (40.0, 24.0), (1.0, 4.0), 0.4),
+    "office": _Massing((1.0, 1.25), (80.0, 60.0), (0.0, 3.0), 0.4),
+    "highrise": _Massing((0.8, 1.0), (40.0, 40.0), (0.0, 3.0), 0.0),
+    "industrial": _Massing((1.0, 1.3), (120.0, 100.0), (0.0, 4.0), 0.4),
+}
+# Sloped roofs go to rectangular buildings in this order until sloped_share is met; never highrises.
+SLOPED_PRIORITY = ("residential", "apartment", "industrial", "office")
+
+
+def _r(value: float) -> float:
+    return round(float(value), 4)
+
+
+def rect_polygon(x0: float, y0: float, x1: float, y1: float) -> Polygon:
+    """Axis-aligned rectangle as a CCW polygon starting at its south-west corner."""
+    x0, y0, x1, y1 = _r(x0), _r(y0), _r(x1), _r(y1)
+    return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+
+
+def polygon_area(polygon: Polygon) -> float:
+    """Signed shoelace area: positive for counter-clockwise vertices."""
+    xs = np.array([p[0] for p in polygon])
+    ys = np.array([p[1] for p in polygon])
+    return float(0.5 * np.sum(xs * np.roll(ys, -1) - np.roll(xs, -1) * ys))
+
+
+def polygon_bbox(polygon: Polygon) -> Rect:
+    xs = [p[0] for p in polygon]
+    ys = [p[1] for p in polygon]
+    return (min(xs), min(ys), max(xs), max(ys))
+
+
+def _polygon_from_list(points: Any) -> Polygon:
+    return tuple((float(x), float(y)) for x, y in points)
+
+
+def _polygon_to_list(polygon: Polygon) -> list[list[float]]:
+    return [[x, y] for x, y in polygon]
+
+
+def _check_number(owner: str, name: str, value: Any, lo: float, hi: float) -> float:
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    if not ok or not math.isfinite(value) or not lo <= value <= hi:
+        raise MetaSimError(f"{owner}.{name} must be a number in [{lo:g}, {hi:g}], got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class LayoutParams:
+    """User-facing knobs of the city generator.
+
+    building_density: share of lots built on is ``1 - (1 - d)**2`` (0.91 at
+        the default 0.7), and footprints fill ``0.4 + 0.5 d`` of a lot's
+        usable width and depth (before per-kind scaling and caps).
+    sloped_share: share of buildings with gable or hip roofs. Sloped roofs
+        go to rectangular residential buildings first, then apartments,
+        industrial and office buildings; highrises and L/T footprints are
+        always flat, which caps the share reachable (about 0.82 with the default mix).
+    tree_density: street-tree probability per planting spot and yard trees
+        per lot area.
+    road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider.
+    block_size_m: (min, max) side length of a block between streets.
+    """
+
+    building_density: float = 0.7
+    sloped_share: float = 0.6
+    tree_density: float = 0.4
+    road_width_m: float = 10.0
+    block_size_m: tuple[float, float] = (60.0, 140.0)
+
+    def __post_init__(self) -> None:
+        owner = "LayoutParams"
+        for name in ("building_density", "sloped_share", "tree_density"):
+            object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
+        road = _check_number(owner, "road_width_m", self.road_width_m, 4.0, 40.0)
+        object.__setattr__(self, "road_width_m", road)
+        block = self.block_size_m
+        if not isinstance(block, (tuple, list)) or len(block) != 2:
+            raise MetaSimError(
+                f"LayoutParams.block_size_m must be a (min, max) pair of metres in [30, 500], got {block!r}"
+            )
+        lo = _check_number(owner, "block_size_m[0]", block[0], 30.0, 500.0)
+        hi = _check_number(owner, "block_size_m[1]", block[1], 30.0, 500.0)
+        if lo > hi:
+            raise MetaSimError(f"LayoutParams.block_size_m must be (min, max) with min <= max, got {block!r}")
+        object.__setattr__(self, "block_size_m", (lo, hi))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "building_density": self.building_density,
+            "sloped_share": self.sloped_share,
+            "tree_density": self.tree_density,
+            "road_width_m": self.road_width_m,
+            "block_size_m": list(self.block_size_m),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> LayoutParams:
+        unknown = set(data) - {"building_density", "sloped_share", "tree_density", "road_width_m", "block_size_m"}
+        if unknown:
+            raise MetaSimError(f"unknown layout parameter(s) {sorted(unknown)}; remove them")
+        data = dict(data)
+        if "block_size_m" in data and isinstance(data["block_size_m"], list):
+            data["block_size_m"] = tuple(data["block_size_m"])
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class Road:
+    """A street or avenue: an axis-aligned rectangle (roads may overlap at crossings)."""
+
+    polygon: Polygon
+
+    @property
+    def bbox(self) -> Rect:
+        return polygon_bbox(self.polygon)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"polygon": _polygon_to_list(self.polygon)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Road:
+        return cls(_polygon_from_list(data["polygon"]))
+
+
+@dataclass(frozen=True)
+class Lot:
+    """A parcel (axis-aligned rectangle) of one block; holds at most one building."""
+
+    polygon: Polygon
+    block_index: int
+
+    @property
+    def bbox(self) -> Rect:
+        return polygon_bbox(self.polygon)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"polygon": _polygon_to_list(self.polygon), "block_index": self.block_index}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Lot:
+        return cls(_polygon_from_list(data["polygon"]), int(data["block_index"]))
+
+
+@dataclass(frozen=True)
+class Building:
+    """One building on one lot.
+
+    `footprint` is the wall outline (CCW, axis-aligned edges). Walls rise to
+    the eave height `height_m`. A sloped roof covers `roof_outline`, the
+    footprint grown by `overhang_m`: its eaves lie on that outline at
+    `height_m` and its planes rise at `roof_pitch_deg` to a ridge (gable) or
+    top ridge (hip) along `ridge_axis`, the footprint's long side. Flat roofs
+    have no overhang and an optional parapet of `parapet_m` around the edge.
+    """
+
+    id: int
+    kind: str
+    lot_index: int
+    footprint: Polygon
+    shape: str
+    height_m: float
+    roof: str
+    roof_pitch_deg: float
+    overhang_m: float
+    ridge_axis: str
+    parapet_m: float
+
+    @property
+    def roof_class(self) -> int:
+        """Label value of the roof-class pass: 1 flat roof, 2 sloped roof (0 is background)."""
+        return 1 if self.roof == "flat" else 2
+
+    @property
+    def roof_outline(self) -> Polygon:
+        """The footprint grown by the overhang: what a nadir camera sees of the roof."""
+        if self.overhang_m == 0.0:
+            return self.footprint
+        x0, y0, x1, y1 = polygon_bbox(self.footprint)  # sloped roofs sit on rectangles only
+        o = self.overhang_m
+        return rect_polygon(x0 - o, y0 - o, x1 + o, y1 + o)
+
+    @property
+    def bbox(self) -> Rect:
+        """Bounding box of the roof outline."""
+        return polygon_bbox(self.roof_outline)
+
+    @property
+    def ridge_height_m(self) -> float:
+        """Height of the highest roof point: eave plus rise over half the outline's short side.
+
+        Flat roofs: the eave height (parapet excluded).
+        """
+        if self.roof == "flat":
+            return self.height_m
+        x0, y0, x1, y1 = self.bbox
+        half_span = min(x1 - x0, y1 - y0) / 2.0
+        return _r(self.height_m + half_span * math.tan(math.radians(self.roof_pitch_deg)))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "kind": self.kind,
+            "lot_index": self.lot_index,
+            "footprint": _polygon_to_list(self.footprint),
+            "shape": self.shape,
+            "height_m": self.height_m,
+            "roof": self.roof,
+            "roof_pitch_deg": self.roof_pitch_deg,
+            "overhang_m": self.overhang_m,
+            "ridge_axis": self.ridge_axis,
+            "parapet_m": self.parapet_m,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Building:
+        building = cls(
+            id=int(data["id"]),
+            kind=str(data["kind"]),
+            lot_index=int(data["lot_index"]),
+            footprint=_polygon_from_list(data["footprint"]),
+            shape=str(data["shape"]),
+            height_m=float(data["height_m"]),
+            roof=str(data["roof"]),
+            roof_pitch_deg=float(data["roof_pitch_deg"]),
+            overhang_m=float(data["overhang_m"]),
+            ridge_axis=str(data["ridge_axis"]),
+            parapet_m=float(data["parapet_m"]),
+        )
+        where = f"building {building.id}"
+        for name, value, allowed in (
+            ("kind", building.kind, KINDS),
+            ("roof", building.roof, ROOFS),
+            ("shape", building.shape, SHAPES),
+            ("ridge_axis", building.ridge_axis, ("x", "y")),
+        ):
+            if value not in allowed:
+                raise MetaSimError(f"{where}: {name} {value!r} is not one of {allowed}; the layout file is damaged")
+        if len(building.footprint) < 4 or polygon_area(building.footprint) <= 0.0:
+            raise MetaSimError(f"{where}: footprint must be a counter-clockwise polygon; the layout file is damaged")
+        if building.roof != "flat" and building.shape != "rect":
+            raise MetaSimError(f"{where}: sloped roofs need a rectangular footprint; the layout file is damaged")
+        return building
+
+
+@dataclass(frozen=True)
+class Tree:
+    """A tree seen from above as a disc of crown radius `radius_m`, `height_m` tall."""
+
+    x: float
+    y: float
+    radius_m: float
+    height_m: float
+
+    @property
+    def bbox(self) -> Rect:
+        r = self.radius_m
+        return (self.x - r, self.y - r, self.x + r, self.y + r)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"x": self.x, "y": self.y, "radius_m": self.radius_m, "height_m": self.height_m}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Tree:
+        return cls(float(data["x"]), float(data["y"]), float(data["radius_m"]), float(data["height_m"]))
+
+
+def _boxes(items: tuple[Any, ...]) -> np.ndarray:
+    return np.array([item.bbox for item in items], dtype=float).reshape(-1, 4)
+
+
+def _in_rect(items: tuple[Any, ...], boxes: np.ndarray, x0: float, y0: float, x1: float, y1: float) -> list[Any]:
+    """Items whose box shares positive area with the rectangle (touching edges do not count)."""
+    hit = (boxes[:, 0] < x1) & (boxes[:, 2] > x0) & (boxes[:, 1] < y1) & (boxes[:, 3] > y0)
+    return [items[i] for i in np.flatnonzero(hit)]
+
+
+@dataclass(frozen=True)
+class CityLayout:
+    """A whole city: the contract between the generator and the Blender builder."""
+
+    seed: int
+    width_m: float
+    height_m: float
+    params: LayoutParams
+    roads: tuple[Road, ...]
+    lots: tuple[Lot, ...]
+    buildings: tuple[Building, ...]
+    trees: tuple[Tree, ...]
+    version: int = LAYOUT_VERSION
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "version": self.version,
+            "seed": self.seed,
+            "width_m": self.width_m,
+            "height_m": self.height_m,
+            "params": self.params.to_dict(),
+            "roads": [road.to_dict() for road in self.roads],
+            "lots": [lot.to_dict() for lot in self.lots],
+            "buildings": [building.to_dict() for building in self.buildings],
+            "trees": [tree.to_dict() for tree in self.trees],
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> CityLayout:
+        version = data.get("version") if isinstance(data, dict) else None
+        if version != LAYOUT_VERSION:
+            raise MetaSimError(
+                f"city layout version {version!r} is not supported (expected {LAYOUT_VERSION}); "
+                "regenerate the layout with this version of meta-sim"
+            )
+        try:
+            return cls(
+                seed=int(data["seed"]),
+                width_m=float(data["width_m"]),
+                height_m=float(data["height_m"]),
+                params=LayoutParams.from_dict(data["params"]),
+                roads=tuple(Road.from_dict(d) for d in data["roads"]),
+                lots=tuple(Lot.from_dict(d) for d in data["lots"]),
+                buildings=tuple(Building.from_dict(d) for d in data["buildings"]),
+                trees=tuple(Tree.from_dict(d) for d in data["trees"]),
+                version=version,
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise MetaSimError(f"city layout is incomplete or damaged ({exc!r}); regenerate it") from exc
+
+    @cached_property
+    def _building_boxes(self) -> np.ndarray:
+        return _boxes(self.buildings)
+
+    @cached_property
+    def _tree_boxes(self) -> np.ndarray:
+        return _boxes(self.trees)
+
+    @cached_property
+    def _road_boxes(self) -> np.ndarray:
+        return _boxes(self.roads)
+
+    def buildings_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Building]:
+        """Buildings whose roof-outline bbox shares positive area with the rectangle, in id order."""
+        return _in_rect(self.buildings, self._building_boxes, x0, y0, x1, y1)
+
+    def trees_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Tree]:
+        """Trees whose crown bbox shares positive area with the rectangle."""
+        return _in_rect(self.trees, self._tree_boxes, x0, y0, x1, y1)
+
+    def roads_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Road]:
+        """Roads that share positive area with the rectangle."""
+        return _in_rect(self.roads, self._road_boxes, x0, y0, x1, y1)
+
+    def tile_grid(self, tile_m: float = TILE_M) -> list[Rect]:
+        """Square tiles from the origin covering the city, row-major, row 0 at y = 0 (south).
+
+        The last column and row may reach past the city; that part is bare ground.
+        """
+        tile_m = _check_number("tile_grid", "tile_m", tile_m, 1.0, 1e5)
+        cols = max(1, math.ceil(self.width_m / tile_m - 1e-9))
+        rows = max(1, math.ceil(self.height_m / tile_m - 1e-9))
+        return [
+            (_r(c * tile_m), _r(r * tile_m), _r((c + 1) * tile_m), _r((r + 1) * tile_m))
+            for r in range(rows)
+            for c in range(cols)
+        ]
+
+    def stats(self) -> dict[str, Any]:
+        """Counts by building kind and roof type, and the sloped share."""
+        by_kind = {kind: 0 for kind in KINDS}
+        by_roof = {roof: 0 for roof in ROOFS}
+        for building in self.buildings:
+            by_kind[building.kind] += 1
+            by_roof[building.roof] += 1
+        n = len(self.buildings)
+        return {
+            "buildings": n,
+            "by_kind": by_kind,
+            "by_roof": by_roof,
+            "sloped_share": (by_roof["gable"] + by_roof["hip"]) / n if n else 0.0,
+            "non_rect": sum(b.shape != "rect" for b in self.buildings),
+            "roads": len(self.roads),
+            "lots": len(self.lots),
+            "empty_lots": len(self.lots) - n,
+            "trees": len(self.trees),
+        }
+
+
+# ---------------------------------------------------------------- streets
+
+
+def _street_strips(rng: np.random.Generator, length: float, params: LayoutParams) -> list[tuple[float, float]]:
+    """(lo, hi) extents of the streets crossing one axis, with blocks of jittered size between."""
+    lo_block, hi_block = params.block_size_m
+    road = params.road_width_m
+    # The first block is cut by the city edge; capping it gives every city wider than
+    # a street plus two edge blocks at least one street.
+    pos = rng.uniform(MIN_EDGE_BLOCK_M, max(MIN_EDGE_BLOCK_M, min(hi_block, length - road - MIN_EDGE_BLOCK_M)))
+    strips = []
+    while True:
+        width = road * (AVENUE_WIDTH_FACTOR if rng.random() < AVENUE_PROBABILITY else 1.0)
+        if pos + width + MIN_EDGE_BLOCK_M > length:
+            return strips
+        strips.append((pos, pos + width))
+        pos += width + rng.uniform(lo_block, hi_block)
+
+
+def _cells(strips: list[tuple[float, float]], length: float) -> list[tuple[float, float]]:
+    """Spans between streets (and the city edges) along one axis."""
+    edges = [0.0] + [v for strip in strips for v in strip] + [length]
+    return list(zip(edges[0::2], edges[1::2]))
+
+
+def _merge_cells(rng: np.random.Generator, ncols: int, nrows: int) -> np.ndarray:
+    """Block index of every grid cell; a few neighbouring cells share a block (no street between)."""
+    block_of = np.full((ncols, nrows), -1, dtype=int)
+    count = 0
+    for j in range(nrows):
+        for i in range(ncols):
+            if block_of[i, j] >= 0:
+                continue
+            block_of[i, j] = count
+            u = rng.random()
+            if u < MERGE_PROBABILITY and i + 1 < ncols and block_of[i + 1, j] < 0:
+                block_of[i + 1, j] = count
+            elif u < 2 * MERGE_PROBABILITY and j + 1 < nrows:
+                block_of[i, j + 1] = count
+            count += 1
+    return block_of
+
+
+def _street_runs(separate: np.ndarray, strip: tuple[float, float], cross: list[tuple[float, float]],
+                 length: float) -> list[tuple[float, float, float, float]]:
+    """Road rectangles along one street line, as (lo, hi, along_lo, along_hi).
+
+    `separate[j]` says whether the cells on either side of the line in cross
+    cell j belong to different blocks (then the street runs there). Each
+    piece reaches over the crossing streets at both ends, so junctions are
+    paved whichever street continues through them.
+    """
+    runs = []
+    for is_street, group in itertools.groupby(range(len(separate)), key=lambda j: bool(separate[j])):
+        if is_street:
+            cells = list(group)
+            along_lo = cross[cells[0] - 1][0] if cells[0] > 0 else 0.0
+            along_hi = cross[cells[-1]][1] if cells[-1] < len(cross) else length
+            runs.append((strip[0], strip[1], along_lo, along_hi))
+    return runs
+
+
+@dataclass(frozen=True)
+class _Block:
+    rect: Rect
+    road_sides: frozenset[str]  # of "S", "N", "W", "E": sides facing a street, not the city edge
+
+
+def _blocks_and_roads(rng: np.random.Generator, width: float, height: float,
+                      params: LayoutParams) -> tuple[list[_Block], list[Road]]:
+    xstrips = _street_strips(rng, width, params)
+    ystrips = _street_strips(rng, height, params)
+    cols, rows = _cells(xstrips, width), _cells(ystrips, height)
+    block_of = _merge_cells(rng, len(cols), len(rows))
+    roads = []
+    for k, strip in enumerate(xstrips):
+        for x0, x1, y0, y1 in _street_runs(block_of[k] != block_of[k + 1], strip, ystrips, height):
+            roads.append(Road(rect_polygon(x0, y0, x1, y1)))
+    for k, strip in enumerate(ystrips):
+        for y0, y1, x0, x1 in _street_runs(block_of[:, k] != block_of[:, k + 1], strip, xstrips, width):
+            roads.append(Road(rect_polygon(x0, y0, x1, y1)))
+    blocks = []
+    for b in range(int(block_of.max()) + 1):
+        ii, jj = np.nonzero(block_of == b)
+        x0, x1 = cols[ii.min()][0], cols[ii.max()][1]
+        y0, y1 = rows[jj.min()][0], rows[jj.max()][1]
+        sides = {"W": x0 > 0.0, "E": x1 < width, "S": y0 > 0.0, "N": y1 < height}
+        blocks.append(_Block((x0, y0, x1, y1), frozenset(s for s, on_road in sides.items() if on_road)))
+    return blocks, roads
+
+
+# ---------------------------------------------------------------- lots
+
+
+@dataclass(frozen=True)
+class _LotPlan:
+    rect: Rect
+    front: str  # side facing the street ("S", "N", "W", "E"); buildings are set back from it
+    zone: str
+    block_index: int
+
+
+def _pick(rng: np.random.Generator, weights: dict[str, float]) -> str:
+    names = list(weights)
+    return names[int(rng.choice(len(names), p=list(weights.values())))]
+
+
+def _zone_of(rng: np.random.Generator, rect: Rect, width: float, height: float) -> str:
+    x0, y0, x1, y1 = rect
+    central = math.hypot((x0 + x1 - width) / 2, (y0 + y1 - height) / 2) < CENTRAL_RADIUS_SHARE * min(width, height)
+    if central:
+        return _pick(rng, {"downtown": 0.7, "commercial": 0.15, "residential": 0.15})
+    return _pick(rng, {"industrial": 0.28, "commercial": 0.07, "residential": 0.65})
+
+
+def _frontage_cuts(rng: np.random.Generator, length: float, frontage: tuple[float, float]) -> list[float]:
+    """Cut positions 0 .. length splitting one side into frontages within `frontage` where it fits."""
+    lo, hi = frontage
+    n_min = max(1, math.ceil(length / hi))
+    n = int(rng.integers(n_min, max(n_min, math.floor(length / lo)) + 1))
+    base = length / n
+    # Jittering each cut by at most slack / 2 keeps every frontage inside [lo, hi].
+    slack = max(0.0, min(base - lo, hi - base))
+    return [0.0] + [k * base + rng.uniform(-slack / 2, slack / 2) for k in range(1, n)] + [length]
+
+
+def _plan_block(rng: np.random.Generator, block: _Block, index: int, width: float, height: float) -> list[_LotPlan]:
+    """Cut a block's buildable area (inside the verges) into lots along its long side."""
+    x0, y0, x1, y1 = block.rect
+    sides = block.road_sides
+    x0, x1 = x0 + VERGE_M * ("W" in sides), x1 - VERGE_M * ("E" in sides)
+    y0, y1 = y0 + VERGE_M * ("S" in sides), y1 - VERGE_M * ("N" in sides)
+    min_side = MIN_BUILDING_SIDE_M + 2 * (BUILDING_MARGIN_M + OVERHANG_RANGE_M[1])
+    if min(x1 - x0, y1 - y0) < min_side:
+        return []  # a sliver between a street and the city edge stays open ground
+    zone = _zone_of(rng, block.rect, width, height)
+    along_x = x1 - x0 >= y1 - y0
+    lo, hi, near, far = (x0, x1, y0, y1) if along_x else (y0, y1, x0, x1)
+    fronts = ("S", "N") if along_x else ("W", "E")
+    cuts = _frontage_cuts(rng, hi - lo, ZONES[zone].frontage_m)
+    if far - near >= 2 * ZONES[zone].min_row_depth_m:
+        mid = (near + far) / 2
+        rows = [(near, mid, fronts[0]), (mid, far, fronts[1])]
+    else:  # one row faces the first long side unless only the second one is a street
+        rows = [(near, far, fronts[0] if fronts[0] in sides or fronts[1] not in sides else fronts[1])]
+    plans = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        for r0, r1, front in rows:
+            rect = (lo + a, r0, lo + b, r1) if along_x else (r0, lo + a, r1, lo + b)
+            plans.append(_LotPlan(rect, front, zone, index))
+    return plans
+
+
+# ---------------------------------------------------------------- buildings
+
+
+@dataclass(frozen=True)
+class _Sketch:
+    """A building before its roof is chosen."""
+
+    lot_index: int
+    kind: str
+    footprint: Polygon
+    shape: str
+    height_m: float
+
+
+def _to_world(plan: _LotPlan, u0: float, u1: float, v0: float, v1: float) -> Rect:
+    """Lot-local rectangle (u along the frontage, v back from the front) in world coordinates."""
+    x0, y0, x1, y1 = plan.rect
+    return {
+        "S": (x0 + u0, y0 + v0, x0 + u1, y0 + v1),
+        "N": (x0 + u0, y1 - v1, x0 + u1, y1 - v0),
+        "W": (x0 + v0, y0 + u0, x0 + v1, y0 + u1),
+        "E": (x1 - v1, y0 + u0, x1 - v0, y0 + u1),
+    }[plan.front]
+
+
+def _footprint_rect(rng: np.random.Generator, plan: _LotPlan, kind: str, fill: float) -> Rect | None:
+    x0, y0, x1, y1 = plan.rect
+    frontage, depth = (x1 - x0, y1 - y0) if plan.front in "SN" else (y1 - y0, x1 - x0)
+    # Room for the widest overhang, whichever roof the building gets later.
+    inset = BUILDING_MARGIN_M + OVERHANG_RANGE_M[1]
+    free_u, free_v = frontage - 2 * inset, depth - 2 * inset
+    if min(free_u, free_v) < MIN_BUILDING_SIDE_M:
+        return None
+    rules = MASSING[kind]
+    setback = min(rng.uniform(*rules.setback_m), free_v - MIN_BUILDING_SIDE_M)
+    w = float(np.clip(rng.uniform(*rules.fill_scale) * fill * free_u,
+                      MIN_BUILDING_SIDE_M, min(rules.max_size_m[0], free_u)))
+    h = float(np.clip(rng.uniform(*rules.fill_scale) * fill * free_v,
+                      MIN_BUILDING_SIDE_M, min(rules.max_size_m[1], free_v - setback)))
+    u0 = inset + rng.uniform(0.0, free_u - w)
+    v0 = inset + setback
+    return _to_world(plan, u0, u0 + w, v0, v0 + h)
+
+
+def _notched(rng: np.random.Generator, rect: Rect) -> tuple[Polygon, str]:
+    """An L (one corner cut away) or T (two corners of one side cut away) inside `rect`."""
+    x0, y0, x1, y1 = rect
+    w, h = x1 - x0, y1 - y0
+    corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    k = int(rng.integers(4))
+    if rng.random() < 0.6:
+        shape, cuts = "L", {k: (rng.uniform(0.35, 0.6) * w, rng.uniform(0.35, 0.6) * h)}
+    else:
+        # Both cuts share the depth across side k -> k+1 and leave a stem in its middle.
+        if k % 2 == 0:  # sides 0 -> 1 and 2 -> 3 run along x
+            depth = rng.uniform(0.35, 0.6) * h
+            cuts = {k: (rng.uniform(0.25, 0.38) * w, depth), (k + 1) % 4: (rng.uniform(0.25, 0.38) * w, depth)}
+        else:
+            depth = rng.uniform(0.35, 0.6) * w
+            cuts = {k: (depth, rng.uniform(0.25, 0.38) * h), (k + 1) % 4: (depth, rng.uniform(0.25, 0.38) * h)}
+        shape = "T"
+    points = []
+    for i, (px, py) in enumerate(corners):
+        if i not in cuts:
+            points.append((_r(px), _r(py)))
+            continue
+        prev, nxt = corners[i - 1], corners[(i + 1) % 4]
+        cut_x, cut_y = cuts[i]
+        into_prev, into_next = (cut_x, cut_y) if prev[1] == py else (cut_y, cut_x)
+        # Walk from the corner toward each neighbour; the notch's inner vertex completes the square.
+        ax, ay = px + np.sign(prev[0] - px) * into_prev, py + np.sign(prev[1] - py) * into_prev
+        cx, cy = px + np.sign(nxt[0] - px) * into_next, py + np.sign(nxt[1] - py) * into_next
+        points += [(_r(ax), _r(ay)), (_r(ax + cx - px), _r(ay + cy - py)), (_r(cx), _r(cy))]
+    return tuple(points), shape
+
+
+def _eave_height(rng: np.random.Generator, kind: str) -> float:
+    lo, hi = HEIGHT_RANGES_M[kind]
+    if kind != "residential":
+        return rng.uniform(lo, hi)
+    base = rng.uniform(3.0, 3.5) if rng.random() < 0.5 else rng.uniform(5.0, 6.5)  # one or two storeys
+    # Synthinel's height factor lies in [0.5, 2]; most houses stay near their storey height.
+    factor = np.clip(rng.lognormal(0.0, 0.25), 0.5, 2.0)
+    return float(np.clip(base * factor, lo, hi))
+
+
+def _sketch_buildings(rng: np.random.Generator, plans: list[_LotPlan], density: float) -> list[_Sketch]:
+    occupancy = 1.0 - (1.0 - density) ** 2
+    fill = 0.4 + 0.5 * density
+    sketches = []
+    for lot_index, plan in enumerate(plans):
+        if rng.random() >= occupancy:
+            continue
+        kind = _pick(rng, ZONES[plan.zone].kinds)
+        rect = _footprint_rect(rng, plan, kind, fill)
+        if rect is None:
+            continue
+        min_notch_side = 2 * MIN_BUILDING_SIDE_M + 4.0
+        notch = min(rect[2] - rect[0], rect[3] - rect[1]) >= min_notch_side
+        if notch and rng.random() < MASSING[kind].notch_probability:
+            footprint, shape = _notched(rng, rect)
+        else:
+            footprint, shape = rect_polygon(*rect), "rect"
+        sketches.append(_Sketch(lot_index, kind, footprint, shape, _r(_eave_height(rng, kind))))
+    return sketches
+
+
+def _roof_buildings(rng: np.random.Generator, sketches: list[_Sketch], sloped_share: float) -> list[Building]:
+    """Give roofs: exactly round(sloped_share * n) sloped ones where enough rectangles allow it."""
+    candidates: list[int] = []
+    for kind in SLOPED_PRIORITY:
+        group = [i for i, s in enumerate(sketches) if s.kind == kind and s.shape == "rect"]
+        candidates += [group[j] for j in rng.permutation(len(group))]
+    sloped = set(candidates[: round(sloped_share * len(sketches))])
+    buildings = []
+    for i, s in enumerate(sketches):
+        x0, y0, x1, y1 = polygon_bbox(s.footprint)
+        roof, pitch, overhang, parapet = "flat", 0.0, 0.0, 0.0
+        if i in sloped:
+            roof = "gable" if rng.random() < 0.5 else "hip"
+            pitch, overhang = rng.uniform(*PITCH_RANGE_DEG), rng.uniform(*OVERHANG_RANGE_M)
+        elif rng.random() < 0.6:
+            parapet = rng.uniform(*PARAPET_RANGE_M)
+        buildings.append(Building(
+            id=i + 1,
+            kind=s.kind,
+            lot_index=s.lot_index,
+            footprint=s.footprint,
+            shape=s.shape,
+            height_m=s.height_m,
+            roof=roof,
+            roof_pitch_deg=_r(pitch),
+            overhang_m=_r(overhang),
+            ridge_axis="x" if x1 - x0 >= y1 - y0 else "y",
+            parapet_m=_r(parapet),
+        ))
+    return buildings
+
+
+# ---------------------------------------------------------------- trees
+
+STREET_TREE_SPACING_M = (8.0, 14.0)
+YARD_M2_PER_TREE = 300.0  # at tree_density 1
+PARK_TREE_FACTOR = 3.0  # empty lots are planted as small parks
+TREE_CLEARANCE_M = 0.05  # keeps crowns off roofs after rounding to 0.1 mm
+
+
+def _street_trees(rng: np.random.Generator, block: _Block, density: float) -> list[Tree]:
+    """Trees in the verge along each street side of a block: off the road and off every lot."""
+    x0, y0, x1, y1 = block.rect
+    trees = []
+    for side in sorted(block.road_sides):
+        lo, hi = (x0, x1) if side in "SN" else (y0, y1)
+        offset = {"S": y0 + VERGE_M / 2, "N": y1 - VERGE_M / 2, "W": x0 + VERGE_M / 2, "E": x1 - VERGE_M / 2}[side]
+        spots = np.arange(lo + VERGE_M, hi - VERGE_M, rng.uniform(*STREET_TREE_SPACING_M))
+        keep = rng.random(len(spots)) < density
+        radii = rng.uniform(1.2, VERGE_M / 2 - 0.1, len(spots))
+        heights = rng.uniform(4.0, 9.0, len(spots))
+        for along, radius, height in zip(spots[keep], radii[keep], heights[keep]):
+            x, y = (along, offset) if side in "SN" else (offset, along)
+            trees.append(Tree(_r(x), _r(y), _r(radius), _r(height)))
+    return trees
+
+
+def _yard_trees(rng: np.random.Generator, lot: Lot, building: Building | None, density: float) -> list[Tree]:
+    """Trees inside one lot, clear of its building's roof outline (other roofs are on other lots)."""
+    x0, y0, x1, y1 = lot.bbox
+    expected = density * (x1 - x0) * (y1 - y0) / YARD_M2_PER_TREE
+    placed: list[Tree] = []
+    for _ in range(rng.poisson(expected if building else expected * PARK_TREE_FACTOR)):
+        for _attempt in range(4):
+            radius = rng.uniform(1.5, 4.0)
+            if min(x1 - x0, y1 - y0) < 2 * radius:
+                continue
+            x, y = rng.uniform(x0 + radius, x1 - radius), rng.uniform(y0 + radius, y1 - radius)
+            if building is not None:
+                bx0, by0, bx1, by1 = building.bbox
+                dx, dy = max(bx0 - x, 0.0, x - bx1), max(by0 - y, 0.0, y - by1)
+                if math.hypot(dx, dy) < radius + TREE_CLEARANCE_M:
+                    continue
+            if any(math.hypot(x - t.x, y - t.y) < max(radius, t.radius_m) for t in placed):
+                continue
+            placed.append(Tree(_r(x), _r(y), _r(radius), _r(radius * rng.uniform(1.8, 2.8))))
+            break
+    return placed
+
+
+# ---------------------------------------------------------------- entry points
+
+MIN_CITY_M = 30.0
+MAX_CITY_M = 5000.0
+
+
+def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutParams | None = None) -> CityLayout:
+    """Generate the city covering [0, width_m] x [0, height_m]; the same seed gives the same layout."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise MetaSimError(f"seed must be a non-negative integer, got {seed!r}")
+    width = _check_number("generate_layout", "width_m", width_m, MIN_CITY_M, MAX_CITY_M)
+    height = _check_number("generate_layout", "height_m", height_m, MIN_CITY_M, MAX_CITY_M)
+    params = LayoutParams() if params is None else params
+    road_rng, lot_rng, building_rng, roof_rng, tree_rng = np.random.default_rng(int(seed)).spawn(5)
+
+    blocks, roads = _blocks_and_roads(road_rng, width, height, params)
+    plans = [plan for index, block in enumerate(blocks) for plan in _plan_block(lot_rng, block, index, width, height)]
+    sketches = _sketch_buildings(building_rng, plans, params.building_density)
+    buildings = _roof_buildings(roof_rng, sketches, params.sloped_share)
+    lots = [Lot(rect_polygon(*plan.rect), plan.block_index) for plan in plans]
+
+    by_lot = {b.lot_index: b for b in buildings}
+    trees = [tree for block in blocks for tree in _street_trees(tree_rng, block, params.tree_density)]
+    for index, lot in enumerate(lots):
+        trees += _yard_trees(tree_rng, lot, by_lot.get(index), params.tree_density)
+    return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
+                      tuple(trees))
+
+
+def layout_for_tiles(seed: int, n_tiles: int, tile_m: float = TILE_M,
+                     params: LayoutParams | None = None) -> tuple[CityLayout, list[Rect]]:
+    """A city over a near-square grid of tiles (cols = ceil(sqrt(n)), rows = ceil(n / cols)).
+
+    Returns the layout and the first `n_tiles` tile rectangles in row-major order (row 0 south).
+    """
+    if isinstance(n_tiles, bool) or not isinstance(n_tiles, (int, np.integer)) or n_tiles < 1:
+        raise MetaSimError(f"n_tiles must be a positive integer, got {n_tiles!r}")
+    tile_m = _check_number("layout_for_tiles", "tile_m", tile_m, 1.0, MAX_CITY_M)
+    cols = math.ceil(math.sqrt(n_tiles))
+    rows = math.ceil(n_tiles / cols)
+    layout = generate_layout(seed, cols * tile_m, rows * tile_m, params)
+    return layout, layout.tile_grid(tile_m)[: int(n_tiles)]

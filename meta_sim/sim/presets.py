@@ -1,0 +1,136 @@
+"""Design presets: what `meta-sim infer` writes and the Blender add-on reads.
+
+A preset is JSON data, never code. Two kinds:
+
+* ``group``: the design inferred for one group of target images::
+
+    {"format": "meta-sim-design-preset", "version": 1, "kind": "group",
+     "name": "kampala-000", "design_space": "rooftops-v1",
+     "design": {"flat_roof": "flat-gravel-light", "sloped_roof": "sloped-clay-red"},
+     "vote_shares": {"flat_roof": {"flat-gravel-light": 0.62, ...}, ...},
+     "search": {"method": "adjoint", "loss": 0.41, ...},
+     "source_images": ["a.png", ...], "model_id": "3f2a9c0d1e2b"}
+
+* ``population``: the distribution of the designs inferred for all groups
+  (``distribution``: parameter -> choice -> share, and ``designs``: each
+  distinct design with its count), to sample the next dataset from.
+
+Pure Python: no torch, no bpy.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+from ..core.errors import MetaSimError
+from ..core.fileio import write_text_atomic
+from .design import DesignSpace
+
+FORMAT = "meta-sim-design-preset"
+VERSION = 1
+KINDS = ("group", "population")
+
+
+@dataclass
+class DesignPreset:
+    kind: str
+    name: str
+    design_space: str
+    design: dict
+    vote_shares: dict = field(default_factory=dict)
+    search: dict = field(default_factory=dict)
+    source_images: list = field(default_factory=list)
+    model_id: str = ""
+    distribution: dict = field(default_factory=dict)  # population only
+    designs: list = field(default_factory=list)  # population only: [{"design": ..., "count": n}]
+
+    def confidence(self, parameter: str) -> float:
+        """The vote share of the chosen value of ``parameter`` (1.0 when no votes were recorded)."""
+        shares = self.vote_shares.get(parameter) or self.distribution.get(parameter) or {}
+        return float(shares.get(str(self.design.get(parameter)), 1.0 if not shares else 0.0))
+
+    def to_dict(self) -> dict:
+        out = {"format": FORMAT, "version": VERSION, "kind": self.kind, "name": self.name,
+               "design_space": self.design_space, "design": self.design,
+               "vote_shares": self.vote_shares, "search": self.search,
+               "source_images": [str(p) for p in self.source_images], "model_id": self.model_id}
+        if self.kind == "population":
+            out["distribution"] = self.distribution
+            out["designs"] = self.designs
+        return out
+
+    @classmethod
+    def from_dict(cls, data, space: DesignSpace | None = None, extra: Mapping | None = None) -> "DesignPreset":
+        """Validate a preset read from disk; ``space`` checks every id against the design space."""
+        if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+            raise MetaSimError(f"not a meta-sim design preset (expected \"format\": \"{FORMAT}\")")
+        version = data.get("version")
+        if not isinstance(version, int) or version < 1:
+            raise MetaSimError(f"preset version {version!r} is not valid")
+        if version > VERSION:
+            raise MetaSimError(f"preset version {version} is newer than this meta-sim reads ({VERSION}); "
+                               "update meta-sim")
+        kind = data.get("kind")
+        if kind not in KINDS:
+            raise MetaSimError(f"preset kind {kind!r} must be one of {', '.join(KINDS)}")
+        design = data.get("design")
+        if not isinstance(design, Mapping) or not design:
+            raise MetaSimError("preset has no design")
+        preset = cls(kind=kind, name=str(data.get("name", "")), design_space=str(data.get("design_space", "")),
+                     design=dict(design), vote_shares=_mapping(data, "vote_shares"),
+                     search=_mapping(data, "search"), source_images=list(data.get("source_images") or []),
+                     model_id=str(data.get("model_id", "")), distribution=_mapping(data, "distribution"),
+                     designs=list(data.get("designs") or []))
+        if space is not None:
+            try:
+                preset.design = space.validate(preset.design, extra)
+            except MetaSimError as exc:
+                raise MetaSimError(f"preset {preset.name!r} does not fit design space {space.name!r}: {exc}") from None
+        return preset
+
+
+def _mapping(data: Mapping, key: str) -> dict:
+    value = data.get(key) or {}
+    if not isinstance(value, Mapping):
+        raise MetaSimError(f"preset field {key!r} must be an object")
+    return dict(value)
+
+
+def save_preset(path: str | Path, preset: DesignPreset) -> Path:
+    """Write atomically (temporary file, then rename)."""
+    return write_text_atomic(path, json.dumps(preset.to_dict(), indent=2) + "\n")
+
+
+def load_preset(path: str | Path, space: DesignSpace | None = None, extra: Mapping | None = None) -> DesignPreset:
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise MetaSimError(f"preset {path} does not exist") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MetaSimError(f"preset {path} is not valid JSON ({exc})") from None
+    try:
+        return DesignPreset.from_dict(data, space, extra)
+    except MetaSimError as exc:
+        raise MetaSimError(f"{path}: {exc}") from None
+
+
+def population(presets: list[DesignPreset], space: DesignSpace, name: str, model_id: str = "") -> DesignPreset:
+    """The distribution of the groups' designs; its own design is the most common value per parameter."""
+    if not presets:
+        raise MetaSimError("a population needs at least one group preset")
+    distribution, design = {}, {}
+    for param in space.names:
+        counts = Counter(str(p.design[param]) for p in presets)
+        distribution[param] = {value: n / len(presets) for value, n in counts.most_common()}
+        design[param] = next(p.design[param] for p in presets if str(p.design[param]) == counts.most_common(1)[0][0])
+    combos = Counter(json.dumps(p.design, sort_keys=True) for p in presets)
+    return DesignPreset(kind="population", name=name, design_space=space.name, design=design,
+                        vote_shares=distribution, distribution=distribution,
+                        designs=[{"design": json.loads(k), "count": n} for k, n in combos.most_common()],
+                        source_images=sorted({s for p in presets for s in p.source_images}),
+                        model_id=model_id, search={"groups": len(presets)})

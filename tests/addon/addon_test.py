@@ -1,0 +1,404 @@
+"""The Blender extension, headless with the bpy module: manifest, zip, lifecycle, every operator, panel draws.
+
+The add-on under test is the built zip, installed into a private extension repository
+(as Blender installs it), with its user folder in a temporary directory.
+"""
+
+import ast
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import tomllib
+import zipfile
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from meta_sim.render.options import RENDER_OPTIONS
+from meta_sim.render.worker import build_argparser
+from meta_sim.sim import tiles
+from meta_sim.sim.design import DesignSpace
+from meta_sim.sim.presets import DesignPreset, load_preset, population, save_preset
+
+ROOT = Path(__file__).resolve().parents[2]
+REPO = "metasim_test"
+MODULE = f"bl_ext.{REPO}.meta_sim"
+SMALL = {"seed": 2, "city_tiles": 1, "tile_px": 64, "gsd": 1.8}  # one 115 m tile at 64 px: quick renders
+# What the extension zip ships besides its entry point: the add-on and the layers it imports.
+SHIPPED = ("blender_addon", "meta_sim/core", "meta_sim/sim", "meta_sim/blender", "meta_sim/render")
+
+INSTALL = """
+import os, sys, zipfile
+import bpy, addon_utils
+
+def install(zip_path, repo_dir, repo, module):
+    with zipfile.ZipFile(zip_path) as archive:
+        archive.extractall(os.path.join(repo_dir, "meta_sim"))
+    bpy.context.preferences.extensions.repos.new(name=repo, module=repo, custom_directory=repo_dir, source="USER")
+    addon_utils.enable(module, default_set=True, handle_error=lambda exc: (_ for _ in ()).throw(exc))
+    return sys.modules[module]
+"""
+
+
+def _blender_ext() -> Path:
+    spec = importlib.util.spec_from_file_location("build_addon", ROOT / "jobs" / "build_addon.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.blender_ext()
+
+
+@pytest.fixture(scope="module")
+def zip_path(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dist")
+    done = subprocess.run([sys.executable, str(ROOT / "jobs" / "build_addon.py"), "--out", str(out)],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return next(out.glob("meta_sim-*.zip"))
+
+
+def test_manifest_passes_blenders_validator():
+    done = subprocess.run([sys.executable, str(_blender_ext()), "validate", str(ROOT)], capture_output=True, text=True)
+    assert done.returncode == 0 and "Success" in done.stdout, done.stdout + done.stderr
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+    assert manifest["permissions"]["files"]
+    assert "bl_info" not in (ROOT / "__init__.py").read_text()
+
+
+def _imported_modules(source: str) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            names |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names.add(node.module)
+    return names
+
+
+def test_zip_holds_exactly_the_addon_and_the_pure_layers(zip_path):
+    with zipfile.ZipFile(zip_path) as archive:
+        names = set(archive.namelist())
+        sources = {n: archive.read(n).decode() for n in names if n.endswith(".py")}
+    shipped = {str(p.relative_to(ROOT)) for folder in SHIPPED for p in (ROOT / folder).rglob("*")
+               if p.is_file() and "__pycache__" not in p.parts and "docs" not in p.parts}
+    assert names == {"blender_manifest.toml", "__init__.py", "meta_sim/__init__.py", *shipped}
+    assert {n.split("/")[1] for n in names if n.startswith("meta_sim/") and n.count("/") > 1} == {
+        "core", "sim", "blender", "render"}
+    imported = {n: {m.split(".")[0] for m in _imported_modules(text)} for n, text in sources.items()}
+    assert not [n for n, modules in imported.items() if modules & {"torch", "click", "tqdm", "meta_sim"}]
+    assert not [n for n, text in sources.items() if "bl_info" in text]
+
+
+@pytest.fixture(scope="module")
+def addon(zip_path, tmp_path_factory, bank, heldout_bank):
+    import addon_utils
+    import bpy  # first: it puts Blender's script modules (addon_utils) on the path
+
+    tmp = tmp_path_factory.mktemp("addon")
+    saved = os.environ.get("BLENDER_USER_RESOURCES")
+    os.environ["BLENDER_USER_RESOURCES"] = str(tmp / "user")  # extension_path_user lands here
+    namespace = {}
+    exec(INSTALL, namespace)  # the same install code the subprocess test runs
+    module = namespace["install"](str(zip_path), str(tmp / "repo"), REPO, MODULE)
+    user = bpy.data.objects.new("user's object", bpy.data.meshes.new("user's mesh"))
+    bpy.context.scene.collection.objects.link(user)
+    yield module
+    addon_utils.disable(MODULE, default_set=True)
+    repos = bpy.context.preferences.extensions.repos
+    repos.remove(next(r for r in repos if r.module == REPO))
+    if saved is None:
+        os.environ.pop("BLENDER_USER_RESOURCES")
+    else:
+        os.environ["BLENDER_USER_RESOURCES"] = saved
+
+
+@pytest.fixture
+def settings(addon):
+    import bpy
+
+    s = bpy.context.scene.meta_sim
+    for name, value in SMALL.items():
+        setattr(s, name, value)
+    s.bank_source = "DEFAULT"
+    s.render_preset = "fast"
+    bpy.ops.meta_sim.load_bank()
+    return s
+
+
+def _counts():
+    import bpy
+
+    return {name: len(getattr(bpy.data, name)) for name in
+            ("objects", "meshes", "materials", "images", "collections", "scenes", "cameras", "lights", "worlds")}
+
+
+def test_register_unregister_twice(addon):
+    import bpy
+
+    for _ in range(2):
+        addon.unregister()
+        assert not hasattr(bpy.types.Scene, "meta_sim")
+        for cls in addon.blender_addon.CLASSES:
+            assert not getattr(cls, "is_registered", False), cls
+        assert not hasattr(bpy.ops.meta_sim, "generate_city") or not _op_exists("meta_sim.generate_city")
+        assert addon.blender_addon.previews._collections == {}
+        addon.register()
+        assert _op_exists("meta_sim.generate_city") and hasattr(bpy.context.scene, "meta_sim")
+
+
+def _op_exists(idname: str) -> bool:
+    import bpy
+
+    category, name = idname.split(".")
+    try:
+        getattr(getattr(bpy.ops, category), name).get_rna_type()
+    except (AttributeError, KeyError):
+        return False
+    return True
+
+
+def test_no_torch_when_blender_imports_and_uses_the_addon(zip_path, tmp_path, bank):
+    script = INSTALL + f"""
+os.environ["BLENDER_USER_RESOURCES"] = {str(tmp_path / "user")!r}
+module = install({str(zip_path)!r}, {str(tmp_path / "repo")!r}, {REPO!r}, {MODULE!r})
+module.unregister(); module.register()
+s = bpy.context.scene.meta_sim
+s.city_tiles, s.tile_px, s.gsd = 1, 64, 1.8
+assert bpy.ops.meta_sim.load_bank() == {{"FINISHED"}}
+assert bpy.ops.meta_sim.generate_city() == {{"FINISHED"}}
+print("TORCH", "torch" in sys.modules)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=os.environ.copy())
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "TORCH False" in done.stdout
+
+
+def test_regenerating_replaces_the_city_without_orphans(settings):
+    import bpy
+
+    bpy.ops.meta_sim.generate_city()
+    first = _counts()
+    for seed in (5, 6):
+        settings.seed = seed
+        assert bpy.ops.meta_sim.generate_city() == {"FINISHED"}
+        assert _counts() == first
+    assert "user's object" in bpy.data.objects
+    assert bpy.ops.meta_sim.remove_city() == {"FINISHED"}
+    assert "user's object" in bpy.data.objects and settings.city_key == ""
+    assert not [c for c in bpy.data.collections if c.name.startswith("Meta-Sim")]
+
+
+def _roof_images_on_polygons(addon):
+    """Slot -> image path, read from the building polygons' materials (what a render shows)."""
+    import bpy
+
+    city = addon.blender_addon.city
+    scene_module = sys.modules[f"{MODULE}.meta_sim.blender.scene"]
+    obj = scene_module.city_buildings(bpy.context.scene.meta_sim.city_key)
+    used = {p.material_index for p in obj.data.polygons}
+    out = {}
+    for slot in used - {0}:
+        nodes = obj.data.materials[slot].node_tree.nodes
+        out[slot] = bpy.path.abspath(next(n.image.filepath for n in nodes if n.type == "TEX_IMAGE"))
+    assert out == {k: v for k, v in city.roof_images(bpy.context.scene.meta_sim).items() if k in used}
+    return out
+
+
+def test_picked_textures_go_on_the_matching_roofs(addon, settings, bank):
+    import bpy
+
+    bpy.ops.meta_sim.generate_city()
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[3], bank.ids("sloped")[7]
+    before = _counts()
+    assert bpy.ops.meta_sim.apply_roofs() == {"FINISHED"}
+    images = _roof_images_on_polygons(addon)
+    assert images == {1: str(bank.image_path(bank.ids("flat")[3])), 2: str(bank.image_path(bank.ids("sloped")[7]))}
+    settings.flat_roof = bank.ids("flat")[4]
+    bpy.ops.meta_sim.apply_roofs()
+    assert _counts() == before  # the replaced roof material and its image are gone
+    assert _roof_images_on_polygons(addon)[1] == str(bank.image_path(bank.ids("flat")[4]))
+
+
+@pytest.fixture
+def preset_folder(tmp_path, bank):
+    space = DesignSpace.load()
+    flat, sloped = bank.ids("flat"), bank.ids("sloped")
+    groups = [DesignPreset(kind="group", name=f"kampala-{k:03d}", design_space=space.name,
+                           design={"flat_roof": flat[k], "sloped_roof": sloped[2]},
+                           vote_shares={"flat_roof": {flat[k]: 0.62, flat[9]: 0.38}, "sloped_roof": {sloped[2]: 0.5}},
+                           source_images=[f"/data/kampala/t{k}{j}.png" for j in range(3)], model_id="abc")
+              for k in (5, 6)]
+    for preset in groups:
+        save_preset(tmp_path / f"{preset.name}.json", preset)
+    save_preset(tmp_path / "population.json", population(groups + groups[:1], space, "population"))
+    (tmp_path / "broken.json").write_text("{not json")
+    future = groups[0].to_dict() | {"version": 99}
+    (tmp_path / "future.json").write_text(json.dumps(future))
+    unknown = groups[0].to_dict() | {"design": {"flat_roof": "flat-no-such-texture", "sloped_roof": sloped[0]}}
+    (tmp_path / "unknown.json").write_text(json.dumps(unknown))
+    return tmp_path
+
+
+def test_presets_browser_applies_good_presets_and_rejects_bad_ones(addon, settings, preset_folder, bank):
+    import bpy
+
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(preset_folder)
+    assert bpy.ops.meta_sim.load_presets() == {"FINISHED"}
+    rows = {row.path.rsplit("/", 1)[-1]: row for row in settings.presets}
+    assert "not valid JSON" in rows["broken.json"].error
+    assert "newer" in rows["future.json"].error
+    assert "flat-no-such-texture" in rows["unknown.json"].error
+    good = rows["kampala-005.json"]
+    assert not good.error and good.flat == bank.ids("flat")[5] and abs(good.flat_share - 0.62) < 1e-6
+    assert good.target == "3 images in /data/kampala"
+    shares = json.loads(rows["population.json"].distribution)["flat_roof"]
+    assert shares[0][0] == bank.ids("flat")[5] and abs(shares[0][1] - 2 / 3) < 1e-6
+
+    index = list(settings.presets).index(good)
+    assert bpy.ops.meta_sim.apply_preset(index=index) == {"FINISHED"}
+    applied = _roof_images_on_polygons(addon)
+    assert applied[1] == str(bank.image_path(bank.ids("flat")[5]))
+    assert settings.flat_roof == bank.ids("flat")[5]
+    for name, message in (("broken.json", "not valid JSON"), ("future.json", "newer"),
+                          ("unknown.json", "flat-no-such-texture")):
+        with pytest.raises(RuntimeError, match=message):
+            bpy.ops.meta_sim.apply_preset(index=list(settings.presets).index(rows[name]))
+        assert _roof_images_on_polygons(addon) == applied and settings.flat_roof == bank.ids("flat")[5]
+
+
+def test_save_preset_writes_the_infer_format(settings, tmp_path, bank):
+    import bpy
+
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[1], bank.ids("sloped")[2]
+    assert bpy.ops.meta_sim.save_preset(filepath=str(tmp_path / "mine.json")) == {"FINISHED"}
+    preset = load_preset(tmp_path / "mine.json", DesignSpace.load())
+    assert preset.kind == "group" and preset.name == "mine"
+    assert preset.design == {"flat_roof": bank.ids("flat")[1], "sloped_roof": bank.ids("sloped")[2]}
+
+
+def test_render_preview_tile_and_its_labels(settings):
+    import bpy
+    import numpy as np
+
+    bpy.ops.meta_sim.generate_city()
+    before = _counts()
+    assert bpy.ops.meta_sim.render_preview() == {"FINISHED"}
+    rgb, labels = bpy.data.images["Meta-Sim Preview"], bpy.data.images["Meta-Sim Preview Labels"]
+    assert tuple(rgb.size) == tuple(labels.size) == (64, 64)
+    pixels = np.asarray(labels.pixels[:]).reshape(64, 64, 4)[..., :3]
+    assert (pixels.max(axis=-1) > 0).mean() > 0.02  # buildings are labelled
+    assert np.asarray(rgb.pixels[:]).std() > 0.01
+    bpy.ops.meta_sim.render_preview()  # again: the same two images, no leftovers of the temporary tile
+    after = _counts()
+    assert after == {**before, "images": before["images"] + 2}
+
+
+def test_exported_job_runs_on_the_render_worker_and_the_preview_matches_it(settings, tmp_path):
+    import bpy
+
+    from meta_sim.sim.imageio import read_rgb8
+
+    settings.seed, settings.sloped_share, settings.tree_density = 7, 0.2, 0.0
+    settings.render_preset = "balanced"  # Cycles: the preview's private scene must sample as the farm does
+    bpy.ops.meta_sim.generate_city()
+    settings.job_dir = str(tmp_path / "job")
+    assert bpy.ops.meta_sim.export_job() == {"FINISHED"}
+    job = json.loads((tmp_path / "job" / "render-job.json").read_text())
+    assert set(job["options"]) <= {opt.dest for opt in RENDER_OPTIONS}
+    assert vars(build_argparser().parse_args(job["argv"]))["seed"] == 7
+    assert job["command"].startswith("python -m meta_sim.render.worker --design ")
+    done = subprocess.run([sys.executable, "-m", "meta_sim.render.worker", *job["argv"], "--preview"], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    first = next((tmp_path / "job" / "tiles").glob("*_t00.exr"))
+    tile = tiles.read_tile(first)
+    assert tile.meta["design"] == job["design"] and tile.meta["city_seed"] == 7
+    settings.preview_tile = 0
+    bpy.ops.meta_sim.render_preview()
+    preview = bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath)
+    assert (read_rgb8(preview) == read_rgb8(first.with_suffix(".png"))).all()
+    settings.sloped_share, settings.tree_density, settings.render_preset = 0.6, 0.4, "fast"
+
+
+def test_user_errors_are_reported_not_raised_as_tracebacks(settings, tmp_path):
+    import bpy
+
+    settings.job_dir = ""
+    bpy.ops.meta_sim.generate_city()
+    with pytest.raises(RuntimeError, match="choose a job folder"):
+        bpy.ops.meta_sim.export_job()
+    settings.presets_folder = str(tmp_path / "missing")
+    with pytest.raises(RuntimeError, match="does not exist"):
+        bpy.ops.meta_sim.load_presets()
+    settings.bank_source, settings.bank_folder = "FOLDER", str(tmp_path)
+    with pytest.raises(RuntimeError, match="not a texture bank"):
+        bpy.ops.meta_sim.generate_city()
+    settings.bank_source = "DEFAULT"
+
+
+class RecordingLayout:
+    """Stands in for ``UILayout``: records calls, returns itself, and checks what a real layout would."""
+
+    def __init__(self, calls=None):
+        self.calls = [] if calls is None else calls
+
+    def __getattr__(self, name):
+        def call(*args, **kwargs):
+            self._check(name, args, kwargs)
+            self.calls.append((name, args, kwargs))
+            return self
+        return call
+
+    @staticmethod
+    def _check(name, args, kwargs):
+        import bpy
+
+        if name in ("prop", "template_icon_view"):
+            data, prop = args[:2]
+            assert prop in data.bl_rna.properties, f"{name}: no property {prop!r}"
+        if name == "operator":
+            assert _op_exists(args[0]), f"no operator {args[0]}"
+        if name == "template_list":
+            assert getattr(bpy.types, args[0], None) is not None, f"no list {args[0]}"
+            assert args[3] in args[2].bl_rna.properties and args[5] in args[4].bl_rna.properties
+        if "icon_value" in kwargs:
+            assert isinstance(kwargs["icon_value"], int)
+
+
+def _draw_all(addon):
+    import bpy
+
+    calls = []
+    for panel in addon.blender_addon.panels.CLASSES:
+        panel.draw(SimpleNamespace(layout=RecordingLayout(calls)), bpy.context)
+    settings = bpy.context.scene.meta_sim
+    for item in settings.presets:
+        addon.blender_addon.presets_ui.META_SIM_UL_presets.draw_item(
+            None, bpy.context, RecordingLayout(calls), settings, item, 0, settings, "presets_index", 0)
+    return calls
+
+
+def test_panels_draw_in_every_state(addon, settings, preset_folder, tmp_path):
+    import bpy
+
+    settings.bank_source, settings.bank_folder = "FOLDER", str(tmp_path)  # no bank: offers to load one
+    assert ("operator", ("meta_sim.load_bank",), {"icon": "IMPORT"}) in _draw_all(addon)
+    settings.bank_source = "DEFAULT"
+    bpy.ops.meta_sim.generate_city()
+    bpy.ops.meta_sim.render_preview()
+    settings.presets_folder = str(preset_folder)
+    bpy.ops.meta_sim.load_presets()
+    for index in range(len(settings.presets)):  # each row selected: errors, a group, the population
+        settings.presets_index = index
+        calls = _draw_all(addon)
+        labels = [kw.get("text", args[0] if args else "") for name, args, kw in calls if name == "label"]
+        row = settings.presets[index]
+        if row.error:
+            assert row.error in labels
+        elif row.distribution:
+            assert "Distribution over the target's groups:" in labels
+    names = {name for name, _, _ in calls}
+    assert {"template_icon_view", "template_list", "template_icon", "operator", "prop"} <= names

@@ -1,0 +1,38 @@
+"""The one atomic writer: whole files or none, the umask's mode, no temporary file left behind."""
+
+import os
+import stat
+
+import pytest
+
+from meta_sim.core.fileio import atomic_path, write_bytes_atomic, write_text_atomic
+
+
+def test_written_file_has_the_mode_a_plain_open_gives(tmp_path):
+    umask = os.umask(0o022)
+    os.umask(umask)
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    path = write_text_atomic(tmp_path / "sub" / "a.json", "{}\n")
+    assert path.read_text() == "{}\n"
+    assert stat.S_IMODE(path.stat().st_mode) == stat.S_IMODE(plain.stat().st_mode) == 0o666 & ~umask
+    assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["a.json"]
+
+
+def test_an_error_while_writing_keeps_the_old_file_and_removes_the_temporary(tmp_path):
+    path = write_bytes_atomic(tmp_path / "tile.exr", b"old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(path) as tmp:
+            assert tmp.parent == tmp_path and tmp.name.startswith(".tile.tmp") and tmp.suffix == ".exr"
+            tmp.write_bytes(b"half a")
+            raise RuntimeError("disk full")
+    assert path.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["tile.exr"]
+
+
+def test_a_writer_that_takes_a_file_name_goes_through_atomic_path(tmp_path):
+    with atomic_path(tmp_path / "model.pt") as tmp:
+        tmp.write_bytes(b"weights")
+        assert not (tmp_path / "model.pt").exists()
+    assert (tmp_path / "model.pt").read_bytes() == b"weights"
+    assert [p.name for p in tmp_path.iterdir()] == ["model.pt"]

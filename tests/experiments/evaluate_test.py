@@ -1,0 +1,73 @@
+"""E1/E2 scoring: ranks by the HSV similarity, ties shared fairly."""
+
+import pytest
+
+from meta_sim.experiments.evaluate import Ranking, rankings, score
+from meta_sim.sim.textures import ensure_default_bank, ensure_heldout_bank
+
+
+def test_credit_counts_the_n_nearest_and_shares_ties_at_the_edge():
+    ranking = Ranking(("a", "b", "c", "d", "e"), (0.9, 0.5, 0.2, 0.2, 0.2))
+    assert ranking.credit("a", 1) == 1.0 and ranking.credit("b", 1) == 0.0
+    assert ranking.credit("b", 2) == 1.0
+    # Third place is shared by c, d and e: each gets one third of it.
+    assert [ranking.credit(t, 3) for t in "cde"] == pytest.approx([1 / 3] * 3)
+    assert ranking.credit("d", 4) == pytest.approx(2 / 3)
+    assert ranking.credit("e", 10) == 1.0  # fewer candidates than n
+    assert ranking.credit("unknown", 10) == 0.0
+    # Expected credit of a uniform guess is n / candidates, whatever the ties.
+    assert sum(ranking.credit(t, 3) for t in ranking.ids) == pytest.approx(3.0)
+
+
+def test_e1_truth_is_its_own_nearest_texture_and_e2_ties_are_fair():
+    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    e1 = rankings("e1", bank, heldout)
+    for kind in ("flat", "sloped"):
+        for truth, ranking in e1[kind].items():
+            assert ranking.ids[0] == truth and ranking.credit(truth, 1) == 1.0
+    e2 = rankings("e2", bank, heldout)
+    for kind, n_bank in (("flat", 40), ("sloped", 44)):
+        assert set(e2[kind]) == set(heldout.ids(kind))
+        for ranking in e2[kind].values():
+            assert len(ranking.ids) == n_bank
+            assert list(ranking.similarity) == sorted(ranking.similarity, reverse=True)
+            assert sum(ranking.credit(t, 10) for t in ranking.ids) == pytest.approx(10.0)
+    truth = {"flat_roof": bank.ids("flat")[0], "sloped_roof": bank.ids("sloped")[0]}
+    assert score(truth, truth, e1) == {"flat_top1": 1.0, "flat_top10": 1.0, "sloped_top1": 1.0, "sloped_top10": 1.0}
+
+
+def test_e1_targets_are_not_the_training_sets_designs():
+    # Training sets and E1 targets both default to seed 1; they once shared a random stream, so the
+    # E1 targets were the training set's first designs and E1 measured recall of seen designs.
+    from meta_sim.experiments.evaluate import target_jobs
+    from meta_sim.render.jobs import sample_designs
+    from meta_sim.sim.design import DesignSpace
+
+    space = DesignSpace.load()
+    train = sample_designs(space, 300, 1)
+    targets = [job.design for job in target_jobs("e1", space, ensure_heldout_bank(), 100, 1)]
+    # 300 of 1,760 designs: about 17 of 100 uniform targets are in the training set by chance.
+    assert sum(t in train for t in targets) < 30
+    assert targets[:10] != train[:10]
+    assert len({job.city_seed for job in target_jobs("e1", space, ensure_heldout_bank(), 100, 1)}) == 100
+
+
+def test_e1_scores_the_targets_the_training_set_lacks_apart():
+    from types import SimpleNamespace
+
+    from meta_sim.experiments.evaluate import score_method
+    from meta_sim.render.jobs import Job
+
+    bank = ensure_default_bank()
+    flat, sloped = bank.ids("flat"), bank.ids("sloped")
+    seen = {"flat_roof": flat[0], "sloped_roof": sloped[0]}
+    unseen = {"flat_roof": flat[1], "sloped_roof": sloped[1]}
+    wrong = {"flat_roof": flat[2], "sloped_roof": sloped[2]}
+    ctx = SimpleNamespace(jobs=[Job(seen, 1, "a"), Job(unseen, 2, "b")],
+                          ranks=rankings("e1", bank, ensure_heldout_bank()), training_designs=[seen])
+    metrics, _ = score_method(ctx, lambda: [seen, wrong])  # recalls the seen design, misses the other
+    assert metrics["flat_top1"] == metrics["sloped_top1"] == 0.5
+    assert metrics["unseen_targets"] == 1
+    assert metrics["unseen"]["flat_top1"] == metrics["unseen"]["sloped_top1"] == 0.0
+    ctx.training_designs = []  # E2: no such split
+    assert "unseen" not in score_method(ctx, lambda: [seen, wrong])[0]

@@ -1,0 +1,264 @@
+"""The NAMS loop on real renders at a small scale: dataset -> train -> eval and infer through the CLI."""
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from meta_sim.cli import main as cli
+from meta_sim.sim.presets import load_preset
+
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
+# A training set small enough for the default test run: 16 designs x 1 tile of 96 px at 1.2 m/px.
+TINY = ["--designs", 16, "--tiles", 1, "--cities", 2, "--hidden", "64,128", "--max-epochs", 40,
+        "--tile-px", 96, "--gsd", 1.2]
+
+
+def _cli(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def tiny_env(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def evaluated(tiny_env, tmp_path_factory):
+    out = tmp_path_factory.mktemp("e1")
+    result = _cli("eval", "e1", "--out", out, "--targets", 3, "-M", 16, "--iterations", 5, "-S", 4,
+                  "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    return out, result
+
+
+def test_eval_writes_results_sheet_and_checkpoint(evaluated):
+    out, result = evaluated
+    results = json.loads((out / "results.json").read_text())
+    assert results["experiment"] == "e1" and results["targets"] == 3
+    assert results["architecture"] == "additive"  # the default
+    assert set(results["methods"]) == {"uniform", "dr", "ms2", "nams_adjoint", "nams_exhaustive"}
+    for metrics in results["methods"].values():
+        for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
+            assert 0.0 <= metrics[key] <= 1.0
+        assert metrics["flat_top1"] <= metrics["flat_top10"] and metrics["seconds_per_target"] >= 0
+        assert 0 <= metrics["unseen_targets"] <= 3
+        assert set(metrics["unseen"]) == ({"flat_top1", "flat_top10", "sloped_top1", "sloped_top10"}
+                                          if metrics["unseen_targets"] else set())
+    assert "| nams_adjoint |" in (out / "results.md").read_text()
+    assert (out / "sheet.png").stat().st_size > 1000
+    assert (out / "nams.pt").is_file() and (out / "dr.pt").is_file()
+
+
+def test_eval_reuses_its_cached_training_set_and_model(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    again = _cli("eval", "e1", "--out", tmp_path, "--targets", 3, "-M", 16, "--iterations", 5, "-S", 4,
+                 "--cache", tiny_env, *TINY)
+    assert again.exit_code == 0
+    without = _cli("eval", "e1", "--out", tmp_path / "no-ms2", "--targets", 3, "-M", 16, "--iterations", 5,
+                   "-S", 4, "--no-ms2", "--cache", tiny_env, *TINY)
+    assert without.exit_code == 0
+    assert "ms2" not in json.loads((tmp_path / "no-ms2" / "results.json").read_text())["methods"]
+    assert (tmp_path / "nams.pt").read_bytes() == (out / "nams.pt").read_bytes()
+    first = json.loads((out / "results.json").read_text())["methods"]
+    second = json.loads((tmp_path / "results.json").read_text())["methods"]
+    for method in first:  # same seed, same designs inferred
+        assert {k: v for k, v in first[method].items() if k != "seconds_per_target"} == \
+               {k: v for k, v in second[method].items() if k != "seconds_per_target"}
+
+
+def _target_folder(tmp_path, tiny_env):
+    folder = tmp_path / "targets"
+    result = _cli("render", "--design", "flat_roof=3,sloped_roof=5", "--seed", 777, "--tiles", 4,
+                  "--tile-px", 96, "--gsd", 1.2, "--out", folder)
+    assert result.exit_code == 0, result.output
+    (folder / "designs.json").unlink()
+    return folder
+
+
+def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    (folder / "empty.png").write_bytes(b"")
+    (folder / "notes.txt").write_text("not an image")
+    good = next(folder.glob("*.exr"))
+    (folder / "truncated.exr").write_bytes(good.read_bytes()[:3000])
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "inferred", "--group-size", 2)
+    assert result.exit_code == 0, result.output
+    assert "empty.png" in result.output and "truncated.exr" in result.output
+    presets = sorted((tmp_path / "inferred" / "presets").glob("*.json"))
+    assert len(presets) == 2  # 4 tiles in groups of 2
+    for path in presets:
+        preset = load_preset(path)
+        assert preset.kind == "group" and len(preset.source_images) == 2
+        assert set(preset.design) == {"flat_roof", "sloped_roof"}
+        for _param, shares in preset.vote_shares.items():
+            assert abs(sum(shares.values()) - 1.0) < 1e-6
+    population = load_preset(tmp_path / "inferred" / "population.json")
+    assert population.kind == "population" and sum(d["count"] for d in population.designs) == 2
+    report = json.loads((tmp_path / "inferred" / "report.json").read_text())
+    assert report["group_count"] == 2 and len(report["groups"]) == 2 and len(report["skipped"]) == 3
+    assert report["architecture"] == "additive"
+    assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
+    assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
+
+
+def test_infer_is_deterministic(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    for name in ("a", "b"):
+        assert _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / name, "--search", "adjoint",
+                    "-M", 32, "--iterations", 10, "-S", 8).exit_code == 0
+    a = sorted((tmp_path / "a" / "presets").glob("*.json"))
+    b = sorted((tmp_path / "b" / "presets").glob("*.json"))
+    assert [p.read_text() for p in a] == [p.read_text() for p in b]
+
+
+def test_infer_profile_sets_the_search_and_explicit_options_win(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "paper", "--profile", "paper",
+                  "-M", 16, "--iterations", 4, "-S", 4, "--group-size", 2)
+    assert result.exit_code == 0, result.output
+    # Progress bars for the stages that take time on a large folder
+    # (4 images, 4 tiles, 2 groups searched together for 4 steps).
+    for bar in ("read target images: 100%.*4/4", "target features: 100%.*4/4", "search: 100%.*4/4"):
+        assert re.search(bar, result.stderr), result.stderr
+    report = json.loads((tmp_path / "paper" / "report.json").read_text())
+    assert report["method"] == "adjoint" and report["group_count"] == 2
+    preset = load_preset(sorted((tmp_path / "paper" / "presets").glob("*.json"))[0])
+    assert (preset.search["M"], preset.search["iterations"]) == (16, 4)
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "fast", "--profile", "fast")
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "fast" / "report.json").read_text())["method"] == "exhaustive"
+
+
+def test_dataset_profile_and_paper_scale_conflict(tmp_path):
+    result = CliRunner().invoke(cli, ["dataset", "--profile", "balanced", "--paper-scale", "--cache", str(tmp_path)])
+    assert result.exit_code == 2 and "not both" in result.output
+
+
+@pytest.mark.parametrize("content", ["empty", "junk"])
+def test_infer_without_usable_images_is_an_error(evaluated, tmp_path, content):
+    out, _ = evaluated
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    if content == "junk":
+        (folder / "a.png").write_bytes(b"\x89PNG not really")
+    result = CliRunner().invoke(cli, ["infer", str(folder), "--model", str(out / "nams.pt"),
+                                      "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    assert "no readable images" in result.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_infer_rejects_a_damaged_checkpoint(evaluated, tiny_env, tmp_path):
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    bad = tmp_path / "bad.pt"
+    data = bytearray((out / "nams.pt").read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    result = CliRunner().invoke(cli, ["infer", str(folder), "--model", str(bad), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "corrupt" in result.output
+
+
+@pytest.mark.skipif(not (REALDATA / "kampala").is_dir(), reason="../shared/realdata is not beside the project")
+def test_infer_on_real_aerial_imagery(evaluated, tmp_path):
+    """Real drone tiles of Kampala (0.3 m web-mercator z19 tiles) through the whole infer path."""
+    out, _ = evaluated
+    folder = tmp_path / "kampala"
+    folder.mkdir()
+    for path in sorted((REALDATA / "kampala" / "ramp-data" / "sample_2" / "input").glob("OAM-*-19.png"))[:4]:
+        shutil.copy(path, folder / path.name)  # a copy in the test's temporary folder only
+    result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "inferred", "--group-size", 4)
+    assert result.exit_code == 0, result.output
+    preset = load_preset(next((tmp_path / "inferred" / "presets").glob("*.json")))
+    assert np.isfinite(preset.search["loss"])
+
+
+def test_train_with_the_papers_architecture(evaluated, tiny_env, tmp_path):
+    """Same cached training set; another architecture is another cached model, and says so."""
+    from meta_sim.nams import load_checkpoint
+
+    result = _cli("train", "--out", tmp_path, "--architecture", "paper", "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    assert "(paper NAMS)" in result.output and "render" in result.output
+    paper = load_checkpoint(tmp_path / "nams.pt", "nams")
+    assert paper.model.config.architecture == "paper" and paper.model.config.blocks == ()
+    default = load_checkpoint(evaluated[0] / "nams.pt", "nams")
+    assert default.model.config.architecture == "additive" and default.model.config.blocks == (40, 44)
+    bad = CliRunner().invoke(cli, ["train", "--out", str(tmp_path), "--architecture", "deep"])
+    assert bad.exit_code != 0 and "deep" in bad.output
+
+
+def test_a_model_without_roof_colour_is_scored_on_the_defaults_features(evaluated, tiny_env, tmp_path):
+    """bench-nams' row nams_exhaustive_no_roof_colour: the default's targets, MS2 pool included, cut to
+    the features the model without the roof-colour histograms was trained on."""
+    from meta_sim.experiments.evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
+    from meta_sim.nams import load_checkpoint
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    result = _cli("train", "--out", tmp_path, "--no-roof-colour", "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    plain = load_checkpoint(tmp_path / "nams.pt", "nams")
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    ctx = prepare_eval("e1", dataset, settings, EvalSettings(targets=3), tiny_env)
+    assert ctx.pool is not None and plain.feature_norm.hist_dim == 0 < ctx.nams.feature_norm.hist_dim
+    row = score_other_model(ctx, plain, seed=1)
+    assert row["targets"] == 3 and 0.0 <= row["flat_top1"] <= row["flat_top10"] <= 1.0
+    # The default model through the same function scores as its own exhaustive run.
+    same = score_other_model(ctx, ctx.nams, seed=1)
+    own, _ = score_method(ctx, method_runs(ctx, 1, {})["nams_exhaustive"])
+    assert {k: same[k] for k in ("flat_top1", "sloped_top10")} == {k: own[k] for k in ("flat_top1", "sloped_top10")}
+
+
+def test_a_stage_that_finds_everything_cached_shows_no_bar(capsys):
+    from meta_sim.cli.base import _Bars
+
+    bars = _Bars()
+    bars("cached stage", 600)
+    step = bars("working stage", 3)
+    step(1)
+    step(2)
+    late = bars("last stage", 1)
+    step(5)  # a closed stage's late steps are dropped, not drawn on a new bar
+    late(1)
+    bars.close()
+    err = capsys.readouterr().err
+    assert "cached stage" not in err
+    assert "working stage" in err and "3/3" in err and "last stage" in err and "1/1" in err
+    assert "5/3" not in err and "8/3" not in err
+
+
+# The CLI with bpy unimportable, as in a base install (`pip install meta-sim`, no `render` extra).
+_WITHOUT_BPY = "import sys; sys.modules['bpy'] = None; from meta_sim.cli import main; main()"
+
+
+def test_infer_runs_without_bpy(evaluated, tmp_path):
+    out, _ = evaluated
+    folder = tmp_path / "kampala"
+    folder.mkdir()
+    for path in sorted((REALDATA / "kampala" / "ramp-data" / "sample_2" / "input").glob("OAM-*-19.png"))[:2]:
+        shutil.copy(path, folder / path.name)  # a copy in the test's temporary folder only
+    done = subprocess.run([sys.executable, "-c", _WITHOUT_BPY, "infer", str(folder), "--model", str(out / "nams.pt"),
+                           "--out", str(tmp_path / "inferred"), "--group-size", "2"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert load_preset(tmp_path / "inferred" / "population.json").kind == "population"
+
+
+def test_render_without_bpy_names_the_extra_to_install(tmp_path):
+    done = subprocess.run([sys.executable, "-c", _WITHOUT_BPY, "render", "--design", "flat_roof=1,sloped_roof=1",
+                           "--tiles", "1", "--tile-px", "32", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True)
+    assert done.returncode == 2
+    assert done.stderr.strip() == "error: rendering needs the bpy package: pip install 'meta-sim[render]'"
+    assert not (tmp_path / "out").exists()  # nothing written

@@ -1,0 +1,246 @@
+"""Roof colour: the likelihood counted on labelled tiles, the weighted histograms, their normalisation,
+and the search's geometric mean of the two feature parts."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from toys import toy_space
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.nams import (
+    FeatureNorm,
+    NAMSConfig,
+    TrainConfig,
+    adjoint_search,
+    design_table,
+    exhaustive_search,
+    train_nams,
+)
+from meta_sim.pipeline.features import ColourTexture
+from meta_sim.pipeline.roofcolour import (
+    BINS,
+    PRIOR,
+    WEIGHT_POWER,
+    RoofColourExtractor,
+    RoofLikelihood,
+    checkpoint_extractor,
+    ensure_roof_finder,
+)
+from meta_sim.sim.imageio import linear_to_srgb
+from meta_sim.sim.tiles import write_tile
+
+# Linear colours: ground green, flat roofs red, sloped roofs blue.
+GROUND, FLAT, SLOPED = (0.05, 0.3, 0.05), (0.6, 0.05, 0.05), (0.05, 0.05, 0.6)
+
+
+def _scene(size=32):
+    """(linear RGB, roof classes): ground with a flat roof on the left and a sloped one on the right."""
+    rgb = np.empty((size, size, 3), np.float32)
+    rgb[:] = GROUND
+    roof = np.zeros((size, size), np.uint32)
+    rgb[4:20, 2:14], roof[4:20, 2:14] = FLAT, 1
+    rgb[8:28, 18:30], roof[8:28, 18:30] = SLOPED, 2
+    return rgb, roof
+
+
+def _bin(linear_rgb):
+    srgb = linear_to_srgb(np.array(linear_rgb))
+    q = np.minimum((srgb * BINS).astype(int), BINS - 1)
+    return (q[0] * BINS + q[1]) * BINS + q[2]
+
+
+@pytest.fixture(scope="module")
+def tiles(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("roof-tiles")
+    paths = []
+    for k in range(3):
+        rgb, roof = _scene()
+        path = folder / f"t{k}.exr"
+        write_tile(path, rgb, np.zeros(roof.shape, np.uint32), roof, {"k": k})
+        paths.append(path)
+    return paths
+
+
+def test_likelihood_is_counted_on_the_roof_labels(tiles, tmp_path):
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
+    flat, sloped = likelihood.tables
+    red, blue, green = _bin(FLAT), _bin(SLOPED), _bin(GROUND)
+    assert flat[red] > 0.9 and sloped[red] < 0.05
+    assert sloped[blue] > 0.9 and flat[blue] < 0.05
+    assert flat[green] < 0.05 and sloped[green] < 0.05
+    assert flat[_bin((1.0, 1.0, 0.0))] == pytest.approx(PRIOR)  # a colour no tile showed
+    assert likelihood.pixels == 3 * 16 * 16
+    # Cached in the folder: the same tables, not counted again (the tiles may be gone).
+    again = ensure_roof_finder(tmp_path, [tmp_path / "missing.exr"] * len(tiles), "colour")
+    assert again.id == likelihood.id and torch.equal(again.tables, likelihood.tables)
+
+
+def test_histograms_follow_the_likely_roofs(tiles, tmp_path):
+    extractor = RoofColourExtractor(ColourTexture(), ensure_roof_finder(tmp_path, tiles, "colour"), power=1.0)
+    rgb, _ = _scene()
+    batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
+    out = extractor(batch)
+    assert out.shape == (1, extractor.dim) and extractor.dim == ColourTexture().dim + sum(extractor.hist_blocks)
+    assert torch.equal(out[:, :extractor.base_dim], ColourTexture()(batch))
+    flat, sloped = out[0, extractor.base_dim:].split(list(extractor.hist_blocks))
+    # Each histogram holds its kind's share of the pixels (the likelihood-weighted pixel count).
+    assert float(flat.sum()) == pytest.approx(12 * 16 / 32 ** 2, rel=0.1)
+    assert float(sloped.sum()) == pytest.approx(12 * 20 / 32 ** 2, rel=0.1)
+    # Red and blue fall into different colour bins.
+    assert float((flat / flat.sum() * sloped / sloped.sum()).sum()) < 0.05
+    # The same under the dihedral views, as the extractor claims.
+    assert extractor.dihedral_invariant
+    assert torch.allclose(extractor(torch.rot90(batch, 1, (2, 3)).flip(-1)), out, atol=1e-6)
+    # Black, white and NaN images give finite histograms.
+    extremes = torch.stack([torch.zeros(3, 32, 32), torch.ones(3, 32, 32), torch.full((3, 32, 32), float("nan"))])
+    assert torch.isfinite(extractor(extremes)).all()
+
+
+def test_feature_norm_makes_unit_histograms_with_the_leading_parts_spread():
+    generator = torch.Generator().manual_seed(0)
+    lead = torch.randn(200, 6, generator=generator) * 3
+    counts = torch.rand(200, 10, generator=generator) * 0.01  # two histograms of 5 bins, unnormalised
+    norm = FeatureNorm.fit(torch.cat([lead, counts], 1), hist_blocks=(5, 5))
+    out = norm.apply(torch.cat([lead, counts], 1))
+    assert norm.dim == 16 and norm.hist_dim == 10 and out.shape == (200, 16)
+    hists = out[:, 6:] / norm.hist_scale
+    for block in hists.split([5, 5], dim=1):
+        assert torch.allclose(block.square().sum(1), torch.ones(200), atol=1e-5)
+    assert float(out[:, 6:].var(0, unbiased=False).sum()) == pytest.approx(
+        float(out[:, :6].var(0, unbiased=False).sum()), rel=1e-3)
+    # Empty, NaN and infinite counts give finite (zero) histograms, never NaN.
+    odd = torch.cat([torch.zeros(3, 6), torch.tensor([[0.0] * 10, [float("nan")] * 10, [float("inf")] * 10])], 1)
+    assert torch.isfinite(norm.apply(odd)).all()
+    restored = FeatureNorm.from_dict(norm.to_dict())
+    assert torch.equal(restored.apply(odd), norm.apply(odd))
+    with pytest.raises(MetaSimError, match="dimensions"):
+        norm.apply(torch.zeros(1, 15))
+    with pytest.raises(MetaSimError, match="do not fit"):
+        FeatureNorm.fit(torch.zeros(10, 4), hist_blocks=(4,))
+
+
+@pytest.fixture(scope="module")
+def coloured():
+    """A 6 x 7 space whose features are 12 linear ones plus two 8-bin histograms, peaked at each
+    parameter's choice; NAMS trained on them."""
+    space = toy_space(6, 7)
+    generator = torch.Generator().manual_seed(0)
+    weights = torch.randn(space.dim, 12, generator=generator)
+
+    def simulate(designs):
+        encoded = torch.stack([torch.from_numpy(space.encode(d)) for d in designs])
+        hists = []
+        for d in designs:
+            for param, _width in (("p0", 6), ("p1", 7)):
+                h = torch.full((8,), 0.02)
+                h[space.parameters[int(param[1])].choices.index(d[param])] = 1.0
+                hists.append(h)
+        colour = torch.stack(hists).reshape(len(designs), 16) * (0.5 + torch.rand(len(designs), 1, generator=generator))
+        lead = encoded @ weights + 0.05 * torch.randn(len(designs), 12, generator=generator)
+        return encoded, torch.cat([lead, colour], 1)
+
+    rng = np.random.default_rng(0)
+    designs, features = simulate(space.sample(rng, 800))
+    fit = train_nams(designs, features, NAMSConfig(space.dim, 28, hidden=(64, 128)),
+                     TrainConfig(max_epochs=60, patience=10, lr=3e-3, whiten=0), hist_blocks=(8, 8))
+    truth = space.sample(rng, 30)
+    _, targets = simulate(truth)
+    return {"space": space, "fit": fit, "truth": truth, "targets": targets}
+
+
+def _accuracy(results, truth, param):
+    return np.mean([r.design[param] == d[param] for r, d in zip(results, truth)])
+
+
+def test_search_takes_the_geometric_mean_of_the_two_parts(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    model = fit.model
+    assert model.config.colour_dims == 16 and model.config.feature_dim == 28
+    # One error scale over the histograms.
+    assert torch.unique(model.feature_scale[-16:]).numel() == 1
+    targets = fit.norm.apply(coloured["targets"])
+    results = exhaustive_search(model, targets, space)
+    assert _accuracy(results, coloured["truth"], "p0") >= 0.9 and _accuracy(results, coloured["truth"], "p1") >= 0.9
+    table = design_table(model, space)
+    errors = (targets[:, None].double() / model.feature_scale.double() - table.features[None].double()).square()
+    expected = (errors[..., :12].mean(-1) * errors[..., 12:].mean(-1)).sqrt().min(dim=1).values
+    assert torch.allclose(torch.tensor([r.best_loss for r in results], dtype=torch.float64), expected, rtol=1e-6)
+    adjoint = adjoint_search(model, targets[:10], space, M=64, S=8, iterations=60,
+                             generator=torch.Generator().manual_seed(0))
+    assert _accuracy(adjoint, coloured["truth"][:10], "p0") >= 0.8
+
+
+def test_colour_decides_when_the_other_features_are_far_off(coloured):
+    # A target unlike every simulation in the other features (a texture the bank lacks): their error
+    # is huge for every design, and the product still ranks designs by the colour histograms.
+    space, fit = coloured["space"], coloured["fit"]
+    shifted = coloured["targets"].clone()
+    shifted[:, :12] += 40.0 * torch.randn(12, generator=torch.Generator().manual_seed(5))
+    targets = fit.norm.apply(shifted)
+    results = exhaustive_search(fit.model, targets, space)
+    assert _accuracy(results, coloured["truth"], "p0") >= 0.9 and _accuracy(results, coloured["truth"], "p1") >= 0.9
+    for dtype in (torch.float32, torch.bfloat16):
+        out = adjoint_search(fit.model, targets[:5], space, M=32, S=4, iterations=20, dtype=dtype,
+                             generator=torch.Generator().manual_seed(0))
+        assert all(math.isfinite(r.best_loss) for r in out)
+
+
+def test_search_is_finite_at_the_extremes_with_colour(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    exact = design_table(fit.model, space).features[:2] * fit.model.feature_scale  # a target P predicts exactly
+    for targets in (torch.zeros(2, 28), torch.full((2, 28), 1e30), exact):
+        for result in exhaustive_search(fit.model, targets, space) + adjoint_search(
+                fit.model, targets, space, M=16, S=4, iterations=10, generator=torch.Generator().manual_seed(0)):
+            assert math.isfinite(result.best_loss) and result.best_loss >= 0
+
+
+def test_pixels_count_their_roof_probability_to_a_power(tiles, tmp_path):
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
+    rgb, _ = _scene()
+    batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
+    plain = RoofColourExtractor(ColourTexture(), likelihood, power=1.0)
+    sharp = RoofColourExtractor(ColourTexture(), likelihood)  # the default power, WEIGHT_POWER
+    assert sharp.power == WEIGHT_POWER > 1 and plain.id == f"{ColourTexture().id}+{likelihood.id}"
+    assert sharp.id == f"{plain.id}^{WEIGHT_POWER:g}"
+
+    class Squared:  # the likelihood's probabilities squared: power 2 of it is power 4 of the likelihood
+        id = "squared"
+
+        def weights(self, level1):
+            return likelihood.weights(level1) ** 2
+
+    assert torch.allclose(sharp.roof_histograms(batch),
+                          RoofColourExtractor(ColourTexture(), Squared(), power=2.0).roof_histograms(batch))
+    # Doubtful pixels (the prior's 0.25 for a colour never seen) all but vanish; sure ones stay.
+    odd = batch.clone()
+    odd[..., :4, :] = torch.tensor([1.0, 1.0, 0.0])[:, None, None]  # yellow: no training tile had it
+    for extractor, doubt in ((plain, PRIOR), (sharp, PRIOR ** WEIGHT_POWER)):
+        grown = extractor.roof_histograms(odd) - extractor.roof_histograms(batch)
+        assert float(grown[0, :extractor.hist_blocks[0]].sum()) == pytest.approx(doubt * 4 * 32 / 32 ** 2, rel=0.2)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(MetaSimError, match="weight power"):
+            RoofColourExtractor(ColourTexture(), likelihood, power=bad)
+
+
+def test_checkpoint_extractor_needs_the_same_likelihood(tiles, tmp_path):
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
+
+    class Ckpt:
+        extractor = RoofColourExtractor(ColourTexture(), likelihood, power=3.0)
+        extra = {"extractor_spec": "colour-texture", "roof_likelihood": extractor.to_dict()}
+        extractor_id = extractor.id
+
+    assert checkpoint_extractor(Ckpt()).id == Ckpt.extractor_id
+    assert checkpoint_extractor(Ckpt()).power == 3.0
+    # Checkpoints from before the power was kept counted the plain probability.
+    Ckpt.extra = {"extractor_spec": "colour-texture", "roof_likelihood": likelihood.to_dict()}
+    Ckpt.extractor_id = RoofColourExtractor(ColourTexture(), likelihood, power=1.0).id
+    assert checkpoint_extractor(Ckpt()).id == Ckpt.extractor_id
+    Ckpt.extra = {"extractor_spec": "colour-texture",
+                  "roof_likelihood": RoofLikelihood(likelihood.tables * 0.5, 1).to_dict()}
+    with pytest.raises(MetaSimError, match="trained on features"):
+        checkpoint_extractor(Ckpt())
+    with pytest.raises(MetaSimError, match="version"):
+        RoofLikelihood.from_dict({"version": 99})

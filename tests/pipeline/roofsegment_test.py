@@ -1,0 +1,102 @@
+"""Roof segmenter: learnt on labelled tiles, it finds roofs by their shape and shading, also in colours
+it never saw; cached, deterministic, and stored in checkpoints."""
+
+import numpy as np
+import pytest
+import torch
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.pipeline.features import ColourTexture, _half
+from meta_sim.pipeline.roofcolour import RoofColourExtractor, checkpoint_extractor, ensure_roof_finder
+from meta_sim.pipeline.roofsegment import RoofSegmenter
+from meta_sim.sim.imageio import linear_to_srgb
+from meta_sim.sim.tiles import write_tile
+
+GROUND = (0.05, 0.3, 0.05)
+
+
+def _scene(flat_colour, sloped_colour, shift=0, size=64):
+    """(linear RGB, roof classes): ground, a uniform flat roof and a sloped roof whose two halves are
+    lit and shaded, as the renders' facets are."""
+    rgb = np.empty((size, size, 3), np.float32)
+    rgb[:] = GROUND
+    roof = np.zeros((size, size), np.uint32)
+    rows, cols = slice(8 + shift, 30 + shift), slice(6, 26)
+    rgb[rows, cols], roof[rows, cols] = flat_colour, 1
+    top, left = 34 - shift, 36
+    rgb[top:top + 22, left:left + 10] = np.array(sloped_colour) * 1.6
+    rgb[top:top + 22, left + 10:left + 20] = np.array(sloped_colour) * 0.4
+    roof[top:top + 22, left:left + 20] = 2
+    return rgb, roof
+
+
+@pytest.fixture(scope="module")
+def tiles(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("segmenter-tiles")
+    paths = []
+    for k, (flat, sloped) in enumerate([((0.6, 0.05, 0.05), (0.05, 0.05, 0.4)), ((0.3, 0.3, 0.3), (0.3, 0.1, 0.05)),
+                                        ((0.05, 0.05, 0.5), (0.4, 0.05, 0.05)), ((0.5, 0.5, 0.1), (0.2, 0.2, 0.2))]):
+        rgb, roof = _scene(flat, sloped, shift=k)
+        path = folder / f"t{k}.exr"
+        write_tile(path, rgb, np.zeros(roof.shape, np.uint32), roof, {"k": k})
+        paths.append(path)
+    return paths
+
+
+@pytest.fixture(scope="module")
+def segmenter(tiles):
+    return RoofSegmenter.fit(tiles, seed=0, steps=1000)
+
+
+def _weights(segmenter, rgb):
+    batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
+    return segmenter.weights(_half(batch))[0]
+
+
+def test_it_finds_roofs_in_colours_it_was_not_trained_on(segmenter):
+    rgb, roof = _scene((0.1, 0.5, 0.5), (0.5, 0.3, 0.5), shift=2)  # cyan and violet: no training roof had them
+    flat, sloped = _weights(segmenter, rgb)
+    labels = _half(torch.from_numpy(np.stack([roof == 1, roof == 2]).astype(np.float32)))
+    inside_flat, inside_sloped, ground = labels[0] == 1, labels[1] == 1, labels.sum(0) == 0
+    assert float(flat[inside_flat].mean()) > 0.6 and float(sloped[inside_sloped].mean()) > 0.6
+    assert float(flat[ground].mean()) < 0.2 and float(sloped[ground].mean()) < 0.2
+    assert float(sloped[inside_flat].mean()) < 0.3 and float(flat[inside_sloped].mean()) < 0.3
+
+
+def test_fit_is_deterministic_and_cached(tiles, tmp_path, monkeypatch):
+    fitted = RoofSegmenter.fit(tiles, seed=0, steps=50)
+    assert RoofSegmenter.fit(tiles, seed=0, steps=50).id == fitted.id
+    assert RoofSegmenter.fit(tiles, seed=1, steps=50).id != fitted.id
+    monkeypatch.setattr("meta_sim.pipeline.roofsegment.STEPS", 20)
+    first = ensure_roof_finder(tmp_path, tiles, "segmenter", seed=0)
+    again = ensure_roof_finder(tmp_path, [tmp_path / "missing.exr"] * len(tiles), "segmenter", seed=0)
+    assert again.id == first.id  # read from the cache: the tiles may be gone
+    with pytest.raises(MetaSimError, match="unknown roof finder"):
+        ensure_roof_finder(tmp_path, tiles, "labels")
+    with pytest.raises(MetaSimError, match="no training tiles"):
+        RoofSegmenter.fit([], steps=1)
+
+
+def test_checkpoints_carry_the_segmenter(segmenter):
+    made = RoofColourExtractor(ColourTexture(), segmenter)
+
+    class Ckpt:
+        extra = {"extractor_spec": "colour-texture", "roof_likelihood": made.to_dict()}
+        extractor_id = made.id
+
+    extractor = checkpoint_extractor(Ckpt())
+    assert extractor.id == Ckpt.extractor_id
+    rgb, _ = _scene((0.6, 0.05, 0.05), (0.05, 0.05, 0.4))
+    batch = torch.from_numpy(linear_to_srgb(rgb).astype(np.float32)).permute(2, 0, 1)[None]
+    assert torch.equal(extractor(batch), RoofColourExtractor(ColourTexture(), segmenter)(batch))
+    with pytest.raises(MetaSimError, match="version"):
+        RoofSegmenter.from_dict({**segmenter.to_dict(), "version": 99})
+    with pytest.raises(MetaSimError, match="do not fit"):
+        RoofSegmenter({"0.weight": torch.zeros(1)})
+
+
+def test_weights_are_finite_at_the_extremes(segmenter):
+    for value in (0.0, 1.0, 1e6):
+        batch = torch.full((1, 3, 16, 16), value)
+        w = segmenter.weights(batch.clamp(0.0, 1.0))
+        assert torch.isfinite(w).all() and float(w.sum(1).max()) <= 1.0 + 1e-6

@@ -1,0 +1,361 @@
+"""Real Blender renders (bpy module), at reduced pixel counts so the suite stays fast."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from meta_sim.cli import main as cli
+from meta_sim.render.jobs import RenderSettings, single_job
+from meta_sim.render.loop import render_jobs
+from meta_sim.sim import tiles
+from meta_sim.sim.design import DesignSpace
+from meta_sim.sim.imageio import read_rgb8
+from meta_sim.sim.layout import layout_for_tiles
+from meta_sim.sim.quality import get_preset
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = {"tile_px": 96, "pixel_size_m": 1.2}  # a full 115.2 m tile at a quarter of the pixels
+SEED = 3
+
+
+@pytest.fixture(scope="module")
+def space():
+    return DesignSpace.load()
+
+
+def _render(space, banks, out, design, preset="fast", n_tiles=4, seed=SEED, preview=False, **kw):
+    settings = RenderSettings(space=space, banks=banks, preset=get_preset(preset), out_dir=Path(out),
+                              n_tiles=n_tiles, preview=preview, **{**SMALL, **kw})
+    job = single_job(space, space.validate(design), seed)
+    summary = render_jobs([job], settings)
+    return summary, [tiles.read_tile(out / f"{job.name}_t{j:02d}.exr") for j in range(n_tiles)]
+
+
+def _design(space, flat=0, sloped=0):
+    return {"flat_roof": flat, "sloped_roof": sloped}
+
+
+@pytest.fixture(scope="module")
+def rendered(space, bank, tmp_path_factory):
+    out = tmp_path_factory.mktemp("render")
+    summary, tile_list = _render(space, [bank], out, _design(space, 5, 9), preview=True)
+    return out, summary, tile_list
+
+
+def _rasterise(layout, rect, px, gsd):
+    """Instance ids of roof outlines sampled at pixel centres (row 0 north): the reference labels."""
+    x0, y0, x1, y1 = rect
+    xs = x0 + (np.arange(px) + 0.5) * gsd
+    ys = y1 - (np.arange(px) + 0.5) * gsd
+    gx, gy = np.meshgrid(xs, ys)
+    out = np.zeros((px, px), dtype=np.uint32)
+    for b in layout.buildings_in_rect(*rect):
+        poly = np.asarray(b.roof_outline)
+        inside = np.zeros(gx.shape, dtype=bool)
+        for (ax, ay), (bx, by) in zip(poly, np.roll(poly, -1, axis=0)):
+            crosses = (ay > gy) != (by > gy)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x_at = ax + (gy - ay) * (bx - ax) / (by - ay)
+            inside ^= crosses & (gx < x_at)
+        out[inside] = b.id
+    return out
+
+
+def test_tiles_have_labels_and_metadata(rendered, space):
+    out, summary, tile_list = rendered
+    assert summary.written == 4 and summary.skipped == 0
+    for j, tile in enumerate(tile_list):
+        assert tile.rgb.shape == (96, 96, 3) and tile.rgb.dtype == np.float32
+        assert np.isfinite(tile.rgb).all() and tile.rgb.max() > 0.05
+        assert tile.meta["tile_index"] == j and tile.meta["city_seed"] == SEED
+        assert tile.meta["design"] == space.validate(_design(space, 5, 9))
+        assert tile.meta["preset"] == "fast" and tile.meta["pixel_size_m"] == 1.2
+        assert tile.meta["software"]["blender"].startswith("5.0")
+
+
+def test_labels_are_consistent_and_match_the_layout_geometry(rendered):
+    _, _, tile_list = rendered
+    layout, rects = layout_for_tiles(SEED, 4, 96 * 1.2)
+    roof_class_of = {b.id: b.roof_class for b in layout.buildings}
+    classes_seen = set()
+    for tile, rect in zip(tile_list, rects):
+        building = tile.building.astype(bool)
+        assert np.array_equal(building, tile.instance > 0)  # every building pixel has an instance id
+        assert np.array_equal(building, tile.roof_class > 0)
+        ids = np.unique(tile.instance[building])
+        assert set(ids) <= set(roof_class_of)
+        expected = np.vectorize(lambda i: roof_class_of.get(int(i), 0), otypes=[np.uint32])(tile.instance)
+        assert np.array_equal(tile.roof_class, expected)  # roof class follows the instance's roof type
+        classes_seen |= set(np.unique(tile.roof_class)) - {0}
+        # Exact labels: the rendered ids agree with the roof outlines sampled at pixel centres.
+        reference = _rasterise(layout, rect, 96, 1.2)
+        assert (reference == tile.instance).mean() > 0.995
+    assert classes_seen == {1, 2}
+
+
+def test_previews_are_written(rendered):
+    out, _, _ = rendered
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert len([p for p in pngs if p.endswith("_labels.png")]) == 4
+    assert any(p.endswith("_mosaic.png") for p in pngs)
+    rgb = read_rgb8(next(out.glob("*_t00.png")))
+    assert rgb.shape == (96, 96, 3) and rgb.std() > 5
+
+
+def test_same_seed_same_pixels_and_resume_skips_valid_tiles(rendered, space, bank, tmp_path):
+    out, _, first = rendered
+    summary, again = _render(space, [bank], tmp_path, _design(space, 5, 9))
+    for a, b in zip(first, again):
+        assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.instance, b.instance)
+    # Resume: nothing to do; then a deleted and a truncated tile are re-rendered, the rest kept.
+    summary, _ = _render(space, [bank], tmp_path, _design(space, 5, 9))
+    assert (summary.written, summary.skipped) == (0, 4)
+    names = sorted(tmp_path.glob("*.exr"))
+    names[0].unlink()
+    names[1].write_bytes(names[1].read_bytes()[:2000])
+    kept = names[2].stat().st_mtime_ns
+    summary, resumed = _render(space, [bank], tmp_path, _design(space, 5, 9))
+    assert (summary.written, summary.skipped) == (2, 2)
+    assert names[2].stat().st_mtime_ns == kept
+    for a, b in zip(first, resumed):
+        assert np.array_equal(a.rgb, b.rgb)
+
+
+def _erode(mask, steps):
+    for _ in range(steps):
+        inner = mask.copy()
+        inner[1:] &= mask[:-1]
+        inner[:-1] &= mask[1:]
+        inner[:, 1:] &= mask[:, :-1]
+        inner[:, :-1] &= mask[:, 1:]
+        mask = inner
+    return mask
+
+
+def test_sloped_design_change_leaves_flat_roof_pixels_unchanged(rendered, space, bank, tmp_path):
+    _, _, base = rendered
+    _, other = _render(space, [bank], tmp_path, _design(space, 5, 30))
+    flat_changed = sloped_changed = flat_pixels = 0
+    for a, b in zip(base, other):
+        assert np.array_equal(a.instance, b.instance)
+        flat = _erode(a.roof_class == 1, 2)
+        sloped = _erode(a.roof_class == 2, 2)
+        flat_pixels += flat.sum()
+        flat_changed += (np.abs(a.rgb - b.rgb).max(axis=-1) > 0)[flat].sum()
+        sloped_changed += (np.abs(a.rgb - b.rgb).max(axis=-1) > 0.01)[sloped].mean()
+    assert flat_pixels > 500 and flat_changed == 0
+    assert sloped_changed > 0.5 * len(base)
+
+
+def test_flat_roof_colour_follows_the_flat_texture(space, bank, tmp_path):
+    flat_ids = bank.ids("flat")
+    luminance = {i: read_rgb8(bank.image_path(i)).mean() for i in flat_ids}
+    dark, light = min(luminance, key=luminance.get), max(luminance, key=luminance.get)
+    means = {}
+    for name in (dark, light):
+        _, tile_list = _render(space, [bank], tmp_path / name, {"flat_roof": name, "sloped_roof": 0},
+                               n_tiles=1)
+        flat = tile_list[0].roof_class == 1
+        means[name] = tile_list[0].rgb[flat].mean()
+    assert means[light] > 2 * means[dark]
+
+
+@pytest.fixture(scope="module")
+def traced(space, bank, tmp_path_factory):
+    """The tiles of ``rendered`` with the path-traced preset."""
+    return _render(space, [bank], tmp_path_factory.mktemp("traced"), _design(space, 5, 9), preset="balanced")[1]
+
+
+def test_path_traced_preset_renders_same_labels(rendered, traced):
+    _, _, base = rendered
+    for a, b in zip(traced, base):
+        assert np.array_equal(a.instance, b.instance)
+        assert np.isfinite(a.rgb).all() and a.rgb.mean() > 0.02
+        assert a.meta["preset"] == "balanced"
+
+
+def test_presets_render_roofs_equally_bright(rendered, traced):
+    """The rasterised preset's exposure brings its roofs to the path-traced brightness (without
+    it, the studio light rendered them at a sixth; see render_presets.FAST_EXPOSURE)."""
+    _, _, base = rendered
+
+    def roof_luminance(tile_list):
+        return np.median(np.concatenate([t.rgb[t.instance > 0] @ np.array([0.2126, 0.7152, 0.0722])
+                                         for t in tile_list]))
+
+    assert base[0].meta["exposure"] == get_preset("fast").exposure != 1.0
+    assert base[0].meta["render"] == get_preset("fast").to_dict()
+    assert 0.75 < roof_luminance(base) / roof_luminance(traced) < 1.33
+
+
+def test_held_out_texture_can_be_rendered(space, bank, heldout_bank, tmp_path):
+    held = heldout_bank.ids("flat")[0]
+    extra = {"flat_roof": heldout_bank.ids("flat")}
+    design = space.validate({"flat_roof": held, "sloped_roof": 0}, extra)
+    settings = RenderSettings(space=space, banks=[bank, heldout_bank], preset=get_preset("fast"),
+                              out_dir=tmp_path, n_tiles=1, **SMALL)
+    summary = render_jobs([single_job(space, design, SEED)], settings)
+    assert summary.written == 1
+    assert tiles.read_tile(summary.paths[0]).meta["design"]["flat_roof"] == held
+
+
+# --- the CLI and its error handling ---------------------------------------------------------------
+def _cli(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--design", "flat_roof=no-such,sloped_roof=1"], "unknown choice 'no-such'"),
+    (["--design", "flat_roof=1,sloped_roof=1", "--preset", "ultra"], "unknown render preset 'ultra'"),
+    (["--design", "flat_roof=1,sloped_roof=1", "--tiles", "0"], "--tiles must be at least 1"),
+    (["--design", "flat_roof=1"], "missing sloped_roof"),
+    ([], "exactly one of --design or --random-designs"),
+])
+def test_render_cli_rejects_bad_input_and_writes_nothing(tmp_path, args, message):
+    out = tmp_path / "out"
+    result = _cli("render", *args, "--out", out, "--tile-px", 32)
+    assert result.exit_code == 2, result.output
+    assert message in result.output and "Traceback" not in result.output
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_render_cli_reports_unwritable_output(tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    result = _cli("render", "--design", "flat_roof=1,sloped_roof=1", "--out", blocker / "tiles")
+    assert result.exit_code == 2 and "cannot write to output folder" in result.output
+
+
+def test_render_cli_reports_missing_texture_file(tmp_path, bank):
+    import shutil
+
+    copy = tmp_path / "bank"
+    shutil.copytree(bank.root, copy)
+    victim = bank.by_id(bank.ids("flat")[1])
+    (copy / victim.path).unlink()
+    out = tmp_path / "out"
+    result = _cli("render", "--bank", copy, "--design", "flat_roof=1,sloped_roof=1", "--out", out)
+    assert result.exit_code == 2
+    assert victim.path.split("/")[-1] in result.output
+    assert not out.exists() or not list(out.glob("*.exr"))
+
+
+def test_worker_runs_as_module_and_as_blender_script_with_identical_tiles(tmp_path):
+    args = ["--design", "flat_roof=2,sloped_roof=4", "--seed", "9", "--tiles", "1",
+            "--tile-px", "48", "--gsd", "2.4"]
+    env = dict(os.environ)
+    module = subprocess.run([sys.executable, "-m", "meta_sim.render.worker", *args, "--out", str(tmp_path / "a")],
+                            capture_output=True, text=True, env=env, cwd=ROOT)
+    assert module.returncode == 0, module.stderr
+    script = subprocess.run([sys.executable, "jobs/render_tiles.py", "--", *args, "--out", str(tmp_path / "b")],
+                            capture_output=True, text=True, env=env, cwd=ROOT)
+    assert script.returncode == 0, script.stderr
+    a, b = (tiles.read_tile(next((tmp_path / d).glob("*.exr"))) for d in "ab")
+    assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.instance, b.instance)
+    bad = subprocess.run([sys.executable, "-m", "meta_sim.render.worker", "--design", "flat_roof=99,sloped_roof=1",
+                          "--out", str(tmp_path / "c")], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert bad.returncode == 2 and "out of range" in bad.stderr
+
+
+def test_scene_builds_only_what_the_tiles_see(space):
+    from meta_sim.blender.scene import CityScene
+
+    layout, rects = layout_for_tiles(SEED, 9, 115.2)
+    scene = CityScene(layout, [rects[4]], pixel_size_m=1.2, shadow_margin_m=20.0)
+    try:
+        x0, y0, x1, y1 = rects[4]
+        assert 0 < len(scene.buildings) < len(layout.buildings) / 2
+        for b in scene.buildings:
+            bx0, by0, bx1, by1 = b.bbox
+            assert bx1 > x0 - 20 and bx0 < x1 + 20 and by1 > y0 - 20 and by0 < y1 + 20
+        assert 0 < scene.n_trees < len(layout.trees)
+    finally:
+        scene.close()
+
+
+def test_training_set_manifest_lists_every_design(tmp_path):
+    result = _cli("render", "--random-designs", 3, "--tiles", 1, "--seed", 4, "--cities", 2,
+                  "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path)
+    assert result.exit_code == 0, result.output
+    import json
+
+    manifest = json.loads((tmp_path / "designs.json").read_text())
+    assert [j["name"] for j in manifest["jobs"]] == ["d00000", "d00001", "d00002"]
+    assert [j["city_seed"] for j in manifest["jobs"]] == [4, 5, 4]
+    for job in manifest["jobs"]:
+        tile = tiles.read_tile(tmp_path / job["tiles"][0])
+        assert tile.meta["design"] == job["design"] and tile.meta["city_seed"] == job["city_seed"]
+    again = _cli("render", "--random-designs", 3, "--tiles", 1, "--seed", 4, "--cities", 2,
+                 "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path)
+    assert "0 tiles written, 3 already done" in again.output
+
+
+def test_end_to_end_full_size_render_through_the_console_script(tmp_path):
+    """The demo's command at full size: 9 tiles of 384 x 384 px at 0.3 m/px with previews."""
+    meta_sim = Path(sys.executable).with_name("meta-sim")
+    result = subprocess.run([str(meta_sim), "render", "--design", "flat_roof=flat-membrane-white-tpo,"
+                             "sloped_roof=sloped-clay-terracotta", "--seed", "1", "--tiles", "9",
+                             "--preset", "fast", "--out", str(tmp_path), "--preview"],
+                            capture_output=True, text=True, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    exrs = sorted(tmp_path.glob("*.exr"))
+    assert len(exrs) == 9
+    total_building = 0
+    for path in exrs:
+        tile = tiles.read_tile(path)
+        assert tile.rgb.shape == (384, 384, 3) and tile.meta["pixel_size_m"] == 0.3
+        total_building += tile.building.sum()
+    assert total_building > 0.05 * 9 * 384 * 384  # a city, not an empty field
+    mosaic = read_rgb8(next(tmp_path.glob("*_mosaic.png")))
+    assert mosaic.shape == (1152, 1152, 3)
+
+
+def test_user_photo_folder_becomes_a_bank_and_renders(tmp_path, bank):
+    import shutil
+
+    photos = tmp_path / "photos"
+    for kind, count in (("flat", 2), ("sloped", 2)):
+        (photos / kind).mkdir(parents=True)
+        for texture_id in bank.ids(kind)[:count]:
+            shutil.copy(bank.image_path(texture_id), photos / kind / f"My {texture_id}.png")
+    user_bank = tmp_path / "bank"
+    built = _cli("textures", "build", "--from", photos, "--out", user_bank)
+    assert built.exit_code == 0, built.output
+    out = tmp_path / "tiles"
+    result = _cli("render", "--bank", user_bank, "--design", "flat_roof=1,sloped_roof=0", "--tiles", 1,
+                  "--tile-px", 48, "--gsd", 2.4, "--out", out)
+    assert result.exit_code == 0, result.output
+    tile = tiles.read_tile(next(out.glob("*.exr")))
+    assert tile.meta["design"]["flat_roof"].startswith("flat-my-")
+    assert tile.meta["design_space"].startswith("bank:")
+
+
+def test_flat_only_bank_builds_no_sloped_roofs(tmp_path, bank):
+    import shutil
+
+    photos = tmp_path / "photos"
+    (photos / "flat").mkdir(parents=True)
+    for texture_id in bank.ids("flat")[:3]:
+        shutil.copy(bank.image_path(texture_id), photos / "flat" / f"{texture_id}.png")
+    assert _cli("textures", "build", "--from", photos, "--out", tmp_path / "bank").exit_code == 0
+    out = tmp_path / "tiles"
+    result = _cli("render", "--bank", tmp_path / "bank", "--design", "flat_roof=2", "--tiles", 4,
+                  "--tile-px", 48, "--gsd", 2.4, "--out", out)
+    assert result.exit_code == 0, result.output
+    classes = set()
+    for path in out.glob("*.exr"):
+        classes |= set(np.unique(tiles.read_tile(path).roof_class))
+    assert classes == {0, 1}
+
+
+def test_worker_and_farm_worker_help_format():
+    from meta_sim.render.worker import build_argparser
+
+    assert "--cities" in build_argparser().format_help()  # argparse %-formats every option's help
+    done = subprocess.run([sys.executable, "-m", "meta_sim.farm.worker", "--help"], capture_output=True, text=True)
+    assert done.returncode == 0 and "--shard" in done.stdout

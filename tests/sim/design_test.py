@@ -1,0 +1,121 @@
+import json
+
+import numpy as np
+import pytest
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.sim.design import DesignSpace
+
+
+@pytest.fixture(scope="module")
+def space():
+    return DesignSpace.load()
+
+
+def test_default_space_is_the_papers_84_d_one_hot(space):
+    assert space.names == ("flat_roof", "sloped_roof")
+    assert [p.width for p in space.parameters] == [40, 44]
+    assert space.dim == 84
+
+
+def test_default_space_choices_are_the_bank_textures(space, bank):
+    assert list(space.parameter("flat_roof").choices) == bank.ids("flat")
+    assert list(space.parameter("sloped_roof").choices) == bank.ids("sloped")
+
+
+def test_flat_only_space_declares_one_parameter_and_no_sloped_roofs():
+    space = DesignSpace.load("rooftops-flat-v1")
+    assert space.names == ("flat_roof",) and space.dim == 40
+    assert space.layout_overrides({"flat_roof": space.parameter("flat_roof").choices[0]}) == {"sloped_share": 0.0}
+
+
+def test_choice_by_index_or_id(space):
+    by_index = space.parse("flat_roof=3,sloped_roof=7")
+    flat, sloped = space.parameter("flat_roof"), space.parameter("sloped_roof")
+    assert by_index == {"flat_roof": flat.choices[3], "sloped_roof": sloped.choices[7]}
+    assert space.parse(f"flat_roof={flat.choices[3]},sloped_roof={sloped.choices[7]}") == by_index
+    assert space.parse(space.format(by_index)) == by_index
+
+
+def test_encode_decode_round_trip_every_choice(space):
+    for design in space.sample(np.random.default_rng(0), 200):
+        vec = space.encode(design)
+        assert vec.shape == (84,) and vec.sum() == 2
+        assert space.decode(vec) == design
+
+
+def test_uniform_sampling_is_seeded_and_covers_choices(space):
+    a = space.sample(np.random.default_rng(5), 2000)
+    assert a == space.sample(np.random.default_rng(5), 2000)
+    assert a != space.sample(np.random.default_rng(6), 2000)
+    counts = np.bincount([space.parameter("flat_roof").choices.index(d["flat_roof"]) for d in a], minlength=40)
+    assert counts.min() > 20 and counts.max() < 90  # 50 expected per choice
+
+
+@pytest.mark.parametrize("text, message", [
+    ("flat_roof=3,chimney=1", "unknown design parameter"),
+    ("flat_roof=no-such-texture,sloped_roof=1", "unknown choice 'no-such-texture'"),
+    ("flat_roof=40,sloped_roof=1", "index 40 is out of range"),
+    ("flat_roof=3", "missing sloped_roof"),
+    ("flat_roof", "write name=value"),
+    ("flat_roof=1,flat_roof=2,sloped_roof=1", "given twice"),
+])
+def test_bad_designs_raise_clear_errors(space, text, message):
+    with pytest.raises(MetaSimError, match=message):
+        space.parse(text)
+
+
+def test_continuous_parameter_encodes_in_unit_range_and_validates(tmp_path):
+    spec = {"format": "meta-sim-design-space", "version": 1, "name": "t", "parameters": [
+        {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "choices": ["a", "b"]},
+        {"name": "building_density", "type": "continuous", "low": 0.2, "high": 0.8,
+         "layout_field": "building_density"}]}
+    path = tmp_path / "space.json"
+    path.write_text(json.dumps(spec))
+    space = DesignSpace.load(path)
+    design = space.parse("flat_roof=b,building_density=0.5")
+    assert np.allclose(space.encode(design), [0, 1, 0.5])
+    assert space.decode([0.2, 0.9, 1.7]) == {"flat_roof": "b", "building_density": 0.8}
+    assert space.layout_overrides(design) == {"building_density": 0.5}
+    with pytest.raises(MetaSimError, match="out of range"):
+        space.parse("flat_roof=a,building_density=0.9")
+    with pytest.raises(MetaSimError, match="not a number"):
+        space.parse("flat_roof=a,building_density=dense")
+    assert DesignSpace.from_dict(space.to_dict()) == space
+
+
+@pytest.mark.parametrize("patch, message", [
+    ({"format": "other"}, "not a design-space file"),
+    ({"version": 99}, "version 99 is not supported"),
+    ({"parameters": []}, "at least one parameter"),
+    ({"parameters": [{"name": "x", "type": "categorical", "choices": ["a", "a"]}]}, "unique ids"),
+    ({"parameters": [{"name": "x", "type": "ordinal"}]}, "must be 'categorical' or 'continuous'"),
+])
+def test_bad_space_files_raise(patch, message):
+    spec = {"format": "meta-sim-design-space", "version": 1, "name": "t",
+            "parameters": [{"name": "x", "type": "categorical", "choices": ["a"]}]}
+    spec.update(patch)
+    with pytest.raises(MetaSimError, match=message):
+        DesignSpace.from_dict(spec)
+
+
+def test_unknown_space_name_lists_the_built_in_ones():
+    with pytest.raises(MetaSimError, match="rooftops-v1"):
+        DesignSpace.load("no-such-space")
+
+
+def test_decode_rejects_wrong_length_and_nan(space):
+    with pytest.raises(MetaSimError, match="84"):
+        space.decode(np.zeros(10))
+    vec = np.zeros(84)
+    vec[0] = np.nan
+    with pytest.raises(MetaSimError, match="NaN"):
+        space.decode(vec)
+
+
+def test_one_parameter_one_choice_space():
+    space = DesignSpace.from_dict({"format": "meta-sim-design-space", "version": 1, "name": "t",
+                                   "parameters": [{"name": "x", "type": "categorical", "choices": ["only"]}]})
+    assert space.dim == 1
+    assert space.sample(np.random.default_rng(0), 3) == [{"x": "only"}] * 3
+    assert space.decode(space.encode({"x": 0})) == {"x": "only"}

@@ -1,0 +1,66 @@
+import json
+
+import pytest
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.sim.design import DesignSpace
+from meta_sim.sim.presets import DesignPreset, load_preset, population, save_preset
+
+
+@pytest.fixture(scope="module")
+def space():
+    return DesignSpace.load()
+
+
+def _preset(space, flat=0, sloped=0, name="g0"):
+    design = space.parse(f"flat_roof={flat},sloped_roof={sloped}")
+    shares = {p: {design[p]: 0.7, "other": 0.3} for p in space.names}
+    return DesignPreset(kind="group", name=name, design_space=space.name, design=design, vote_shares=shares,
+                        search={"method": "adjoint", "loss": 0.5}, source_images=["a.png"], model_id="abc")
+
+
+def test_round_trip_and_confidence(space, tmp_path):
+    preset = _preset(space, 3, 4)
+    path = save_preset(tmp_path / "p.json", preset)
+    loaded = load_preset(path, space)
+    assert loaded.to_dict() == preset.to_dict()
+    assert loaded.confidence("flat_roof") == 0.7
+    assert [p.name for p in tmp_path.iterdir()] == ["p.json"]  # no temporary left behind
+
+
+@pytest.mark.parametrize("patch, message", [
+    ({"format": "something-else"}, "not a meta-sim design preset"),
+    ({"version": 2}, "newer than this meta-sim reads"),
+    ({"kind": "spell"}, "kind 'spell'"),
+    ({"design": {}}, "has no design"),
+    ({"design": {"flat_roof": "flat-unobtainium", "sloped_roof": 0}}, "unknown choice 'flat-unobtainium'"),
+    ({"vote_shares": [1, 2]}, "must be an object"),
+])
+def test_bad_presets_are_rejected_with_a_message(space, tmp_path, patch, message):
+    data = _preset(space).to_dict()
+    data.update(patch)
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(MetaSimError, match=message):
+        load_preset(path, space)
+
+
+def test_non_json_and_missing_files(tmp_path, space):
+    path = tmp_path / "evil.json"
+    path.write_text("__import__('os').system('echo pwned')")
+    with pytest.raises(MetaSimError, match="not valid JSON"):
+        load_preset(path, space)
+    with pytest.raises(MetaSimError, match="does not exist"):
+        load_preset(tmp_path / "nope.json")
+
+
+def test_population_counts_designs(space):
+    groups = [_preset(space, 1, 2, "a"), _preset(space, 1, 2, "b"), _preset(space, 5, 2, "c")]
+    pop = population(groups, space, "all", model_id="abc")
+    flat = space.parameter("flat_roof").choices
+    assert pop.design["flat_roof"] == flat[1]
+    assert pop.distribution["flat_roof"] == {flat[1]: 2 / 3, flat[5]: 1 / 3}
+    assert pop.designs[0]["count"] == 2
+    assert DesignPreset.from_dict(pop.to_dict(), space).distribution == pop.distribution
+    with pytest.raises(MetaSimError):
+        population([], space, "none")
