@@ -5,7 +5,7 @@ import stat
 
 import pytest
 
-from meta_sim.core.fileio import atomic_path, write_bytes_atomic, write_text_atomic
+from meta_sim.core.fileio import atomic_dir, atomic_path, write_bytes_atomic, write_text_atomic
 
 
 def test_written_file_has_the_mode_a_plain_open_gives(tmp_path):
@@ -36,3 +36,27 @@ def test_a_writer_that_takes_a_file_name_goes_through_atomic_path(tmp_path):
         assert not (tmp_path / "model.pt").exists()
     assert (tmp_path / "model.pt").read_bytes() == b"weights"
     assert [p.name for p in tmp_path.iterdir()] == ["model.pt"]
+
+
+def test_a_folder_is_built_beside_and_renamed_into_place_with_the_umask_mode(tmp_path):
+    umask = os.umask(0o022)
+    os.umask(umask)
+    with atomic_dir(tmp_path / "bank") as tmp:
+        assert tmp.parent == tmp_path and not (tmp_path / "bank").exists()
+        (tmp / "manifest.json").write_text("{}")
+    assert (tmp_path / "bank" / "manifest.json").read_text() == "{}"
+    assert stat.S_IMODE((tmp_path / "bank").stat().st_mode) == 0o777 & ~umask
+    with pytest.raises(RuntimeError):
+        with atomic_dir(tmp_path / "other") as tmp:
+            (tmp / "half").write_text("x")
+            raise RuntimeError("interrupted")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bank"]
+
+
+def test_a_folder_another_process_put_in_place_first_is_kept(tmp_path):
+    with atomic_dir(tmp_path / "bank") as tmp:
+        (tmp / "mine").write_text("late")
+        (tmp_path / "bank").mkdir()
+        (tmp_path / "bank" / "theirs").write_text("first")
+    assert [p.name for p in (tmp_path / "bank").iterdir()] == ["theirs"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bank"]

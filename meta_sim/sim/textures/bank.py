@@ -24,8 +24,6 @@ import json
 import math
 import os
 import re
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -34,7 +32,7 @@ import numpy as np
 
 from ...core.cache import cache_root
 from ...core.errors import MetaSimError
-from ...core.fileio import write_bytes_atomic
+from ...core.fileio import atomic_dir, write_bytes_atomic
 from ..imageio import read_rgb8, resize
 from . import procedural
 from .pngio import write_png
@@ -382,18 +380,8 @@ def _ensure(final: Path, build: Callable[[Path], TextureBank]) -> TextureBank:
         return load_bank(final)
     if final.exists():
         raise MetaSimError(f"{final} exists but holds no {MANIFEST}; delete that folder and try again")
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent))
-    try:
+    with atomic_dir(final) as tmp:
         build(tmp)
-        try:
-            os.rename(tmp, final)
-        except OSError:
-            if not (final / MANIFEST).is_file():
-                raise
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
     return load_bank(final)
 
 
