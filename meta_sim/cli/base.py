@@ -34,8 +34,10 @@ def main():
 def _torch_threads(command):
     """Run a torch-side command with META_SIM_THREADS intra-op threads, else all CPUs but one.
 
-    Torch's default (one thread per CPU) collapses when anything else runs: on 2 CPUs while Blender
-    rendered, a NAMS training epoch took 2.9 s with 2 threads and 0.96 s with 1.
+    Torch's default, one thread per CPU, slows down badly as soon as anything else runs (Blender
+    rendering beside training, say): its threads wait for one another at every operation, so one
+    that shares a CPU holds up the rest. So one CPU is left free. Raises MetaSimError when
+    META_SIM_THREADS is not a whole number.
     """
 
     @functools.wraps(command)

@@ -1,4 +1,6 @@
-"""Benchmarks behind the README's tables (`make bench-*`). Medians over repeats."""
+"""Benchmarks behind the tables of docs/benchmarks.md (`make bench-render`, `make bench-nams`); their
+results go to ``benchmarks/*.json`` and the tables into the docs through ``publish``. Times are
+medians over repeats."""
 
 from __future__ import annotations
 
@@ -67,6 +69,7 @@ def bench_render(designs: int = 4, tiles: int = 9, repeats: int = 3, presets=("f
 
 
 def format_render_table(result: dict) -> str:
+    """``bench_render``'s result as the Markdown table of docs/benchmarks.md, with a note under it."""
     lines = ["| preset | engine | s/tile (render+labels+write) | render | labels | EXR write |",
              "|---|---|---|---|---|---|"]
     for name, p in result["presets"].items():
@@ -180,6 +183,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
 
 
 def format_nams_table(result: dict) -> str:
+    """``bench_nams``'s result as the Markdown tables of docs/benchmarks.md: accuracy and search time
+    per experiment and method, a note on training and feature times, and the stage times (E4)."""
     lines = ["| experiment | method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target "
              "| targets | top-1 flat / sloped, unseen designs |", "|---|---|---|---|---|---|---|---|---|"]
     for experiment, rows in result["experiments"].items():

@@ -2,8 +2,9 @@
 
 * E1: synthetic targets whose design is in the bank, rendered in city seeds
   the training set never used, with designs drawn independently of the
-  training set's (at the default scale about 1 in 6 is a training design by
-  chance, 300 of 1,760).
+  training set's, as the design behind real imagery would be. Some targets
+  are a training design by chance; ``unseen`` scores only the others (see
+  docs/design.md, "E1 targets and the design stream").
 * E2: synthetic targets made with held-out textures (the design gap): the
   best a method can do is name the bank texture nearest to the truth.
 
@@ -17,7 +18,8 @@ Scoring follows the paper (section 5.4): rank the bank's textures by the HSV
 similarity to the true texture (``meta_sim/sim/textures/similarity.py``); a
 prediction is a top-n hit when it is among the n nearest, with ties at the
 n-th place shared fairly (``Ranking.credit``). In E1 the nearest texture is
-the truth itself.
+the truth itself. The published scores are in docs/benchmarks.md
+(`make bench-nams`).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from ..sim.design import DesignSpace
 
 TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
 # Designs are drawn from np.random.default_rng([seed, stream]). Training sets use stream 1
-# (render.sample_designs): E1 targets once did too, and with the default seed of both they were the
+# (render.jobs.sample_designs): E1 targets once did too, and with the default seed of both they were the
 # training set's first designs. Version 2 of the targets draws E1 from a stream of its own.
 TARGET_DESIGN_STREAM = {"e1": 3, "e2": 2}
 TARGETS_VERSION = 2
@@ -122,10 +124,13 @@ def unseen_rows(rows: list[dict], jobs: list[Job], training_designs) -> list[dic
 
 
 def mean_scores(rows: list[dict]) -> dict:
+    """The mean of each metric over score rows (``score``'s); {} for no rows."""
     return {key: float(np.mean([r[key] for r in rows])) for key in rows[0]} if rows else {}
 
 
 def results_markdown(results: dict) -> str:
+    """``run_eval``'s results as Markdown tables: every method, then (E1) the targets the training
+    set lacks."""
     experiment = results["experiment"].upper()
     lines = [f"### {experiment}: rate of inferring one of the n nearest textures "
              f"({results['targets']} target groups of {results['tiles_per_target']} tiles)", "",
@@ -145,6 +150,7 @@ def results_markdown(results: dict) -> str:
 
 
 def write_results(out: Path, results: dict) -> None:
+    """Write ``results.json`` and ``results.md`` into the folder ``out``."""
     write_text_atomic(out / "results.json", json.dumps(results, indent=2) + "\n")
     write_text_atomic(out / "results.md", results_markdown(results))
 
@@ -170,6 +176,10 @@ def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, 
 
 @dataclass(frozen=True)
 class EvalSettings(SearchOptions):
+    """How `meta-sim eval` scores: the neural-adjoint search settings (``SearchOptions``; ``S`` also
+    for the exhaustive vote), target groups and tiles per group, whether to run MS2, the seed of the
+    targets and the searches, the targets' render preset, and the rows of ``sheet.png``."""
+
     targets: int = 20
     tiles: int = 9  # per target group, as in the paper (and `meta-sim infer`'s default group size)
     ms2: bool = True  # run the MS2 baseline (needs the training set's per-tile features)
@@ -199,7 +209,15 @@ class EvalContext:
 
 def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
                  bars: Bars | None = None) -> EvalContext:
-    """Build or reuse the training set and models; render the targets and compute their features."""
+    """Build or reuse the training set and models; render the targets and compute their features.
+
+    ``experiment`` is "e1" or "e2"; ``dataset`` a DatasetConfig and ``models_settings`` a
+    ModelSettings (``pipeline.workflow``); training sets, models and targets are cached under
+    ``root``. With ``settings.ms2`` the training set's per-tile features are computed too (MS2's
+    pool). Returns the EvalContext every method is scored with. Raises MetaSimError for an unknown
+    experiment or preset, a missing ``bpy`` while something is left to render, or what
+    ``ensure_models`` raises.
+    """
     import time
 
     from ..nams import load_checkpoint
@@ -303,7 +321,15 @@ def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
 
 def run_eval(experiment: str, out: Path, dataset, models_settings, settings: EvalSettings = EvalSettings(),
              root: Path | None = None, bars: Bars | None = None) -> dict:
-    """Build or reuse the training set and models, render targets, score every method."""
+    """Build or reuse the training set and models, render targets, score every method.
+
+    Arguments as for ``prepare_eval`` (``root`` defaults to the cache). Scores uniform, DR, MS2 (with
+    ``settings.ms2``) and NAMS with the adjoint and the exhaustive search, and writes into ``out``:
+    ``results.json`` and ``results.md``, copies of ``nams.pt`` and ``dr.pt``, and ``sheet.png``
+    (the first ``settings.sheet_rows`` targets beside the same city rendered with NAMS's inferred
+    design). Returns the results dict. Raises MetaSimError as ``prepare_eval`` does, or when the
+    search settings are invalid.
+    """
     import shutil
 
     from ..core.cache import cache_root

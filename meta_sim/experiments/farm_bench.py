@@ -22,6 +22,9 @@ SETTINGS = (("local, 1 worker", "local", 1, 4), ("local, 2 workers", "local", 2,
 
 
 def bench_farm(designs: int = 16, tiles: int = 4, tile_px: int = 384, preset: str = "fast", seed: int = 7) -> dict:
+    """Plan one job of ``designs`` random designs x ``tiles`` tiles and render it with each of
+    ``SETTINGS`` into a temporary folder; returns per setting the time, throughput and peak memory
+    per worker process, and the machine's load before and after."""
     options = {"design": None, "random_designs": designs, "seed": seed, "cities": 4, "tiles": tiles,
                "preset": preset, "bank": None, "space": None, "tile_px": tile_px, "gsd": 0.3}
     load_before = os.getloadavg()
@@ -46,6 +49,7 @@ def bench_farm(designs: int = 16, tiles: int = 4, tile_px: int = 384, preset: st
 
 
 def format_farm_table(result: dict) -> str:
+    """``bench_farm``'s result as the Markdown table of docs/benchmarks.md, with a note under it."""
     lines = ["| setting | worker processes | tiles | s | tiles/s | peak RSS per worker (MB, max / median) |",
              "|---|---|---|---|---|---|"]
     for r in result["settings"]:

@@ -1,7 +1,7 @@
 """What the renders' roof colours alone tell: a reference for the E1/E2 scores, not a method.
 
 E1 and E2 score an inferred texture by the HSV similarity of texture
-swatches (``meta_sim.textures.similarity``), while every method sees
+swatches (``meta_sim.sim.textures.similarity``), while every method sees
 rendered tiles, where lighting, shadows and the texture's scale on the roof
 change the colours. This reference asks how far the renders agree with the
 score, with information no method has -- the tiles' roof labels:
@@ -113,6 +113,7 @@ def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Pat
 
 
 def format_reference_table(result: dict) -> str:
+    """The reference's result as the Markdown table of docs/benchmarks.md."""
     lines = ["| experiment | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | targets |",
              "|---|---|---|---|---|---|"]
     for experiment, rows in result["experiments"].items():

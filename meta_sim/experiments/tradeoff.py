@@ -50,6 +50,9 @@ METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
 
 @dataclass
 class Point:
+    """One row of the trade-off: a knob's setting, its E1 metrics, inference seconds per target group,
+    one-off seconds, the number of targets, and anything else worth keeping in the JSON."""
+
     knob: str
     setting: str
     metrics: dict
@@ -226,6 +229,7 @@ def accuracy(metrics: dict) -> float:
 
 
 def format_tradeoff_table(result: dict) -> str:
+    """The trade-off's result as the Markdown table of docs/benchmarks.md, with the views note."""
     lines = ["| knob | setting | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per group | "
              "one-off min | targets | top-1 flat / sloped, unseen designs |",
              "|---|---|---|---|---|---|---|---|---|---|"]

@@ -49,6 +49,7 @@ class Runner:
     timeout: float | None = None  # seconds per task
 
     def command(self, job_file: Path) -> list[str]:
+        """The command line that renders the batch manifest ``job_file``."""
         if self.blender:
             return [self.blender, "-b", "--python-exit-code", "1", "--python", str(SHARD_SCRIPT),
                     "--", "--manifest", str(job_file)]
@@ -57,6 +58,11 @@ class Runner:
 
 @dataclass(frozen=True)
 class RunOptions:
+    """How ``run`` renders: the executor ("local" or "dask"), parallel worker processes, a Dask
+    scheduler address, the Blender binary, a time-out per task, retries of a failed task, tasks per
+    worker process before it is replaced, and whether to show a progress bar. ``run`` raises
+    MetaSimError for a value out of range or a combination that cannot work."""
+
     executor: str = "local"
     workers: int = 2
     scheduler: str | None = None  # Dask scheduler address; None: a LocalCluster
@@ -69,6 +75,10 @@ class RunOptions:
 
 @dataclass
 class RunSummary:
+    """What ``run`` did: tasks and tiles in the manifest, tiles valid before and rendered during the
+    run, the tasks that failed (with why) and their tiles, retries, wall seconds and one record per
+    worker process."""
+
     tasks: int = 0
     tiles: int = 0
     already_done: int = 0  # tiles valid before the run
@@ -81,10 +91,12 @@ class RunSummary:
 
     @property
     def tiles_done(self) -> int:
+        """Valid tiles after the run."""
         return self.already_done + self.rendered
 
     @property
     def tiles_per_second(self) -> float:
+        """Tiles this run rendered per wall second (0 before any time has passed)."""
         return self.rendered / self.seconds if self.seconds > 0 else 0.0
 
 
@@ -221,7 +233,13 @@ def _check(options: RunOptions) -> Runner:
 
 
 def run(manifest: farm.Manifest, options: RunOptions = RunOptions()) -> RunSummary:
-    """Render every task whose tiles are not all valid; retry failures; summarise."""
+    """Render every task whose tiles are not all valid; retry failures; summarise.
+
+    Leftover temporary tiles are removed first, and the texture banks are built here once, before the
+    workers start. Failed renders do not raise: they are in the summary's ``failed``. Raises
+    MetaSimError for bad ``options`` (see ``RunOptions``), a missing Blender, bpy or distributed, or an
+    unreachable Dask scheduler.
+    """
     from tqdm import tqdm
 
     runner = _check(options)

@@ -24,7 +24,7 @@ from ..core.fileio import write_text_atomic
 from .manifest import Manifest
 
 REPOSITORY = Path(__file__).resolve().parents[2]
-TASKS_PER_SHARD = 8  # default shard size: a Blender start-up (~0.5 s) amortised over 8 designs
+TASKS_PER_SHARD = 8  # default shard size: one Blender start-up amortised over several designs
 
 TEMPLATE = """// meta-sim render job for Flamenco v3, exported by `meta-sim jobs export-flamenco`.
 // Manifest: %(manifest)s (%(tasks)d tasks, %(tiles)d tiles). Put this file in the
@@ -72,6 +72,13 @@ def job_type_name(manifest_path: Path) -> str:
 
 
 def export(manifest: Manifest, manifest_path: Path, out_dir: Path, shards: int | None = None) -> Path:
+    """Write the Flamenco job type for ``manifest`` (saved at ``manifest_path``) into ``out_dir`` as
+    ``meta_sim_<manifest stem>.js`` and return its path.
+
+    ``shards`` is the form's default number of Flamenco tasks (default: one per ``TASKS_PER_SHARD``
+    manifest tasks). Raises MetaSimError when the manifest has no tasks, ``shards`` is not between 1
+    and the number of tasks, or ``out_dir`` cannot be written.
+    """
     if not manifest.tasks:
         raise MetaSimError("the manifest has no tasks; plan a job with designs first")
     count = len(manifest.tasks)

@@ -39,11 +39,13 @@ class Task:
     outputs: tuple
 
     def to_dict(self) -> dict:
+        """The task as the manifest's JSON holds it."""
         return {"name": self.name, "design": self.design, "city_seed": self.city_seed,
                 "tiles": list(self.tiles), "outputs": list(self.outputs)}
 
     @classmethod
     def from_dict(cls, data) -> "Task":
+        """A task from the manifest's JSON; MetaSimError when a key is missing."""
         if not isinstance(data, dict) or any(k not in data for k in TASK_KEYS):
             raise MetaSimError(f"a manifest task needs the keys {', '.join(TASK_KEYS)}")
         return cls(str(data["name"]), dict(data["design"]), int(data["city_seed"]),
@@ -52,6 +54,9 @@ class Task:
 
 @dataclass(frozen=True)
 class Manifest:
+    """A render job: the settings every task shares, the tiles' folder and the tasks (``plan``
+    makes one, ``save`` and ``load`` write and read it)."""
+
     space: dict  # the design space, as DesignSpace.to_dict()
     bank: str | None  # texture bank folder; None: the default bank of each machine's cache
     preset: str
@@ -63,9 +68,11 @@ class Manifest:
 
     @property
     def n_outputs(self) -> int:
+        """Tiles over all tasks."""
         return sum(len(t.tiles) for t in self.tasks)
 
     def to_dict(self, relative_to: Path | None = None) -> dict:
+        """The manifest's JSON; ``out_dir`` is written relative to ``relative_to`` when it lies inside it."""
         out_dir = Path(self.out_dir)
         if relative_to is not None and out_dir.is_relative_to(relative_to):
             out_dir = out_dir.relative_to(relative_to)
@@ -76,6 +83,8 @@ class Manifest:
 
     @classmethod
     def from_dict(cls, data, base: Path) -> "Manifest":
+        """A manifest from its JSON, a relative ``out_dir`` resolved against ``base``; MetaSimError for
+        another format or version or a damaged file."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise MetaSimError(f"not a meta-sim job manifest (expected \"format\": \"{FORMAT}\"); "
                                "write one with `meta-sim jobs plan`")
@@ -91,6 +100,7 @@ class Manifest:
             raise MetaSimError(f"damaged job manifest ({exc!r}); plan the job again") from None
 
     def subset(self, tasks) -> "Manifest":
+        """The same job with only ``tasks``."""
         return replace(self, tasks=tuple(tasks))
 
     def shard(self, index: int, count: int) -> "Manifest":
@@ -101,6 +111,8 @@ class Manifest:
 
 
 def parse_shard(text: str) -> tuple[int, int]:
+    """``"i/n"`` -> (i, n); MetaSimError when ``text`` is not of that form (``Manifest.shard`` checks
+    the range)."""
     match = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text or "")
     if not match:
         raise MetaSimError(f"--shard {text!r}: write i/n, e.g. 0/4 for the first of four shards")
@@ -160,6 +172,8 @@ def save(manifest: Manifest, path: Path) -> Path:
 
 
 def load(path: Path) -> Manifest:
+    """Read the manifest at ``path``; MetaSimError when it is missing, unreadable or not a manifest
+    this meta-sim reads."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -201,13 +215,16 @@ class Status:
     temporaries: list
 
     def count(self, state: str) -> int:
+        """Tiles in ``state`` over all tasks."""
         return sum(1 for tiles in self.states.values() for _, state_ in tiles if state_ == state)
 
     @property
     def complete_tasks(self) -> set:
+        """Names of the tasks whose tiles are all done."""
         return {name for name, tiles in self.states.items() if all(s == DONE for _, s in tiles)}
 
     def paths(self, state: str) -> list:
+        """Paths of the tiles in ``state``."""
         return [path for tiles in self.states.values() for path, s in tiles if s == state]
 
 

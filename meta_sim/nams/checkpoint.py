@@ -11,7 +11,8 @@ code is ever executed):
     state_dict      the model's tensors (NAMS: also the buffers z_mean, z_std,
                     feature_scale)
     space           the design space (DesignSpace.to_dict())
-    feature_norm    {"mean": tensor, "std": tensor}
+    feature_norm    FeatureNorm.to_dict() (mean, std, and any whitening and
+                    histogram blocks)
     extractor_id    which feature extractor made the training features
     history         training history (plain values)
     extra           anything else the caller wants kept (plain values)
@@ -46,6 +47,9 @@ FORMAT_VERSION = 2
 
 @dataclass
 class Checkpoint:
+    """A loaded, verified checkpoint (``load_checkpoint``): the model in eval mode, the design space and
+    feature normalisation it was trained with, and ``model_id``, which presets cite."""
+
     kind: str
     model: NAMS | DirectRegression
     space: DesignSpace

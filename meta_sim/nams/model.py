@@ -11,9 +11,8 @@ of z. "additive" (the default) also splits P into one network per
 parameter's slice of z, summed: a tile's features are close to a sum over
 its flat and its sloped roofs, and a sum carries what one texture does to
 pairings the training set never rendered, which the joint P does not.
-`make bench-nams` (600 designs x 2 tiles, 100 independent E1 targets,
-exhaustive search), E1 top-1 flat/sloped: paper 0.94/0.56, factorised
-0.97/0.79, additive 0.99/0.93; training 211, 207 and 167 s.
+The reasoning is in docs/design.md ("Architectures"); the three compared
+on one training set are rows of `make bench-nams` in docs/benchmarks.md.
 
 Loss reductions (the paper does not state them): BCE and MSE are means over
 all entries, KL is summed over the z dimensions and averaged over the batch,
@@ -56,6 +55,7 @@ class MLP(nn.Sequential):
     search feeds (targets, starts, z_dim) tensors."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The layers applied over the last dimension of ``x``, whatever the leading ones."""
         lead = x.shape[:-1]
         return super().forward(x.reshape(-1, x.shape[-1])).reshape(*lead, -1)
 
@@ -83,9 +83,11 @@ class Blockwise(nn.Module):
         self.nets = nn.ModuleList(make(i, o) for i, o in zip(in_blocks, out_blocks))
 
     def parts(self, x: torch.Tensor) -> list[torch.Tensor]:
+        """Each block's network applied to its block of ``x``: one output per block."""
         return [net(part) for net, part in zip(self.nets, x.split(self.in_blocks, dim=-1))]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The blocks' outputs, concatenated or summed."""
         parts = self.parts(x)
         return torch.stack(parts).sum(dim=0) if self.sum else torch.cat(parts, dim=-1)
 
@@ -106,9 +108,8 @@ def kl_to_standard_normal(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tenso
 PREDICTORS = ("joint", "additive")
 
 # What `--architecture` offers: name -> (factorised E and D, predictor, hidden sizes, description).
-# The factorised networks are half as wide as the paper's: each sees one parameter, and six of them
-# at (512, 1024) cost about half what the paper's three at (1024, 2048) do (E1 on the default
-# training set, independent targets: sloped top-1 0.94 at (1024, 2048), 0.93 at (512, 1024)).
+# The factorised networks are half as wide as the paper's: each sees one parameter, so it needs less
+# capacity, and six of them at (512, 1024) cost about half what the paper's three at (1024, 2048) do.
 ARCHITECTURES = {
     "paper": (False, "joint", (1024, 2048), "the paper's NAMS: E, D and P each see the whole design (all of z)"),
     "factorised": (True, "joint", (512, 1024), "one E and one D per design parameter, each with its own "
@@ -131,6 +132,9 @@ def architecture_options(name: str, widths) -> dict:
 
 @dataclass(frozen=True)
 class NAMSConfig:
+    """NAMS sizes, loss weights and architecture; ``__post_init__`` raises MetaSimError for a
+    combination that cannot be built (sizes below 1, blocks not summing to ``design_dim``, ...)."""
+
     design_dim: int
     feature_dim: int
     z_dim: int = 10
@@ -181,6 +185,7 @@ class NAMSConfig:
             raise MetaSimError("mu_bound and logvar_bound must be positive")
 
     def to_dict(self) -> dict:
+        """Plain values for a checkpoint (tuples as lists)."""
         out = asdict(self)
         out["hidden"] = list(self.hidden)
         out["blocks"] = list(self.blocks)
@@ -188,6 +193,7 @@ class NAMSConfig:
 
     @property
     def architecture(self) -> str:
+        """The ``ARCHITECTURES`` name this config's blocks and predictor amount to."""
         for name, (factorised, predictor, _, _) in ARCHITECTURES.items():
             if factorised == bool(self.blocks) and predictor == self.predictor:
                 return name
@@ -201,10 +207,14 @@ class NAMSConfig:
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "NAMSConfig":
+        """A config from ``to_dict``'s values; MetaSimError for an unknown key or an invalid value."""
         return _from_dict(cls, data)
 
 
 class NAMSOutput(NamedTuple):
+    """What ``NAMS.forward`` returns: E's mean and log-variance, the z used (sampled when training,
+    mu otherwise), D's design logits and P's normalised features."""
+
     mu: torch.Tensor
     logvar: torch.Tensor
     z: torch.Tensor
@@ -251,15 +261,18 @@ class NAMS(nn.Module):
     # The exhaustive search caches P(mu(E(d))) for every design of a space
     # (see search.design_table). Anything that may change the weights drops it.
     def train(self, mode: bool = True):
+        """``nn.Module.train``; entering training mode drops the cached design tables."""
         if mode:
             self._design_tables.clear()
         return super().train(mode)
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """``nn.Module.load_state_dict``, dropping the cached design tables."""
         self._design_tables.clear()
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def encode(self, designs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """E: encoded designs (..., design_dim) -> soft-clamped (mu, logvar), each (..., z_dim)."""
         if self.config.blocks:
             pairs = [out.chunk(2, dim=-1) for out in self.encoder.parts(designs)]
             mu, logvar = torch.cat([m for m, _ in pairs], dim=-1), torch.cat([v for _, v in pairs], dim=-1)
@@ -272,9 +285,11 @@ class NAMS(nn.Module):
         return self.decoder(z)
 
     def predict(self, z: torch.Tensor) -> torch.Tensor:
+        """P: z (..., z_dim) -> normalised features (..., feature_dim)."""
         return self.predictor(z)
 
     def forward(self, designs: torch.Tensor, generator: torch.Generator | None = None) -> NAMSOutput:
+        """E, then z (sampled with ``generator`` in training mode, mu otherwise), then D and P."""
         mu, logvar = self.encode(designs)
         if self.training:
             eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype, device=mu.device)
@@ -297,6 +312,8 @@ class NAMS(nn.Module):
 
 @dataclass(frozen=True)
 class DRConfig:
+    """Direct-regression sizes: features in, design vector out, ``hidden`` layer widths."""
+
     feature_dim: int
     design_dim: int
     hidden: tuple[int, ...] = (500,) * 5
@@ -305,12 +322,14 @@ class DRConfig:
         _check_sizes(self, ("feature_dim", "design_dim"))
 
     def to_dict(self) -> dict:
+        """Plain values for a checkpoint (tuples as lists)."""
         out = asdict(self)
         out["hidden"] = list(self.hidden)
         return out
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "DRConfig":
+        """A config from ``to_dict``'s values; MetaSimError for an unknown key or an invalid value."""
         return _from_dict(cls, data)
 
 
@@ -329,10 +348,13 @@ class DirectRegression(nn.Module):
         self.net = mlp(config.feature_dim, config.hidden, config.design_dim, nn.ReLU(), dropout=0.0)
 
     def forward(self, features: torch.Tensor) -> torch.Tensor:
+        """Normalised features (N, feature_dim) -> design vectors (N, design_dim)."""
         return self.net(features)
 
     def loss(self, designs: torch.Tensor, features: torch.Tensor,
              generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, float]]:
+        """MSE of the predicted design vector, and that term for the history (``generator`` is unused:
+        the signature matches ``NAMS.loss`` so that one training loop serves both)."""
         mse = F.mse_loss(self(features), designs)
         return mse, {"mse": mse.item()}
 

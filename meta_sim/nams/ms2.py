@@ -29,13 +29,11 @@ Choices made here, where the paper leaves room:
   per-feature variance averaged over features; ``"median"``, the median
   distance between two pool tiles. Should the rule give 0 (most tiles
   coincide), h^2 is the mean squared distance between two pool tiles, or 1
-  if all coincide. The default scale, 2, was chosen on synthetic pools
-  (additive per-choice feature effects plus noise, 128 features, 300 of
-  40 x 44 designs): with Scott's h itself MS2 settles on the nearest pool
-  design, which for a target whose design the pool lacks gets few
-  parameters right; twice as wide recovers most of those and still nearly
-  all targets the pool holds; the median rule (about 16 sigma at 128
-  features) blurs designs together.
+  if all coincide. The default scale is 2: with Scott's h itself MS2
+  settles on the nearest pool design, which for a target whose design the
+  pool lacks gets few parameters right; twice as wide gets most of those
+  parameters right and still nearly all targets the pool holds; the median
+  rule is far wider and blurs designs together.
 * p^G(x_i) averages the kernels of all N samples, x_i's own included (no
   leave-one-out): with a finite pool a draw often repeats a tile, and a
   repeat is a genuine sample of p^G. So log p^G >= -log N, always finite.

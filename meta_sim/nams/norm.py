@@ -24,11 +24,9 @@ class FeatureNorm:
 
     A constant dimension gets std 1 (it carries no information and must not
     blow up a target that differs there); other stds are clamped below by eps.
-    Whitening exists for the search: its MSE over 774 standardised features is
+    Whitening exists for the search: its MSE over the standardised features is
     dominated by many correlated, noisy dimensions, while unit-variance
-    principal components weigh every independent direction once (E1 top-1 of
-    NAMS exhaustive, 300 x 4 tiles: 0.65/0.55 -> 0.91/0.74 with 128 components,
-    measured on the first E1 targets, which were training designs).
+    principal components weigh every independent direction once.
 
     Noise whitening (``designs`` given) goes one step further: within the
     components it whitens by the covariance of the simulation noise -- what
@@ -39,21 +37,13 @@ class FeatureNorm:
     encoded designs (with an intercept), its covariance taken
     over the residual degrees of freedom and shrunk by ``shrink`` towards its
     mean variance. With fewer residual degrees of freedom than components,
-    only half as many components as there are degrees of freedom are kept
-    (measured with the linear fit, 150 designs x 4 tiles, 135 training rows,
-    52 degrees of freedom: 128 components whitened by the total spread
-    0.81/0.57, 26 by the noise 0.88/0.77); with fewer than 2 the total
-    spread is used (``noise_whitened`` is then False). Measured with the linear fit itself
-    (300 x 4 tiles, 100 E1 targets of 4 tiles, 128 components): top-1
-    flat/sloped 0.91/0.81 whitened by the total spread, 0.95/0.92 by the noise
-    (on the first E1 targets, training designs; on independent targets of 9
-    tiles the noise-whitened linear fit also gets 0.95/0.92). With NAMS on
-    independent E1 targets (exhaustive, 100 groups of 9 tiles): E1 top-1
-    0.84/0.43 whitened by the total spread, 0.79/0.50 by the noise; E2 top-10
-    0.60/0.56 and 0.80/0.60.
+    only half as many components as there are degrees of freedom are kept,
+    so that the noise covariance stays well estimated; with fewer than 2 the
+    total spread is used (``noise_whitened`` is then False). The reasoning is
+    in docs/design.md ("Feature space").
 
     Histogram blocks (``hist_blocks``, the widths of the features' trailing
-    histograms, e.g. ``roofcolour.RoofColourExtractor``'s two roof-colour
+    histograms, e.g. ``pipeline.roofcolour.RoofColourExtractor``'s two roof-colour
     histograms) are neither standardised nor whitened: each is made to sum
     to 1 and square-rooted (its Euclidean distances are then Hellinger
     distances), and all are multiplied by one ``hist_scale`` that gives them
@@ -74,6 +64,10 @@ class FeatureNorm:
     def fit(cls, features: torch.Tensor, eps: float = 1e-6, whiten: int = 0,
             designs: torch.Tensor | None = None, shrink: float = 0.03,
             hist_blocks: tuple[int, ...] = ()) -> "FeatureNorm":
+        """Fit on training ``features`` (N, dim). ``whiten`` > 0 keeps that many principal components;
+        ``designs`` (N, design_dim), given with it, whitens them by the simulation noise. The last
+        ``hist_blocks`` widths of the features are histograms. Raises MetaSimError when the blocks do
+        not fit the features."""
         hist_blocks = tuple(int(b) for b in hist_blocks)
         lead = features.shape[1] - sum(hist_blocks)
         if min(hist_blocks, default=1) < 1 or lead < 1:
@@ -123,6 +117,8 @@ class FeatureNorm:
         return (self.mean.shape[0] if self.components is None else self.components.shape[0]) + self.hist_dim
 
     def apply(self, features: torch.Tensor) -> torch.Tensor:
+        """Raw features (..., dim) -> normalised (..., ``self.dim``); MetaSimError if their width is not
+        the one this normalisation was fitted on (features from another extractor)."""
         features = torch.as_tensor(features, dtype=torch.float32)
         lead = self.mean.shape[0]
         if features.shape[-1] != lead + self.hist_dim:
@@ -136,6 +132,7 @@ class FeatureNorm:
         return torch.cat([out, hists], dim=-1)
 
     def to_dict(self) -> dict:
+        """Tensors and plain values for a checkpoint; ``from_dict`` reads them back."""
         out = {"mean": self.mean.clone(), "std": self.std.clone()}
         if self.components is not None:
             out["components"] = self.components.clone()
@@ -147,6 +144,7 @@ class FeatureNorm:
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "FeatureNorm":
+        """The normalisation ``to_dict`` stored; MetaSimError if it is missing, malformed or not finite."""
         try:
             mean = torch.as_tensor(data["mean"], dtype=torch.float32)
             std = torch.as_tensor(data["std"], dtype=torch.float32)

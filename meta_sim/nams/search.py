@@ -22,7 +22,7 @@ the vote. ``SearchResult.searched_design`` keeps the search's answer and
 
 The loss is the mean squared error of the predicted features in units of
 the model's ``feature_scale``; a model whose features end in roof-colour
-histograms (``NAMSConfig.colour_dims``, see ``meta_sim.roofcolour``) takes
+histograms (``NAMSConfig.colour_dims``, see ``meta_sim.pipeline.roofcolour``) takes
 the geometric mean of the error over those and over the rest (``_combined``).
 
 Targets must be normalised with the checkpoint's ``FeatureNorm``. Every
@@ -63,6 +63,7 @@ class SearchOptions:
     r: float = 0.0
 
     def search_options(self) -> dict:
+        """The settings as keyword arguments for ``search`` / ``adjoint_search``."""
         return {name: getattr(self, name) for name in ("M", "k", "S", "iterations", "lr", "r")}
 
 
@@ -86,6 +87,7 @@ class SearchResult:
     ranked: list[tuple[dict, float]] = field(default_factory=list)
 
     def to_dict(self) -> dict:
+        """Plain JSON-ready values (``ranked`` as a list of {design, loss})."""
         return {"design": self.design, "votes": self.votes, "best_loss": self.best_loss,
                 "mean_loss": self.mean_loss, "method": self.method, "searched_design": self.searched_design,
                 "rejected": self.rejected, "ranked": [{"design": d, "loss": loss} for d, loss in self.ranked]}
@@ -144,11 +146,8 @@ def _combined(*mses: torch.Tensor) -> torch.Tensor:
     A product does not depend on either block's units, so it needs no
     weight between them, and a far-off target (a texture the bank lacks),
     whose whitened error is huge for every design, is still ranked by its
-    roof colours in proportion. Chosen with a linear stand-in for P on the
-    default training set, on a validation that needs no held-out textures
-    (E1 targets with their own texture barred from the answer, the HSV
-    top-10 of the others credited): the product did as well as the best of
-    the weighted sums tried.
+    roof colours in proportion. The reasoning is in docs/design.md ("Roof
+    colour").
     """
     if len(mses) == 1:
         return mses[0]
@@ -409,7 +408,9 @@ def search(model: NAMS, targets, space: DesignSpace, method: str = "auto", *, S:
            generator: torch.Generator | None = None, top: int = 10, M: int = 1000, k: float = 3.0,
            iterations: int = 200, lr: float = 0.01, dtype: torch.dtype = torch.float32,
            boundary_weight: float = 0.1, bars: Bars | None = None) -> list[SearchResult]:
-    """Search designs for the target rows with ``method``; adjoint-only options are ignored by exhaustive."""
+    """Search designs for the target rows with ``method`` ("auto", "adjoint" or "exhaustive", see
+    ``resolve_method``); adjoint-only options are ignored by exhaustive. One SearchResult per row;
+    MetaSimError for an unknown method, bad options, or targets that do not fit the model."""
     if resolve_method(space, method) == "exhaustive":
         return exhaustive_search(model, targets, space, S=S, top=top, r=r, generator=generator)
     return adjoint_search(model, targets, space, M=M, k=k, S=S, iterations=iterations, lr=lr, r=r,

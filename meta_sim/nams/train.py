@@ -32,8 +32,7 @@ from .norm import FeatureNorm
 # split: the total loss, or "mse" (P's error for NAMS, the whole loss for DR).
 # NAMS's total is dominated by the design BCE (lambda_D = 1 against lambda_P =
 # 0.005), which levels off long before P does, so stopping on it leaves P, the
-# only network the search uses, undertrained (measured: stopped at epoch ~60
-# instead of ~220).
+# only network the search uses, undertrained.
 MONITORS = ("loss", "mse")
 
 
@@ -56,12 +55,10 @@ class TrainConfig:
 
     Patience 60 with the learning rate halved after 15 epochs without
     progress, rather than patience 20 at a fixed rate: P keeps improving
-    slowly for hundreds of epochs (E1 top-1 of NAMS exhaustive, 300 x 4
-    tiles, 100 targets of 9 tiles: 0.94/0.79 stopped at epoch 168,
-    0.94/0.86 at epoch 430 -- on the first E1 targets, which were training
-    designs; on independent targets 0.78/0.48 with patience 20 at a fixed
-    rate (233 epochs) and 0.79/0.50 with this schedule (511 epochs), the same
-    within the seed's spread).
+    slowly for hundreds of epochs, and a short patience stops it early.
+
+    ``__post_init__`` raises MetaSimError for a setting out of range; ``from_dict`` also for an
+    unknown option name.
     """
 
     lr: float = 1e-3
@@ -95,10 +92,12 @@ class TrainConfig:
             raise MetaSimError(f"plateau_factor must be in [0, 1) (0 = off), not {self.plateau_factor}")
 
     def to_dict(self) -> dict:
+        """Plain values (stored in the training history)."""
         return asdict(self)
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "TrainConfig":
+        """A config from plain values; MetaSimError for an unknown option or an invalid value."""
         unknown = set(data) - set(cls.__dataclass_fields__)
         if unknown:
             raise MetaSimError(f"unknown training option(s) {', '.join(sorted(unknown))}")
@@ -117,6 +116,9 @@ class EpochReport(NamedTuple):
 
 
 class Fit(NamedTuple):
+    """What training returns: the model (eval mode, best validation weights), the ``FeatureNorm``
+    fitted on the training split, and the history (per-epoch losses, best epoch, seconds, row counts)."""
+
     model: NAMS | DirectRegression
     norm: FeatureNorm
     history: dict
@@ -125,10 +127,18 @@ class Fit(NamedTuple):
 def train_nams(designs: torch.Tensor, features: torch.Tensor, model_config: NAMSConfig | None = None,
                config: TrainConfig = TrainConfig(), on_epoch: Callable[[EpochReport], None] | None = None,
                hist_blocks: tuple[int, ...] = ()) -> Fit:
-    """Train E, D and P; store the spread of the training embeddings for the search.
+    """Train E, D and P on encoded ``designs`` (N, design_dim) and raw ``features`` (N, feature_dim).
 
-    ``hist_blocks``: the widths of the features' trailing histograms (see FeatureNorm); the search
-    compares them apart from the rest (``NAMSConfig.colour_dims``)."""
+    ``model_config`` defaults to the paper's sizes for these widths; its ``feature_dim`` and
+    ``colour_dims`` are replaced by the fitted normalisation's. ``on_epoch`` is called after every
+    epoch (progress bars). ``hist_blocks``: the widths of the features' trailing histograms (see
+    FeatureNorm); the search compares them apart from the rest (``NAMSConfig.colour_dims``).
+
+    Returns a ``Fit`` whose model also holds the spread of the training embeddings (the search's
+    starts) and P's error per feature (the search's units). Rows with NaN/Inf are dropped with a
+    warning. Raises MetaSimError when the shapes disagree, no row is finite, too few rows are left
+    after the validation split, or the loss diverges.
+    """
     designs, features, dropped = _clean(designs, features)
     model_config = model_config or NAMSConfig(design_dim=designs.shape[1], feature_dim=features.shape[1])
     return _fit("nams", model_config, designs, features, config, on_epoch, dropped, hist_blocks)
@@ -137,7 +147,13 @@ def train_nams(designs: torch.Tensor, features: torch.Tensor, model_config: NAMS
 def train_dr(designs: torch.Tensor, features: torch.Tensor, model_config: DRConfig | None = None,
              config: TrainConfig = TrainConfig(), on_epoch: Callable[[EpochReport], None] | None = None,
              hist_blocks: tuple[int, ...] = ()) -> Fit:
-    """Train the direct-regression baseline: normalised features -> design vector, MSE."""
+    """Train the direct-regression baseline (normalised features -> design vector, MSE) on encoded
+    ``designs`` (N, design_dim) and raw ``features`` (N, feature_dim).
+
+    ``model_config`` defaults to the paper's DR for these widths (its ``feature_dim`` follows the
+    fitted normalisation); ``on_epoch`` and ``hist_blocks`` are as for ``train_nams``. Returns a
+    ``Fit``; raises MetaSimError in the same cases as ``train_nams``.
+    """
     designs, features, dropped = _clean(designs, features)
     model_config = model_config or DRConfig(feature_dim=features.shape[1], design_dim=designs.shape[1])
     return _fit("dr", model_config, designs, features, config, on_epoch, dropped, hist_blocks)
@@ -285,9 +301,8 @@ def _store_search_stats(model: NAMS, train_designs: torch.Tensor, designs: torch
     """z_mean/z_std from the training split; feature_scale from P's error over all rows.
 
     The error scale uses the validation rows too: a variance per feature needs
-    more rows than the validation split alone has (measured on the first
-    E1 targets, which were training designs: validation-only scales gave
-    E1 top-1 0.58/0.39, all rows 0.74/0.57).
+    more rows than the validation split alone has, and scales estimated from
+    that split alone are too noisy to weigh the search by.
     """
     mu, _ = model.encode(train_designs)
     model.z_mean.copy_(mu.mean(dim=0))

@@ -2,8 +2,8 @@
 
 A training set lives in one folder: ``tiles/`` (the EXR tiles and their
 ``designs.json``, resumable like any render) and one feature cache per
-extractor and view count, ``features-<key>.pt``, holding the design ids, the
-encoded designs, the design-space spec, the extractor id and one averaged
+extractor and view count, ``features-<key>.pt``, holding the design names,
+the design-space spec, the extractor id, the view count and one averaged
 feature vector per design. ``tile-features-<key>.pt`` beside it holds, in
 the same format, one feature vector per tile (the pool MS2 samples from);
 the design's vector is the mean of its tiles'.
@@ -30,12 +30,14 @@ CACHE_VERSION = 1
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    """What a training set is made of. The default fits a 2-core machine in a few minutes;
-    ``paper()`` is the paper's scale (1,700 designs x 9 tiles).
+    """What a training set is made of: how many random designs (drawn with ``seed``) and tiles per
+    design, rendered in how many cities, with which render quality preset, design space, tile size
+    and metres per pixel. The default fits a 2-core machine in a few minutes; ``paper()`` is the
+    paper's scale (1,700 designs x 9 tiles).
 
     600 designs x 2 tiles rather than 300 x 4: the same rendering, and more
-    designs is what NAMS needs to infer designs it was not trained on (E1
-    top-1 flat/sloped 0.94/0.56 against 0.78/0.49, `make bench-tradeoff`).
+    designs is what NAMS needs to infer designs it was not trained on (rows
+    "training set" of `make bench-tradeoff` in docs/benchmarks.md).
     """
 
     designs: int = 600
@@ -49,6 +51,7 @@ class DatasetConfig:
 
     @classmethod
     def paper(cls, **overrides) -> "DatasetConfig":
+        """The paper's scale, 1,700 designs x 9 tiles, with any other field overridden."""
         return cls(**{"designs": 1700, "tiles": 9, **overrides})
 
     def identity(self) -> dict:
@@ -59,11 +62,16 @@ class DatasetConfig:
         return {**asdict(self), **get_preset(self.preset).cache_fields()}
 
     def key(self) -> str:
+        """A short hash of ``identity()``: the training set's folder name in the cache."""
         return hashlib.sha256(json.dumps(self.identity(), sort_keys=True).encode()).hexdigest()[:12]
 
 
 @dataclass
 class FeatureSet:
+    """A training set's features, one row per design (the mean over its tiles and views), with the
+    designs' names, the designs as dicts and encoded, the design space, and the extractor id and
+    view count that made them (``build_features``)."""
+
     names: list[str]
     designs: list[dict]
     encoded: torch.Tensor  # (N, design_dim) float32
@@ -71,14 +79,15 @@ class FeatureSet:
     space: DesignSpace
     extractor_id: str
     views: int
-    # With roof colour (roofcolour.RoofColourExtractor): the widths of the features' trailing
+    # With roof colour (pipeline.roofcolour.RoofColourExtractor): the widths of the features' trailing
     # histograms, and the roof finder and power they were weighted by (its to_dict()), for the checkpoint.
     hist_blocks: tuple[int, ...] = ()
     roof_likelihood: dict | None = None
 
 
 class TileFeatures(NamedTuple):
-    """Per-tile features of a training set: every tile one simulation of its design."""
+    """Per-tile features of a training set, every tile one simulation of its design: the designs,
+    encoded (N, design_dim) and the features (N, tiles, feature_dim) (``build_tile_features``)."""
 
     designs: list[dict]
     encoded: torch.Tensor  # (N, design_dim) float32
@@ -86,7 +95,13 @@ class TileFeatures(NamedTuple):
 
 
 def render_training_set(root: Path, config: DatasetConfig, progress: Callable[[int], None] | None = None):
-    """Render (or finish rendering) the tiles; returns the render jobs."""
+    """Render (or finish rendering) the training set's tiles into ``root/tiles`` with the default
+    texture bank; returns the render jobs (one per design).
+
+    Tiles already rendered with the same settings are kept, so a rerun resumes. ``progress(n)`` is
+    called as tiles are done. Needs ``bpy``; raises MetaSimError for an unknown design space or
+    render preset, a missing ``bpy`` or an unwritable folder.
+    """
     from ..render.jobs import RenderSettings, design_jobs, sample_designs
     from ..render.loop import render_jobs
     from ..sim.quality import get_preset
@@ -102,11 +117,14 @@ def render_training_set(root: Path, config: DatasetConfig, progress: Callable[[i
 
 
 def job_tiles(tile_dir: Path, name: str, n_tiles: int) -> list[Path]:
+    """The paths of the first ``n_tiles`` tiles of the design named ``name`` in ``tile_dir``
+    (whether or not they exist)."""
     return [Path(tile_dir) / f"{name}_t{j:02d}.exr" for j in range(n_tiles)]
 
 
 def training_tiles(root: Path, config: DatasetConfig) -> list[Path]:
-    """Every tile of a rendered training set, in design order."""
+    """Every tile of a rendered training set, in design order; MetaSimError naming the first tile
+    that is missing (render the set with ``render_training_set`` / `meta-sim dataset` first)."""
     _, _, names = _training_designs(config)
     return [p for name in names for p in _existing_tiles(Path(root), name, config.tiles)]
 
@@ -118,6 +136,11 @@ def build_features(root: Path, config: DatasetConfig, extractor, views: int = 8,
     A design's feature is the mean of its tiles' features (every tile x view
     weighs the same in it), so the tiles' features are computed once, cached
     (``build_tile_features``, the pool MS2 samples from) and averaged here.
+    ``extractor`` is a feature extractor (``features.Extractor`` or
+    ``roofcolour.RoofColourExtractor``), ``views`` how many rotations and flips
+    of each tile it averages, ``progress(1)`` is called after each design
+    computed. Both caches live in ``root``. Raises MetaSimError when a tile is
+    missing or unreadable.
     """
     root = Path(root)
     space, designs, names = _training_designs(config)
@@ -139,7 +162,8 @@ def build_tile_features(root: Path, config: DatasetConfig, extractor, views: int
     """Features of every tile of the training set, each tile alone (averaged over its ``views``).
 
     Cached per design beside ``build_features``'s cache, computing only what
-    the cache lacks; ``progress(1)`` after each design computed.
+    the cache lacks; ``progress(1)`` after each design computed. Raises
+    MetaSimError when a tile is missing or unreadable.
     """
     space, designs, names = _training_designs(config)
     cached = _tile_features(Path(root), config, space, names, extractor, views, progress)

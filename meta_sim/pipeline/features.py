@@ -1,7 +1,7 @@
 """Feature extractors, and the paper's augmentation and averaging (section 4).
 
 An extractor maps a float32 batch ``(N, 3, H, W)`` of display sRGB in
-[0, 1] (what ``meta_sim.imageio.read_image`` returns) to ``(N, dim)``
+[0, 1] (what ``meta_sim.sim.imageio.read_image`` returns) to ``(N, dim)``
 float32 features, deterministically, for any H, W >= 16. Its ``id`` names
 it, its version and parameters; checkpoints and feature caches store it so
 features from different extractors are never mixed.
@@ -40,6 +40,9 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
 class Extractor(Protocol):
+    """What every feature extractor offers: an ``id`` stored with its features, the feature width
+    ``dim``, and a call mapping an (N, 3, H, W) sRGB batch in [0, 1] to (N, dim) float32 features."""
+
     id: str
     dim: int
     # True when features do not change under rotations by 90 degrees and flips: views are then skipped.
@@ -56,7 +59,7 @@ class ColourTexture:
     smaller multiples (corners aligned, a symmetric operation). Level 0 is
     the image; levels 1-3 are 2x2 block means of the level below. Luminance
     is ``Y = 0.299 R + 0.587 G + 0.114 B``. Colours are placed in the HSV
-    cone of the paper's similarity score (``meta_sim.textures.similarity``)
+    cone of the paper's similarity score (``meta_sim.sim.textures.similarity``)
     with the chroma stretched: ``(c^(1/4) cos 2 pi h, c^(1/4) sin 2 pi h, v)``
     over [-1, 1]^2 x [0, 1] (``v = max``, ``c = max - min``, hexcone hue
     ``h``). Roofs, roads and ground are nearly grey: in the plain cone they
@@ -90,10 +93,9 @@ class ColourTexture:
 
     The stretch (1/4 rather than 1/3 or 1/2), the conditional form of
     item 3 and its weight were chosen on "fast" renders of every bank
-    texture in two cities (4 tiles each), by how often a design's nearest
-    neighbour in the other city is the same design: flat roofs 10 % top-1
-    with the plain cone and item 3 as a joint histogram, 82 % now (100 %
-    top-5); sloped roofs 9 %, now 77 % (98 %). Chance is 1 in 40-44.
+    texture in two cities, by how often a design's nearest neighbour in the
+    other city is the same design: the plain cone and a joint histogram for
+    item 3 tell far fewer roof textures apart.
 
     Every statistic is invariant to rotations by 90 degrees and flips (2x2
     blocks of sides that are multiples of 8 map onto each other), so

@@ -27,6 +27,11 @@ from ..sim.presets import DesignPreset, population, save_preset
 
 @dataclass(frozen=True)
 class InferSettings(SearchOptions):
+    """How `meta-sim infer` searches: the search settings (``SearchOptions``), then tiles per target
+    group, the search ``method`` ("auto", "adjoint" or "exhaustive"), the seed of the search's random
+    starts and rejection draws, the targets' metres per pixel (``gsd``; None: each file's own, else
+    the render's), the dihedral views averaged per tile, and a backbone's weights file."""
+
     group_size: int = 9
     method: str = "auto"
     seed: int = 0
@@ -48,6 +53,25 @@ def group_tiles(tiles: list, group_size: int) -> list[list]:
 
 def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: InferSettings = InferSettings(),
           bars: Bars | None = None) -> dict:
+    """Infer the designs behind the images in ``target_dir`` with the NAMS checkpoint at
+    ``checkpoint_path``; write presets and a report into ``out_dir`` and return the report.
+
+    Every readable image directly in ``target_dir`` (unreadable files are skipped and listed in the
+    report) is brought to the checkpoint's render pixel size (from ``settings.gsd``, else the file's
+    metadata; without either it is taken as rendered) and cut into tiles of the checkpoint's size;
+    the tiles, in file-name order, form groups of ``settings.group_size``. Each group's features
+    (the checkpoint's extractor, averaged over tiles and views) are normalised and searched, and
+    ``out_dir`` gets ``presets/<folder>-NNN.json`` (one design preset per group, with its vote
+    shares), ``population.json`` (the distribution of the groups' designs), and ``report.json``,
+    ``report.md`` and ``report.png`` (each group's first tile beside the textures of its design,
+    for the first 12 groups). The returned dict is what ``report.json`` holds: counts, skipped
+    files, model id, method, seconds, the population and each group's design and confidence.
+
+    Raises MetaSimError when the checkpoint is missing, unreadable or not a NAMS model, its
+    extractor cannot be rebuilt (e.g. a backbone without ``settings.weights``), ``target_dir`` is
+    not a folder or holds no readable image, an image is too small for a tile, or a setting is out
+    of range.
+    """
     from ..nams import load_checkpoint, search
     from ..sim.imageio import list_images, load_targets
     from .features import features_for_groups

@@ -21,6 +21,7 @@ class Profile:
     group_size: int = 9
 
     def search_options(self) -> dict:
+        """The adjoint search's M and iterations as keyword arguments (none for another method)."""
         return {"M": self.M, "iterations": self.iterations} if self.method == "adjoint" else {}
 
 
@@ -37,6 +38,7 @@ PROFILES = {
 
 
 def get_profile(name: str) -> Profile:
+    """The profile called ``name``; MetaSimError listing the profiles for an unknown one."""
     try:
         return PROFILES[name]
     except KeyError:

@@ -1,7 +1,7 @@
 """Roof colour: the colours of the pixels that are likely roofs, found without labels at inference.
 
 Why. The default features describe whole tiles, and the search weighs them
-by the simulation noise (``nams.train.FeatureNorm``): what tells one bank
+by the simulation noise (``nams.norm.FeatureNorm``): what tells one bank
 texture from another in a render. A target roofed with a texture the bank
 lacks (E2) then goes to the bank texture of the most similar *structure*,
 whatever its colour, while the E2 score -- and an artist -- asks for the
@@ -33,7 +33,8 @@ histograms by their plain distance, not whitened by the noise (see
   1 gain more from a purer sample than from a larger one.
 
 The finder belongs to the training set it was learnt on; the checkpoint
-stores it, so inference needs no labels.
+stores it, so inference needs no labels. The reasoning is in docs/design.md
+("Roof colour").
 """
 
 from __future__ import annotations
@@ -122,10 +123,12 @@ class RoofLikelihood:
         return self.tables[:, _bin_index(level1)].permute(1, 0, 2, 3)
 
     def to_dict(self) -> dict:
+        """The tables and pixel count for a checkpoint or the cache; ``from_dict`` reads them back."""
         return {"version": VERSION, "tables": self.tables.clone(), "pixels": self.pixels}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "RoofLikelihood":
+        """The likelihood ``to_dict`` stored; MetaSimError for another version or tables of the wrong shape."""
         if data.get("version") != VERSION:
             raise MetaSimError(f"roof likelihood version {data.get('version')!r}; this meta-sim reads "
                                f"version {VERSION} (train the model again)")
@@ -197,6 +200,9 @@ class RoofColourExtractor:
         return torch.cat([self.base(batch), self.roof_histograms(batch)], dim=1)
 
     def roof_histograms(self, batch: torch.Tensor) -> torch.Tensor:
+        """(N, sum(hist_blocks)): the flat-roof then the sloped-roof histogram of each image of an
+        (N, 3, H, W) sRGB batch, each bin divided by the image's pixel count (not made to sum to 1:
+        ``FeatureNorm`` does that after the group mean, so that a group pools its tiles' pixels)."""
         parts = []
         for chunk in batch.split(ColourTexture.CHUNK):
             level1 = _level1(torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0))

@@ -6,8 +6,10 @@ of each kind. A likelihood from a pixel's colour alone (``RoofLikelihood``)
 cannot tell a green roof from the grass around it, nor a roof texture the
 bank lacks from the ground; the layout can: roofs are rectangles with
 edges, shadows beside them, and sloped ones show their facets. The net sees
-a neighbourhood of about 20 m (dilated 3x3 convolutions on the 2x2-pixel
-means) and gives, per pixel, p(other), p(flat roof), p(sloped roof).
+a neighbourhood of about 80 m at 0.3 m per pixel (dilated 3x3 convolutions on
+the 2x2-pixel means, see ``_Net``) and gives, per pixel, p(other), p(flat
+roof), p(sloped roof). Its settings are the constants below; the reasoning is
+in docs/design.md ("Roof colour").
 
 Learnt to generalise to roofs it has not seen: while training, the roof
 pixels of half the crops get a random per-channel gain, offset and channel
@@ -39,8 +41,8 @@ LR = 3e-3
 MAX_TILES = 1200  # tiles kept in memory for training (evenly spaced over the training set)
 CLASSES = 3  # other, flat roof, sloped roof
 RECOLOUR = 0.5  # share of the training crops whose roofs are recoloured
-# Convolutions in channels-last layout: the same net, learnt and run in about half the time on CPUs
-# (oneDNN's fastest layout); a layout gives slightly different rounding, so it is part of ``config_id``.
+# Convolutions in channels-last layout: the same net, learnt and run faster on CPUs (oneDNN's fastest
+# layout); a layout gives slightly different rounding, so it is part of ``config_id``.
 MEMORY_FORMAT = torch.channels_last
 
 
@@ -52,7 +54,8 @@ def config_id() -> str:
 
 class _Net(nn.Module):
     """Per pixel of the 2x2-pixel means: fine features there, and features of a context of about
-    75 m (dilated convolutions at half that resolution, enough to see a whole roof and its facets)."""
+    80 m at 0.3 m per pixel (dilated convolutions at half that resolution, enough to see a whole roof
+    and its facets)."""
 
     def __init__(self):
         super().__init__()
@@ -109,7 +112,9 @@ class RoofSegmenter:
     @classmethod
     def fit(cls, paths, seed: int = 0, steps: int | None = None,
             progress: Callable[[int], None] | None = None) -> "RoofSegmenter":
-        """Trained on meta-sim EXR tiles (their RGB as ``read_image`` gives it, and their roof labels)."""
+        """Trained on meta-sim EXR tiles (their RGB as ``read_image`` gives it, and their roof labels)
+        for ``steps`` steps (default ``STEPS``), ``progress(1)`` after each. Deterministic for ``seed``.
+        Raises MetaSimError when there are no tiles, they differ in size, or training diverges."""
         steps = steps or STEPS
         rgb, shares = _training_pixels(paths)
         generator = torch.Generator().manual_seed(int(seed))
@@ -153,11 +158,14 @@ class RoofSegmenter:
         return torch.softmax(self.net(x), dim=1)[:, 1:].contiguous()
 
     def to_dict(self) -> dict:
+        """The weights for a checkpoint or the cache; ``from_dict`` (or ``roof_finder_from_dict``) reads
+        them back."""
         return {"kind": "segmenter", "version": VERSION,
                 "state": {k: v.clone() for k, v in self.net.state_dict().items()}}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> "RoofSegmenter":
+        """The segmenter ``to_dict`` stored; MetaSimError for another version or weights that do not fit."""
         if data.get("version") != VERSION:
             raise MetaSimError(f"roof segmenter version {data.get('version')!r}; this meta-sim reads "
                                f"version {VERSION} (train the model again)")

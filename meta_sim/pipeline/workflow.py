@@ -28,6 +28,12 @@ MODEL_CODE_VERSION = 2
 
 @dataclass(frozen=True)
 class ModelSettings:
+    """Everything besides the training set that decides the cached models: the NAMS architecture,
+    the feature extractor spec (``features.make_extractor``) and a backbone's weights file, the
+    dihedral views per tile, NAMSConfig and TrainConfig overrides, the seed, and the roof-colour
+    features' settings. An unknown architecture, option or value raises MetaSimError when the
+    settings are used (``key``, ``train_models``)."""
+
     architecture: str = DEFAULT_ARCHITECTURE  # a name from nams.ARCHITECTURES
     extractor: str = "colour-texture"
     weights: str | None = None
@@ -35,7 +41,7 @@ class ModelSettings:
     nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
     train: dict = field(default_factory=dict)  # TrainConfig overrides
     seed: int = 0
-    # Add the roof-colour histograms to the features (meta_sim.roofcolour); needs the tiles' labels.
+    # Add the roof-colour histograms to the features (meta_sim.pipeline.roofcolour); needs the tiles' labels.
     roof_colour: bool = True
     # What finds the roofs they count: roofcolour.ROOF_FINDERS (the learnt segmenter, or colour alone).
     roof_finder: str = "segmenter"
@@ -69,6 +75,9 @@ class ModelSettings:
 
 @dataclass
 class Models:
+    """What ``ensure_models`` returns: the NAMS and DR checkpoint paths, the training set's features,
+    and the seconds spent on each stage this time ("train_*" only when the models were trained)."""
+
     nams_path: Path
     dr_path: Path
     features: FeatureSet
@@ -76,12 +85,21 @@ class Models:
 
 
 def dataset_dir(config: DatasetConfig, root: Path | None = None) -> Path:
+    """The folder of the training set ``config`` describes: ``datasets/<config.key()>`` under ``root``
+    (default: the cache, ``core.cache.cache_root``). Nothing is created."""
     return Path(root or cache_root()) / "datasets" / config.key()
 
 
 def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
                      bars: Bars | None = None) -> tuple[FeatureSet, dict]:
-    """Render what is missing of the training set and compute what is missing of its features."""
+    """Render what is missing of the training set and compute what is missing of its features.
+
+    With ``settings.roof_colour`` the roof finder is learnt first (once per training set) and the
+    features end in its roof-colour histograms. Returns the FeatureSet and the seconds spent
+    rendering ("render") and on features ("features"); ``bars`` makes a progress bar per stage.
+    Raises MetaSimError for an unknown space, preset, extractor or roof finder, a missing ``bpy``
+    while tiles are missing, or an unreadable tile.
+    """
     from .features import make_extractor
 
     folder = dataset_dir(config, root)
@@ -113,7 +131,13 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
 
 def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, dataset: DatasetConfig,
                  bars: Bars | None = None) -> dict:
-    """Train NAMS and the DR baseline on a feature set; write ``nams.pt`` and ``dr.pt``."""
+    """Train NAMS and the DR baseline on a feature set; write ``nams.pt`` and ``dr.pt`` into
+    ``out_dir`` and return the seconds each took ("train_nams", "train_dr").
+
+    ``dataset`` is recorded in the checkpoints (tile size and pixel size are what inference cuts
+    targets to). Raises MetaSimError for an unknown architecture or an invalid NAMS or training
+    option, or when training fails (see ``nams.train.train_nams``).
+    """
     from ..nams import NAMSConfig, TrainConfig, save_checkpoint, train_dr, train_nams
 
     torch.manual_seed(settings.seed)
@@ -124,7 +148,7 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
     seconds = {}
     out_dir = Path(out_dir)
     # DR keeps per-feature standardisation: whitening is there for the search's metric, and DR
-    # has no search (it is the paper's baseline as measured; `make bench-nams` has its E1/E2 rows).
+    # has no search (it is the paper's baseline as the paper trained it; its E1/E2 rows come from `make bench-nams`).
     jobs = (("nams", train_nams, nams_config, train_config),
             ("dr", train_dr, None, dataclasses.replace(train_config, whiten=0)))
     for kind, trainer, config, trainer_config in jobs:
@@ -145,7 +169,14 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
 
 def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
                   bars: Bars | None = None) -> Models:
-    """The cached NAMS and DR checkpoints for these inputs, trained first if they are missing."""
+    """The cached NAMS and DR checkpoints for these inputs, trained first if they are missing.
+
+    Renders and computes features as ``prepare_features`` does, then looks in ``models/<key>``
+    under ``root`` (default: the cache) for checkpoints keyed by every input
+    (``ModelSettings.key``); if either is missing or unreadable, both are trained again
+    (``train_models``). Returns their paths, the features and the seconds spent. Raises
+    MetaSimError as ``prepare_features`` and ``train_models`` do.
+    """
     from ..nams import load_checkpoint
 
     features, seconds = prepare_features(config, settings, root, bars)

@@ -20,7 +20,9 @@ from ..sim.quality import RenderPreset
 class Job:
     """One design to render in one city: tiles ``{name}_t{j:02d}.exr``.
 
-    ``tiles`` restricts the job to some tile indices (a farm task); None means all of them.
+    ``design`` maps each parameter of the space to its choice, ``city_seed`` picks the city layout,
+    ``name`` the tiles' file stem. ``tiles`` restricts the job to some tile indices (a farm task);
+    None means all of them.
     """
 
     design: dict
@@ -29,11 +31,16 @@ class Job:
     tiles: tuple | None = None
 
     def tile_indices(self, n_tiles: int) -> tuple:
+        """The tile indices this job renders out of ``n_tiles`` per design."""
         return tuple(range(n_tiles)) if self.tiles is None else tuple(self.tiles)
 
 
 @dataclass
 class RenderSettings:
+    """What every job of a render shares: the design space, the texture banks, the render quality
+    preset, the output folder, tiles per design, tile size in pixels and metres per pixel, and
+    whether to write PNG previews beside the EXR tiles."""
+
     space: DesignSpace
     banks: list  # TextureBank objects; a texture id is looked up in each in turn
     preset: RenderPreset
@@ -45,11 +52,15 @@ class RenderSettings:
 
     @property
     def tile_m(self) -> float:
+        """A tile's side on the ground, in metres."""
         return self.tile_px * self.pixel_size_m
 
 
 @dataclass
 class RenderSummary:
+    """What ``render_jobs`` did: tiles written and skipped (already valid), cities built, seconds
+    per stage ("layout", "build", "labels", "render", "write") and the paths written."""
+
     written: int = 0
     skipped: int = 0
     cities: int = 0
@@ -58,6 +69,7 @@ class RenderSummary:
 
 
 def tile_path(out_dir: Path, job: Job, index: int) -> Path:
+    """Where tile ``index`` of ``job`` is written in ``out_dir``."""
     return Path(out_dir) / f"{job.name}_t{index:02d}.exr"
 
 
@@ -75,6 +87,7 @@ def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int)
 
 
 def single_job(space: DesignSpace, design: dict, seed: int) -> Job:
+    """The job for one given design in city ``seed``, named after its choices and the seed."""
     name = "+".join(str(design[n]) for n in space.names)
     return Job(design, seed, f"{name}_s{seed}")
 

@@ -74,10 +74,15 @@ def _layout_params(space: DesignSpace, design: dict) -> LayoutParams:
 
 def render_jobs(jobs: list[Job], settings: RenderSettings,
                 progress: Callable[[int], None] | None = None, record: bool = True) -> RenderSummary:
-    """Render every missing tile of every job; returns counts and stage timings.
+    """Render every missing tile of every job into ``settings.out_dir``; returns a RenderSummary
+    (counts, stage timings and the paths written).
 
-    ``record`` writes ``designs.json`` beside the tiles; a farm turns it off, since its
-    manifest lists the folder's jobs and concurrent workers would race on that file.
+    Tiles that already exist with the same metadata are skipped; ``progress(n)`` is called with the
+    tiles skipped or written as they are counted. ``record`` writes ``designs.json`` beside the
+    tiles; a farm turns it off, since its manifest lists the folder's jobs and concurrent workers
+    would race on that file. Needs ``bpy``. Raises MetaSimError when ``bpy`` is missing, the output
+    folder cannot be written, or a design names a texture that no bank holds (or whose file is
+    missing) or a layout field that does not exist; all of these are checked before anything renders.
     """
     require("bpy", "rendering")
     from ..blender.scene import CityScene, Rect, blender_version, bounding_rect  # bpy only when rendering

@@ -13,6 +13,9 @@ from pathlib import Path
 
 @dataclass(frozen=True)
 class Option:
+    """One render option: its command-line flag, value type, default, help text, and whether it is
+    an on/off flag that takes no value."""
+
     flag: str
     type: type
     default: object
@@ -21,6 +24,7 @@ class Option:
 
     @property
     def dest(self) -> str:
+        """The option's key in a parsed options dict (``--tile-px`` -> ``tile_px``)."""
         return self.flag.lstrip("-").replace("-", "_")
 
 

@@ -18,6 +18,7 @@ from .plan import plan
 
 
 def build_argparser() -> argparse.ArgumentParser:
+    """An argparse parser for ``RENDER_OPTIONS`` (Blender's Python has no click)."""
     parser = argparse.ArgumentParser(prog="meta_sim.render.worker", description=__doc__.splitlines()[0])
     for opt in RENDER_OPTIONS:
         if opt.is_flag:

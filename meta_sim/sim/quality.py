@@ -1,4 +1,4 @@
-"""Render quality presets: what each costs is measured by `make bench-render`.
+"""Render quality presets: what each costs is measured by `make bench-render` (docs/benchmarks.md).
 
 Pure data, shared by the renderer, the CLI and the add-on.
 """
@@ -12,6 +12,9 @@ from ..core.errors import MetaSimError
 
 @dataclass(frozen=True)
 class RenderPreset:
+    """A render quality setting: the engine, its samples, bounces, denoising, anti-aliasing and
+    shadows, and the exposure that brings its renders to the brightness of the others."""
+
     name: str
     engine: str  # 'BLENDER_WORKBENCH' (rasterised) or 'CYCLES' (path traced)
     description: str
@@ -24,6 +27,7 @@ class RenderPreset:
     exposure: float = 1.0
 
     def to_dict(self) -> dict:
+        """The settings as plain values (recorded in tile metadata)."""
         return {"name": self.name, "engine": self.engine, "samples": self.samples,
                 "bounces": self.bounces, "denoise": self.denoise,
                 "antialiasing": self.antialiasing, "shadows": self.shadows, "exposure": self.exposure}
@@ -34,10 +38,10 @@ class RenderPreset:
         return {} if self.exposure == 1.0 else {"exposure": self.exposure}
 
 
-# Workbench's studio light renders a surface at about a sixth of the linear brightness that the
-# path-traced presets' sun and sky give it. 6.0 is the median ratio of flat-roof brightness,
-# balanced over fast, on the two presets' 600 x 2 training sets (same designs, cities and tiles);
-# `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
+# Workbench's studio light renders a surface far darker than the path-traced presets' sun and sky do,
+# so fast renders are scaled up to their brightness: a model trained on one preset then meets
+# targets at the brightness it learnt. How the value was chosen is in docs/design.md ("The fast
+# preset's exposure"); `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
 FAST_EXPOSURE = 6.0
 
 
@@ -53,6 +57,7 @@ PRESETS = {p.name: p for p in (
 
 
 def get_preset(name: str) -> RenderPreset:
+    """The render preset called ``name``; MetaSimError listing the presets for an unknown one."""
     try:
         return PRESETS[name]
     except KeyError:

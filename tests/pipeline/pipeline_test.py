@@ -169,14 +169,21 @@ def test_infer_rejects_a_damaged_checkpoint(evaluated, tiny_env, tmp_path):
     assert result.exit_code == 2 and "corrupt" in result.output
 
 
+def _kampala(tmp_path, n: int):
+    """A folder of ``n`` real drone tiles of Kampala (0.3 m web-mercator z19), copied into the test's
+    temporary folder only."""
+    folder = tmp_path / "kampala"
+    folder.mkdir()
+    for path in sorted((REALDATA / "kampala" / "ramp-data" / "sample_2" / "input").glob("OAM-*-19.png"))[:n]:
+        shutil.copy(path, folder / path.name)
+    return folder
+
+
 @pytest.mark.skipif(not (REALDATA / "kampala").is_dir(), reason="../shared/realdata is not beside the project")
 def test_infer_on_real_aerial_imagery(evaluated, tmp_path):
     """Real drone tiles of Kampala (0.3 m web-mercator z19 tiles) through the whole infer path."""
     out, _ = evaluated
-    folder = tmp_path / "kampala"
-    folder.mkdir()
-    for path in sorted((REALDATA / "kampala" / "ramp-data" / "sample_2" / "input").glob("OAM-*-19.png"))[:4]:
-        shutil.copy(path, folder / path.name)  # a copy in the test's temporary folder only
+    folder = _kampala(tmp_path, 4)
     result = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "inferred", "--group-size", 4)
     assert result.exit_code == 0, result.output
     preset = load_preset(next((tmp_path / "inferred" / "presets").glob("*.json")))
@@ -243,12 +250,10 @@ def test_a_stage_that_finds_everything_cached_shows_no_bar(capsys):
 _WITHOUT_BPY = "import sys; sys.modules['bpy'] = None; from meta_sim.cli import main; main()"
 
 
+@pytest.mark.skipif(not (REALDATA / "kampala").is_dir(), reason="../shared/realdata is not beside the project")
 def test_infer_runs_without_bpy(evaluated, tmp_path):
     out, _ = evaluated
-    folder = tmp_path / "kampala"
-    folder.mkdir()
-    for path in sorted((REALDATA / "kampala" / "ramp-data" / "sample_2" / "input").glob("OAM-*-19.png"))[:2]:
-        shutil.copy(path, folder / path.name)  # a copy in the test's temporary folder only
+    folder = _kampala(tmp_path, 2)
     done = subprocess.run([sys.executable, "-c", _WITHOUT_BPY, "infer", str(folder), "--model", str(out / "nams.pt"),
                            "--out", str(tmp_path / "inferred"), "--group-size", "2"], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
