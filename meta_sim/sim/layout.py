@@ -825,6 +825,13 @@ MIN_CITY_M = 30.0
 MAX_CITY_M = 5000.0
 
 
+def stage_generators(seed: int, n: int) -> list[np.random.Generator]:
+    """``n`` independent generators for the stages of one seed: the streams ``default_rng(seed).spawn(n)``
+    gives, built from ``SeedSequence.spawn`` because ``Generator.spawn`` needs numpy 1.25 and the add-on
+    and the worker also run on Blender 4.2's older numpy."""
+    return [np.random.Generator(np.random.PCG64(child)) for child in np.random.SeedSequence(seed).spawn(n)]
+
+
 def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutParams | None = None) -> CityLayout:
     """Generate the city covering [0, width_m] x [0, height_m]; the same seed gives the same layout."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -832,7 +839,7 @@ def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutPa
     width = _check_number("generate_layout", "width_m", width_m, MIN_CITY_M, MAX_CITY_M)
     height = _check_number("generate_layout", "height_m", height_m, MIN_CITY_M, MAX_CITY_M)
     params = LayoutParams() if params is None else params
-    road_rng, lot_rng, building_rng, roof_rng, tree_rng = np.random.default_rng(int(seed)).spawn(5)
+    road_rng, lot_rng, building_rng, roof_rng, tree_rng = stage_generators(int(seed), 5)
 
     blocks, roads = _blocks_and_roads(road_rng, width, height, params)
     plans = [plan for index, block in enumerate(blocks) for plan in _plan_block(lot_rng, block, index, width, height)]

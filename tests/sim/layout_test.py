@@ -303,3 +303,19 @@ def test_damaged_layout_files_are_rejected():
         CityLayout.from_dict(broken)
     with pytest.raises(MetaSimError, match="unknown layout parameter"):
         CityLayout.from_dict({**data, "params": {**data["params"], "density": 1}})
+
+
+def test_stage_generators_are_default_rngs_spawned_streams_without_generator_spawn(monkeypatch):
+    """Blender 4.2 bundles a numpy without ``Generator.spawn``: the layout must not need it."""
+    from meta_sim.sim import layout as layout_module
+
+    expected = [g.random(4).tolist() for g in np.random.default_rng(11).spawn(5)]  # this numpy has spawn
+    before = json.dumps(generate_layout(11, 300.0, 300.0).to_dict())
+
+    class OldGenerator(np.random.Generator):
+        def spawn(self, n_children):
+            raise AttributeError("'numpy.random.Generator' object has no attribute 'spawn' (numpy < 1.25)")
+
+    monkeypatch.setattr(layout_module.np.random, "Generator", OldGenerator)
+    assert [g.random(4).tolist() for g in layout_module.stage_generators(11, 5)] == expected
+    assert json.dumps(generate_layout(11, 300.0, 300.0).to_dict()) == before
