@@ -27,7 +27,7 @@ REPOSITORY = Path(__file__).resolve().parents[2]
 TASKS_PER_SHARD = 8  # default shard size: one Blender start-up amortised over several designs
 
 TEMPLATE = """// meta-sim render job for Flamenco v3, exported by `meta-sim jobs export-flamenco`.
-// Manifest: %(manifest)s (%(tasks)d tasks, %(tiles)d tiles). Put this file in the
+// Manifest: %(manifest_js)s (%(tasks)d tasks, %(tiles)d tiles). Put this file in the
 // Flamenco manager's scripts/ folder and restart the manager; submit with its API or web UI.
 
 const JOB_TYPE = {
@@ -66,6 +66,13 @@ function compileJob(job) {
 """
 
 
+def _js(text: str) -> str:
+    """``text`` as a JavaScript string literal that nothing can break out of: JSON with every non-ASCII
+    character (U+2028 and U+2029 end a line in a comment) and ``<``, ``>``, ``&`` escaped."""
+    literal = json.dumps(str(text), ensure_ascii=True)
+    return literal.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
 def job_type_name(manifest_path: Path) -> str:
     """Flamenco names a job type after its file; keep it to safe characters."""
     return "meta_sim_" + re.sub(r"[^A-Za-z0-9_]", "_", Path(manifest_path).stem)
@@ -88,9 +95,8 @@ def export(manifest: Manifest, manifest_path: Path, out_dir: Path, shards: int |
     manifest_path = Path(manifest_path).resolve()
     name = job_type_name(manifest_path)
     text = TEMPLATE % {
-        "label": json.dumps(f"meta-sim {manifest_path.stem} ({count} tasks)"), "manifest": manifest_path,
-        "manifest_js": json.dumps(str(manifest_path)), "repository_js": json.dumps(str(REPOSITORY)),
-        "shards": shards, "tasks": count, "tiles": manifest.n_outputs}
+        "label": _js(f"meta-sim {manifest_path.stem} ({count} tasks)"), "manifest_js": _js(str(manifest_path)),
+        "repository_js": _js(str(REPOSITORY)), "shards": int(shards), "tasks": count, "tiles": manifest.n_outputs}
     try:
         return write_text_atomic(Path(out_dir) / f"{name}.js", text)
     except OSError as exc:

@@ -22,10 +22,15 @@ from pathlib import Path
 
 from ..core.errors import MetaSimError
 from ..core.fileio import write_text_atomic
+from ..core.names import safe_name
 
 FORMAT = "meta-sim-farm-job"
 VERSION = 1
 TASK_KEYS = ("name", "design", "city_seed", "tiles", "outputs")
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -45,11 +50,19 @@ class Task:
 
     @classmethod
     def from_dict(cls, data) -> "Task":
-        """A task from the manifest's JSON; MetaSimError when a key is missing."""
+        """A task from the manifest's JSON; MetaSimError when a key is missing or of the wrong type
+        (``Manifest.from_dict`` checks the task against its content)."""
         if not isinstance(data, dict) or any(k not in data for k in TASK_KEYS):
             raise MetaSimError(f"a manifest task needs the keys {', '.join(TASK_KEYS)}")
-        return cls(str(data["name"]), dict(data["design"]), int(data["city_seed"]),
-                   tuple(int(j) for j in data["tiles"]), tuple(str(p) for p in data["outputs"]))
+        name = safe_name(data["name"], "manifest task name")
+        design, seed, tiles, outputs = data["design"], data["city_seed"], data["tiles"], data["outputs"]
+        if not isinstance(design, dict) or not all(isinstance(v, (str, int, float)) for v in design.values()):
+            raise MetaSimError(f"task {name}: design must be an object of ids and numbers")
+        if not _is_int(seed) or not isinstance(tiles, list) or not all(_is_int(j) for j in tiles):
+            raise MetaSimError(f"task {name}: city_seed and tiles must be whole numbers")
+        if not isinstance(outputs, list) or not all(isinstance(p, str) for p in outputs):
+            raise MetaSimError(f"task {name}: outputs must be a list of file names")
+        return cls(name, dict(design), seed, tuple(tiles), tuple(outputs))
 
 
 @dataclass(frozen=True)
@@ -92,12 +105,33 @@ class Manifest:
             raise MetaSimError(f"job manifest version {data.get('version')!r} is not supported "
                                f"(this meta-sim reads {VERSION}); plan the job again")
         try:
-            return cls(space=dict(data["space"]), bank=data["bank"], preset=str(data["preset"]),
-                       n_tiles=int(data["n_tiles"]), tile_px=int(data["tile_px"]),
-                       pixel_size_m=float(data["pixel_size_m"]), out_dir=Path(base) / data["out_dir"],
-                       tasks=tuple(Task.from_dict(t) for t in data["tasks"]))
+            manifest = cls(space=dict(data["space"]), bank=data["bank"], preset=str(data["preset"]),
+                           n_tiles=int(data["n_tiles"]), tile_px=int(data["tile_px"]),
+                           pixel_size_m=float(data["pixel_size_m"]), out_dir=Path(base) / data["out_dir"],
+                           tasks=tuple(Task.from_dict(t) for t in data["tasks"]))
         except (KeyError, TypeError, ValueError) as exc:
             raise MetaSimError(f"damaged job manifest ({exc!r}); plan the job again") from None
+        manifest.check_tasks()
+        return manifest
+
+    def check_tasks(self) -> None:
+        """Every task is what its name says: the name is the hash of its design, city and the shared
+        settings, its tiles lie in 0..n_tiles-1 and its outputs are its tiles' file names. A manifest
+        edited by hand (or by someone hostile) cannot send a tile anywhere else; MetaSimError if not."""
+        shared = self.shared_settings()
+        for task in self.tasks:
+            if task.name != task_name(task.design, task.city_seed, shared):
+                raise MetaSimError(f"manifest task {task.name} does not match its design, city and settings "
+                                   "(edited by hand?); plan the job again")
+            if len(set(task.tiles)) != len(task.tiles) or not all(0 <= j < self.n_tiles for j in task.tiles):
+                raise MetaSimError(f"task {task.name}: tile indices must be distinct and in 0..{self.n_tiles - 1}")
+            if list(task.outputs) != [f"{task.name}_t{j:02d}.exr" for j in task.tiles]:
+                raise MetaSimError(f"task {task.name}: outputs must be its tiles' file names; plan the job again")
+
+    def shared_settings(self) -> dict:
+        """What every task's pixels depend on besides its design and city (part of each task's name)."""
+        return {"space": self.space.get("name"), "preset": self.preset, "n_tiles": self.n_tiles,
+                "tile_px": self.tile_px, "pixel_size_m": self.pixel_size_m}
 
     def subset(self, tasks) -> "Manifest":
         """The same job with only ``tasks``."""
@@ -139,7 +173,7 @@ def plan(options: dict, out_dir: Path) -> Manifest:
 
     jobs, settings = plan_render({**options, "out": out_dir, "preview": False})
     shared = {"space": settings.space.name, "preset": settings.preset.name, "n_tiles": settings.n_tiles,
-              "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m}
+              "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m}  # Manifest.shared_settings
     tasks = {}
     for job in jobs:
         name = task_name(job.design, job.city_seed, shared)

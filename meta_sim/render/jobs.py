@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.fileio import write_text_atomic
+from ..core.names import safe_name
 from ..sim import tiles
 from ..sim.design import DesignSpace
 from ..sim.quality import RenderPreset
@@ -69,8 +70,9 @@ class RenderSummary:
 
 
 def tile_path(out_dir: Path, job: Job, index: int) -> Path:
-    """Where tile ``index`` of ``job`` is written in ``out_dir``."""
-    return Path(out_dir) / f"{job.name}_t{index:02d}.exr"
+    """Tile ``index`` of ``job`` in ``out_dir``: ``{name}_tNN.exr``. MetaSimError when the job's name
+    (from a design's ids or a farm manifest) would not make a safe file name inside ``out_dir``."""
+    return Path(out_dir) / safe_name(f"{job.name}_t{index:02d}.exr", "tile file name")
 
 
 def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:

@@ -26,6 +26,7 @@ Pure Python and numpy: imported by the add-on, the renderer and the torch side.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -33,6 +34,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from ..core.errors import MetaSimError
+from ..core.names import MAX_NAME, safe_name
 
 FORMAT = "meta-sim-design-space"
 VERSION = 1
@@ -56,7 +58,7 @@ class Categorical:
         ``extra`` ids are accepted as well (held-out textures may be rendered,
         though they cannot be encoded).
         """
-        if isinstance(value, (int, np.integer)) or (isinstance(value, str) and value.isdigit()):
+        if isinstance(value, (int, np.integer)) or (isinstance(value, str) and value.isascii() and value.isdigit()):
             index = int(value)
             if not 0 <= index < len(self.choices):
                 raise MetaSimError(
@@ -107,6 +109,12 @@ class Continuous:
 Parameter = Categorical | Continuous
 
 
+def _finite(value, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise MetaSimError(f"{what} must be a finite number, not {value!r}")
+    return float(value)
+
+
 def _preview(choices: tuple[str, ...], n: int = 3) -> str:
     shown = ", ".join(repr(c) for c in choices[:n])
     return shown + (", ..." if len(choices) > n else "")
@@ -129,20 +137,32 @@ class DesignSpace:
             raise MetaSimError(
                 f"design-space version {version!r} is not supported (this meta-sim reads {VERSION})")
         params: list[Parameter] = []
-        for raw in data.get("parameters", []):
+        raws = data.get("parameters", [])
+        if not isinstance(raws, list):
+            raise MetaSimError("design-space \"parameters\" must be a list")
+        for raw in raws:
+            if not isinstance(raw, Mapping):
+                raise MetaSimError(f"a design-space parameter must be an object, not {raw!r}")
             name, kind = raw.get("name"), raw.get("type")
-            if not isinstance(name, str) or not name.isidentifier():
+            if not isinstance(name, str) or not name.isidentifier() or len(name) > MAX_NAME:
                 raise MetaSimError(f"design-space parameter name {name!r} must be an identifier")
             if kind == "categorical":
-                choices = tuple(raw.get("choices") or ())
-                if not choices or len(set(choices)) != len(choices):
+                choices = raw.get("choices") or ()
+                if not isinstance(choices, (list, tuple)) or not choices or len(set(map(str, choices))) != len(choices):
                     raise MetaSimError(f"{name}: choices must be a non-empty list of unique ids")
-                params.append(Categorical(name, choices, raw.get("texture_kind")))
+                choices = tuple(safe_name(c, f"{name}: choice") for c in choices)
+                texture_kind = raw.get("texture_kind")
+                if texture_kind not in (None, "flat", "sloped"):
+                    raise MetaSimError(f"{name}: texture_kind must be \"flat\" or \"sloped\", not {texture_kind!r}")
+                params.append(Categorical(name, choices, texture_kind))
             elif kind == "continuous":
-                low, high = float(raw["low"]), float(raw["high"])
+                low, high = (_finite(raw.get(key), f"{name}: {key}") for key in ("low", "high"))
                 if not low < high:
                     raise MetaSimError(f"{name}: low ({low}) must be below high ({high})")
-                params.append(Continuous(name, low, high, raw.get("layout_field")))
+                field = raw.get("layout_field")
+                if field is not None and (not isinstance(field, str) or not field.isidentifier()):
+                    raise MetaSimError(f"{name}: layout_field must be a layout parameter's name, not {field!r}")
+                params.append(Continuous(name, low, high, field))
             else:
                 raise MetaSimError(f"{name}: type must be 'categorical' or 'continuous', not {kind!r}")
         if not params:
@@ -152,7 +172,12 @@ class DesignSpace:
         kinds = [p.texture_kind for p in params if isinstance(p, Categorical) and p.texture_kind]
         if len(set(kinds)) != len(kinds):
             raise MetaSimError("at most one parameter may set each roof kind's material")
-        return cls(str(data.get("name", "unnamed")), tuple(params), dict(data.get("layout", {})))
+        space_name, layout = data.get("name", "unnamed"), data.get("layout", {})
+        if not isinstance(space_name, str) or not space_name or len(space_name) > MAX_NAME:
+            raise MetaSimError(f"design-space name must be a short non-empty string, not {space_name!r}")
+        if not isinstance(layout, Mapping):
+            raise MetaSimError("design-space \"layout\" must be an object")
+        return cls(space_name, tuple(params), dict(layout))
 
     def to_dict(self) -> dict:
         return {"format": FORMAT, "version": self.version, "name": self.name,

@@ -227,7 +227,7 @@ vm.runInContext(fs.readFileSync(process.argv[2], "utf8") + "\\nthis.JOB_TYPE = J
 const settings = {};
 for (const s of sandbox.JOB_TYPE.settings) settings[s.key] = s.default;
 sandbox.compileJob({settings, addTask: (t) => tasks.push(t)});
-console.log(JSON.stringify({label: sandbox.JOB_TYPE.label, tasks}));
+console.log(JSON.stringify({label: sandbox.JOB_TYPE.label, tasks, pwned: sandbox.pwned !== undefined}));
 """
 
 
@@ -253,3 +253,26 @@ def test_flamenco_job_type_parses_and_compiles_one_task_per_shard(tmp_path, refe
                                          "--", "--manifest", str(manifest_path.resolve()), "--shard", "1/3"]
     too_many = _cli("jobs", "export-flamenco", manifest_path, "--out", tmp_path / "f2", "--shards", 9)
     assert too_many.exit_code == 2 and "--shards must be between 1 and" in too_many.output
+
+
+def test_flamenco_export_of_a_hostile_path_runs_no_code(tmp_path, reference):
+    """Quotes, newlines, U+2028 and script-like text in the manifest's path stay inside string literals."""
+    if shutil.which("node") is None:
+        pytest.skip("node is not installed: cannot parse the exported JavaScript")
+    folder = tmp_path / 'evil"\n;globalThis.pwned = 1; <script>--><!--\u2028globalThis.pwned = 2;\'`${x}'
+    folder.mkdir()
+    manifest_path = folder / "job.json"
+    _plan(manifest_path)
+    result = _cli("jobs", "export-flamenco", manifest_path, "--out", tmp_path / "flamenco", "--shards", 2)
+    assert result.exit_code == 0, result.output
+    script = tmp_path / "flamenco" / "meta_sim_job.js"
+    assert "<script>" not in script.read_text() and "\u2028" not in script.read_text()
+    check = subprocess.run(["node", "--check", str(script)], capture_output=True, text=True)
+    assert check.returncode == 0, check.stderr
+    harness = tmp_path / "harness.js"
+    harness.write_text(NODE_HARNESS)
+    run = subprocess.run(["node", str(harness), str(script)], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    compiled = json.loads(run.stdout)
+    assert compiled["pwned"] is False
+    assert compiled["tasks"][0]["commands"][0]["params"]["args"][6] == str(manifest_path.resolve())

@@ -33,6 +33,7 @@ import numpy as np
 from ...core.cache import cache_root
 from ...core.errors import MetaSimError
 from ...core.fileio import atomic_dir, write_bytes_atomic
+from ...core.names import inside, safe_name
 from ..imageio import read_rgb8, resize
 from . import procedural
 from .pngio import write_png
@@ -89,6 +90,7 @@ class TextureEntry:
         for key in ("id", "name", "kind", "path", "source", "sha256"):
             if not isinstance(data[key], str) or not data[key]:
                 raise MetaSimError(f"{where}: {key} must be a non-empty string, got {data[key]!r}")
+        safe_name(data["id"], f"{where}: texture id")
         if data["kind"] not in KINDS:
             raise MetaSimError(f"{where}: kind must be one of {', '.join(KINDS)}, got {data['kind']!r}")
         rel = Path(data["path"])
@@ -169,7 +171,8 @@ class TextureBank:
         return [e.id for e in self.entries if kind is None or e.kind == kind]
 
     def image_path(self, texture_id: str) -> Path:
-        return self.root / self.by_id(texture_id).path
+        """The texture's image file, checked to lie inside the bank folder (links followed)."""
+        return inside(self.root, self.by_id(texture_id).path, f"texture {texture_id!r}: image")
 
     def load_image(self, texture_id: str) -> np.ndarray:
         return read_rgb8(self.image_path(texture_id))
