@@ -51,7 +51,9 @@ def jobs_plan(manifest_path, out_dir, **options):
 @click.argument("manifest_path", type=click.Path(path_type=Path))
 @click.option("--list", "show", is_flag=True, help="also list the missing and corrupt tiles")
 def jobs_status(manifest_path, show):
-    """Count done, missing and corrupt tiles of a job (tiles are read and checked as the worker does)."""
+    """Count done, missing and corrupt tiles of a job (tiles are read and checked as the worker does).
+
+    Exits 0 when every tile is done, 1 when some are missing or corrupt (a script can wait on it)."""
     from ..farm import manifest as farm
 
     manifest = farm.load(manifest_path)
@@ -60,11 +62,14 @@ def jobs_status(manifest_path, show):
                f"{status.count(farm.DONE)} done, {status.count(farm.MISSING)} missing, "
                f"{status.count(farm.CORRUPT)} corrupt (of {manifest.n_outputs}) in {manifest.out_dir}")
     if status.temporaries:
-        click.echo(f"{len(status.temporaries)} half-written temporary files (the next `jobs run` removes them)")
+        click.echo(f"{len(status.temporaries)} half-written temporary files "
+                   "(`jobs run` removes those whose worker is gone)")
     if show:
         for state in (farm.MISSING, farm.CORRUPT):
             for path in status.paths(state):
                 click.echo(f"{state:8s} {path}")
+    if status.count(farm.DONE) < manifest.n_outputs:
+        sys.exit(1)
 
 
 @jobs.command("run")

@@ -12,13 +12,58 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import shutil
+import socket
 import tempfile
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-TEMP_MARK = ".tmp"  # temporary files are named .NAME.tmpXXXXXXXX.SUFFIX beside the destination
+TEMP_MARK = ".tmp"  # temporary files are named .NAME.tmpPID-HOST-XXXXXXXX.SUFFIX beside the destination
+# A temporary file whose writer cannot be asked whether it lives (another host) counts as abandoned after this.
+STALE_SECONDS = 3600.0
+
+
+@functools.cache
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:24] or "host"
+
+
+def temp_owner(name: str) -> tuple[int, str] | None:
+    """(pid, host) of the process that writes the temporary file called ``name``, or None when the name
+    is not one of ``atomic_path``'s."""
+    match = re.search(re.escape(TEMP_MARK) + r"(\d+)-([A-Za-z0-9]+)-", name)
+    return (int(match[1]), match[2]) if match else None
+
+
+def abandoned(path: str | os.PathLike, now: float | None = None) -> bool:
+    """Whether the temporary file at ``path`` is left over by a writer that is gone: its process no longer
+    runs on this host, or (written on another host) it has not changed for ``STALE_SECONDS``."""
+    owner = temp_owner(Path(path).name)
+    try:
+        age = (time.time() if now is None else now) - Path(path).stat().st_mtime
+    except FileNotFoundError:
+        return False
+    if owner is None or owner[1] != _host():
+        return age > STALE_SECONDS
+    try:
+        os.kill(owner[0], 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:  # alive, another account's
+        return False
+    return _zombie(owner[0])
+
+
+def _zombie(pid: int) -> bool:
+    """A killed process nobody has reaped yet still answers ``kill(pid, 0)``; Linux says it is a zombie."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rpartition(")")[2].split()[:1] == ["Z"]
 
 
 @functools.cache
@@ -38,7 +83,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     OpenImageIO or ``torch.save``); moved onto ``path`` when the block ends without an error."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}{TEMP_MARK}", suffix=path.suffix, dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}{TEMP_MARK}{os.getpid()}-{_host()}-", suffix=path.suffix,
+                               dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)

@@ -244,8 +244,7 @@ def run(manifest: farm.Manifest, options: RunOptions = RunOptions()) -> RunSumma
 
     runner = _check(options)
     farm.render_setup(manifest)  # builds the banks once here, before workers race to
-    for path in farm.temporaries(manifest):
-        path.unlink(missing_ok=True)
+    _remove_abandoned(manifest)
     started = time.perf_counter()
     status = farm.check(manifest)
     summary = RunSummary(tasks=len(manifest.tasks), tiles=manifest.n_outputs, already_done=status.count(farm.DONE))
@@ -289,5 +288,12 @@ def run(manifest: farm.Manifest, options: RunOptions = RunOptions()) -> RunSumma
     finally:
         bar.close()
         pool.close()
+    _remove_abandoned(manifest)  # again: a worker killed just before this run started is gone by now
     summary.seconds = time.perf_counter() - started
     return summary
+
+
+def _remove_abandoned(manifest: farm.Manifest) -> None:
+    """Temporary tiles of workers that are gone; those of live workers (another run) are left alone."""
+    for path in farm.temporaries(manifest, abandoned_only=True):
+        path.unlink(missing_ok=True)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..core.errors import MetaSimError
-from ..core.fileio import write_text_atomic
+from ..core.fileio import abandoned, write_text_atomic
 from ..core.names import safe_name
 
 FORMAT = "meta-sim-farm-job"
@@ -289,12 +289,14 @@ def check(manifest: Manifest, threads: int = 8) -> Status:
     return Status(states, temporaries(manifest))
 
 
-def temporaries(manifest: Manifest) -> list[Path]:
-    """Half-written tiles a killed worker left (``.NAME_tNN.tmpXXXXXXXX.exr``); never read as tiles."""
+def temporaries(manifest: Manifest, abandoned_only: bool = False) -> list[Path]:
+    """Temporary tiles of the manifest's tasks (``.NAME_tNN.tmp*.exr``, never read as tiles): all of
+    them, or only those whose writer is gone (``core.fileio.abandoned``), which are safe to delete
+    while other workers may still be writing theirs."""
     out_dir = Path(manifest.out_dir)
     if not out_dir.is_dir():
         return []
     names = {t.name for t in manifest.tasks}
-    pattern = re.compile(r"\.(.+)_t\d+\.tmp\w+\.exr")
-    return sorted(p for p in out_dir.glob(".*.tmp*.exr")
-                  if (m := pattern.fullmatch(p.name)) and m[1] in names)
+    pattern = re.compile(r"\.(.+)_t\d+\.tmp[\w-]+\.exr")
+    found = (p for p in out_dir.glob(".*.tmp*.exr") if (m := pattern.fullmatch(p.name)) and m[1] in names)
+    return sorted(p for p in found if not abandoned_only or abandoned(p))

@@ -93,6 +93,10 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
     summary = RenderSummary()
     by_city: dict = defaultdict(list)
     for job in jobs:
+        missing = [name for name in settings.space.names if name not in job.design]
+        if missing:
+            raise MetaSimError(f"job {job.name}: its design lacks {', '.join(missing)} of design space "
+                               f"{settings.space.name!r}")
         params = _layout_params(settings.space, job.design)
         textures = resolve_textures(settings.space, job.design, settings.banks)  # fail early
         wanted = job.tile_indices(settings.n_tiles)

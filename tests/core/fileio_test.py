@@ -60,3 +60,23 @@ def test_a_folder_another_process_put_in_place_first_is_kept(tmp_path):
         (tmp_path / "bank" / "theirs").write_text("first")
     assert [p.name for p in (tmp_path / "bank").iterdir()] == ["theirs"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bank"]
+
+
+def test_a_temporary_file_is_abandoned_only_when_its_writer_is_gone(tmp_path):
+    import subprocess
+    import sys
+    import time
+
+    from meta_sim.core import fileio
+
+    with atomic_path(tmp_path / "tile.exr") as tmp:
+        assert fileio.temp_owner(tmp.name) == (os.getpid(), fileio._host())
+        assert not fileio.abandoned(tmp)  # this process writes it
+    gone = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    dead = tmp_path / f".tile.tmp{gone}-{fileio._host()}-abc.exr"
+    foreign = tmp_path / ".tile.tmp1-otherhost-abc.exr"
+    for path in (dead, foreign):
+        path.write_bytes(b"half")
+    assert fileio.abandoned(dead) and not fileio.abandoned(foreign)
+    assert fileio.abandoned(foreign, now=time.time() + fileio.STALE_SECONDS + 1)

@@ -102,3 +102,23 @@ def test_a_bank_texture_id_cannot_name_a_path(tmp_path, bank):
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(MetaSimError, match="not a safe name"):
         load_bank(tmp_path)
+
+
+def test_a_task_that_cannot_render_fails_alone_with_its_reason(tmp_path, capsys):
+    from meta_sim.farm import manifest as farm
+    from meta_sim.farm.worker import run_job
+
+    assert _cli("jobs", "plan", *JOB, "--out", tmp_path / "job.json").exit_code == 0
+    data = json.loads((tmp_path / "job.json").read_text())
+    broken = data["tasks"][0]
+    del broken["design"]["sloped_roof"]  # renamed consistently, as a hostile or buggy planner could
+    shared = {"space": data["space"]["name"], "preset": data["preset"], "n_tiles": data["n_tiles"],
+              "tile_px": data["tile_px"], "pixel_size_m": data["pixel_size_m"]}
+    broken["name"] = farm.task_name(broken["design"], broken["city_seed"], shared)
+    broken["outputs"] = [f"{broken['name']}_t00.exr"]
+    (tmp_path / "job.json").write_text(json.dumps(data))
+    failures = run_job(tmp_path / "job.json")
+    assert [name for name, _ in failures] == [broken["name"]] and "lacks sloped_roof" in failures[0][1]
+    assert (tmp_path / "job-tiles" / data["tasks"][1]["outputs"][0]).is_file()
+    status = _cli("jobs", "status", tmp_path / "job.json")
+    assert status.exit_code == 1 and "1 done, 1 missing" in status.output

@@ -17,6 +17,7 @@ import pytest
 from click.testing import CliRunner
 
 from meta_sim.cli import main as cli
+from meta_sim.core import fileio
 from meta_sim.farm import executors
 from meta_sim.farm import manifest as farm
 from meta_sim.sim import tiles
@@ -127,14 +128,17 @@ def test_truncated_or_foreign_tile_is_reported_corrupt_and_rerendered(tmp_path, 
     truncated.write_bytes(truncated.read_bytes()[: truncated.stat().st_size // 2])
     shutil.copy(manifest.out_dir / first.outputs[0], manifest.out_dir / second.outputs[0])  # wrong metadata
     (manifest.out_dir / second.outputs[1]).unlink()
-    (manifest.out_dir / f".{second.outputs[2][:-4]}.tmp99.exr").write_bytes(b"half a tile")
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead = f".{second.outputs[2][:-4]}.tmp{int(gone.stdout)}-{fileio._host()}-x1.exr"  # a killed worker's
+    (manifest.out_dir / dead).write_bytes(b"half a tile")
     status = _cli("jobs", "status", tmp_path / "job.json", "--list")
-    assert status.exit_code == 0, status.output
+    assert status.exit_code == 1, status.output  # tiles missing or corrupt
     assert "2/4 tasks complete; tiles: 45 done, 1 missing, 2 corrupt (of 48)" in status.output
     assert f"corrupt  {truncated}" in status.output and "1 half-written temporary files" in status.output
     summary = executors.run(manifest, executors.RunOptions(workers=2, **QUIET))
     assert summary.rendered == 3 and summary.already_done == 45 and not summary.failed
     assert _counts(manifest) == (48, 0, 0) and not farm.temporaries(manifest)
+    assert _cli("jobs", "status", tmp_path / "job.json").exit_code == 0
     _same_tiles(_pixels(manifest), reference[1])
 
 
