@@ -8,7 +8,6 @@ newer meta-sim or names textures the bank lacks becomes a row with its error.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import bpy
@@ -19,15 +18,6 @@ from . import library as libraries
 from . import previews
 
 TOP_CHOICES = 3  # of a population's distribution, per parameter
-
-
-def target_of(preset: DesignPreset) -> str:
-    """Where the preset's images came from: their common folder and how many."""
-    images = [str(p) for p in preset.source_images]
-    if not images:
-        return "no target images recorded"
-    common = os.path.commonpath(images) if len(images) > 1 else os.path.dirname(images[0])
-    return f"{len(images)} image{'s' if len(images) != 1 else ''} in {common or '.'}"
 
 
 def read_folder(folder: Path, library) -> list[dict]:
@@ -53,7 +43,7 @@ def _row(path: Path, library) -> dict:
     except MetaSimError as exc:
         return {**row, "error": str(exc).replace(f"{path}: ", "")}
     names = {kind: library.texture_parameter(kind) for kind in ("flat", "sloped")}
-    row.update(name=preset.name or path.stem, kind=preset.kind, target=target_of(preset))
+    row.update(name=preset.name or path.stem, kind=preset.kind, target=preset.target())
     for kind, parameter in names.items():
         if parameter is not None:
             row[kind] = str(preset.design[parameter.name])

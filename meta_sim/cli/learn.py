@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
+from ..core.fileio import writable_dir
 from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
 
 
@@ -109,10 +110,10 @@ def train_command(out, **o):
     from ..pipeline.workflow import ensure_models
 
     dataset, settings = _configs(o)
+    writable_dir(out)  # before hours of training, not after
     bars = _Bars()
     models = ensure_models(dataset, settings, o["cache"], bars)
     bars.close()
-    out.mkdir(parents=True, exist_ok=True)
     shutil.copy2(models.nams_path, out / "nams.pt")
     shutil.copy2(models.dr_path, out / "dr.pt")
     click.echo(f"wrote {out / 'nams.pt'} ({settings.architecture} NAMS) and {out / 'dr.pt'} "
@@ -137,6 +138,7 @@ def _search_options(command):
 @click.argument("target_dir", type=click.Path(path_type=Path))
 @click.option("--model", type=click.Path(path_type=Path), required=True, help="NAMS checkpoint (nams.pt)")
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for presets and report")
+@click.option("--overwrite", is_flag=True, help="replace the outputs of an earlier run in --out (as a whole)")
 @click.option("--group-size", type=int, default=9, show_default=True, help="target tiles per inferred design")
 @click.option("--gsd", type=float, default=None,
               help="metres per pixel of the targets (default: GeoTIFF/EXR metadata, else the render's)")
@@ -152,8 +154,8 @@ def _search_options(command):
 @_search_options
 @click.pass_context
 @_torch_threads
-def infer_command(ctx, target_dir, model, out, group_size, gsd, views, weights, seed, method, profile, M, k, S,
-                  iterations, lr, r):
+def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views, weights, seed, method, profile,
+                  M, k, S, iterations, lr, r):
     """Infer rooftop designs for a folder of target images; write presets and a report."""
     from ..pipeline.infer import InferSettings, infer
 
@@ -173,7 +175,7 @@ def infer_command(ctx, target_dir, model, out, group_size, gsd, views, weights, 
                              weights=str(weights) if weights else None)
     bars = _Bars()
     try:
-        report = infer(target_dir, model, out, settings, bars)
+        report = infer(target_dir, model, out, settings, bars, overwrite=overwrite)
     finally:
         bars.close()
     for s in report["skipped"]:
@@ -199,10 +201,12 @@ def eval_command(experiment, out, targets, target_tiles, seed, ms2, M, k, S, ite
     from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
 
     dataset, settings = _configs(o)
+    eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
+                                 iterations=iterations, lr=lr, r=r)
+    eval_settings.check()
+    writable_dir(out)
     bars = _Bars()
-    results = run_eval(experiment, out, dataset, settings,
-                       EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
-                                    iterations=iterations, lr=lr, r=r), o["cache"], bars)
+    results = run_eval(experiment, out, dataset, settings, eval_settings, o["cache"], bars)
     bars.close()
     click.echo(results_markdown(results))
     click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}")

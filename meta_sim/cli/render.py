@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..core.extras import require
+from ..core.fileio import writable_dir
 from .base import main
 
 
@@ -27,6 +28,7 @@ def _render_command():
 
         require("bpy", "rendering")  # before planning builds the banks
         jobs, settings = plan(options)
+        writable_dir(settings.out_dir)
         with tqdm(total=len(jobs) * settings.n_tiles, unit="tile", desc="render") as bar:
             summary = render_jobs(jobs, settings, bar.update)
         click.echo(f"{summary.written} tiles written, {summary.skipped} already done, in {settings.out_dir}")

@@ -27,7 +27,9 @@ def textures():
 def textures_build(out, source, heldout, size, repeat_m):
     """Write a texture bank: images, manifest.json and the HSV similarity matrix."""
     from ..sim import textures as tx
+    from ..sim.textures.bank import check_size
 
+    check_size(size)
     if source is not None:
         if out is None:
             raise MetaSimError("with --from, give the bank folder to write with --out")

@@ -21,6 +21,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from .errors import MetaSimError
+
 TEMP_MARK = ".tmp"  # temporary files are named .NAME.tmpPID-HOST-XXXXXXXX.SUFFIX beside the destination
 # A temporary file whose writer cannot be asked whether it lives (another host) counts as abandoned after this.
 STALE_SECONDS = 3600.0
@@ -98,17 +100,24 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 
 
 @contextmanager
-def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
-    """A temporary folder beside ``path`` to build a whole folder in (a texture bank); renamed onto
-    ``path`` when the block ends without an error, with the mode a plain ``mkdir`` would give it.
-    When another process renamed its own build into place first, that one is kept and this one
-    removed; on any error the temporary folder is removed."""
+def atomic_dir(path: str | os.PathLike, replace: bool = False) -> Iterator[Path]:
+    """A temporary folder beside ``path`` to build a whole folder in (a texture bank, the outputs of
+    `meta-sim infer`); renamed onto ``path`` when the block ends without an error, with the mode a
+    plain ``mkdir`` would give it. ``replace``: an existing ``path`` is swapped out whole and removed.
+    Otherwise, when another process put its own build in place first, that one is kept and this one
+    removed. On any error the temporary folder is removed and ``path`` is left as it was."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}{TEMP_MARK}", dir=path.parent))
     try:
         yield tmp
         os.chmod(tmp, 0o777 & ~_umask())
+        if replace and path.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old", dir=path.parent))
+            os.rename(path, old / path.name)
+            os.rename(tmp, path)
+            shutil.rmtree(old, ignore_errors=True)
+            return
         try:
             os.rename(tmp, path)
         except OSError:
@@ -117,6 +126,19 @@ def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def writable_dir(path: str | os.PathLike, option: str = "--out") -> Path:
+    """``path`` as a folder this process can write in (created if missing); MetaSimError naming
+    ``option`` otherwise. Commands call it before any long work, so a bad folder fails in a second."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):  # a unique name: concurrent workers share the folder
+            pass
+    except OSError as exc:
+        raise MetaSimError(f"cannot write to folder {path}: {exc.strerror}; choose another {option}") from None
+    return path
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:

@@ -187,6 +187,13 @@ class EvalSettings(SearchOptions):
     preset: str | None = None  # default: the training set's render preset
     sheet_rows: int = 6
 
+    def check(self, method: str = "auto") -> None:
+        """MetaSimError for settings the evaluation would refuse, before anything is rendered."""
+        super().check(method)
+        for name, value in (("--targets", self.targets), ("--target-tiles", self.tiles)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise MetaSimError(f"{name} must be at least 1, not {value!r}")
+
 
 @dataclass
 class EvalContext:

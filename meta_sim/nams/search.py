@@ -62,6 +62,12 @@ class SearchOptions:
     lr: float = 0.01
     r: float = 0.0
 
+    def check(self, method: str = "auto") -> None:
+        """MetaSimError for settings the search would refuse, so a command fails before any work."""
+        _check_common(self.S, self.r)
+        if method != "exhaustive":
+            _check_adjoint(self.M, self.k, self.S, self.iterations, self.lr)
+
     def search_options(self) -> dict:
         """The settings as keyword arguments for ``search`` / ``adjoint_search``."""
         return {name: getattr(self, name) for name in ("M", "k", "S", "iterations", "lr", "r")}
@@ -119,6 +125,19 @@ def _check_space(model, space: DesignSpace) -> None:
 def _check_nams(model) -> None:
     if not isinstance(model, NAMS):
         raise MetaSimError(f"this search needs a NAMS model, not {type(model).__name__} (use dr_predict for DR)")
+
+
+def _check_adjoint(M: int, k: float, S: int, iterations: int, lr: float, boundary_weight: float = 0.1) -> None:
+    if M < 1:
+        raise MetaSimError(f"M (random starts) must be at least 1, not {M}")
+    if S > M:
+        raise MetaSimError(f"S must not exceed M (S={S}, M={M})")
+    if not (k >= 0 and math.isfinite(k)):
+        raise MetaSimError(f"k (start range in latent standard deviations) must be finite and >= 0, not {k}")
+    if iterations < 0:
+        raise MetaSimError(f"iterations must be at least 0, not {iterations}")
+    if not (lr > 0 and math.isfinite(lr) and boundary_weight >= 0):
+        raise MetaSimError("lr must be a positive number and boundary_weight non-negative")
 
 
 def _check_common(S: int, r: float) -> None:
@@ -226,16 +245,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     _check_nams(model)
     _check_space(model, space)
     _check_common(S, r)
-    if M < 1:
-        raise MetaSimError(f"M (random starts) must be at least 1, not {M}")
-    if S > M:
-        raise MetaSimError(f"S must not exceed M (S={S}, M={M})")
-    if not (k >= 0 and math.isfinite(k)):
-        raise MetaSimError(f"k (start range in latent standard deviations) must be finite and >= 0, not {k}")
-    if iterations < 0:
-        raise MetaSimError(f"iterations must be at least 0, not {iterations}")
-    if not (lr > 0 and boundary_weight >= 0):
-        raise MetaSimError("lr must be positive and boundary_weight non-negative")
+    _check_adjoint(M, k, S, iterations, lr, boundary_weight)
     targets = _targets(targets, model.config.feature_dim)
 
     # Frozen copies in the search dtype; the caller's model is left as it is.

@@ -10,6 +10,7 @@ each group beside the textures of its inferred design.
 from __future__ import annotations
 
 import json
+import math
 import re
 import time
 from dataclasses import dataclass
@@ -19,10 +20,12 @@ import numpy as np
 import torch
 
 from ..core.errors import MetaSimError
-from ..core.fileio import write_text_atomic
+from ..core.fileio import atomic_dir, writable_dir, write_text_atomic
 from ..core.progress import Bars
 from ..nams.search import SearchOptions
 from ..sim.presets import DesignPreset, population, save_preset
+
+METHODS = ("auto", "adjoint", "exhaustive")
 
 
 @dataclass(frozen=True)
@@ -39,6 +42,20 @@ class InferSettings(SearchOptions):
     views: int | None = None  # default: what the model was trained with
     weights: str | None = None  # backbone weights, when the model's extractor needs them
 
+    def check(self) -> None:
+        """MetaSimError for any setting ``infer`` would refuse, before an image is read."""
+        from .features import VIEW_COUNTS
+
+        if self.method not in METHODS:
+            raise MetaSimError(f"--method must be one of {', '.join(METHODS)}, not {self.method!r}")
+        super().check(self.method)
+        if isinstance(self.group_size, bool) or not isinstance(self.group_size, int) or self.group_size < 1:
+            raise MetaSimError(f"--group-size must be at least 1, not {self.group_size!r}")
+        if self.gsd is not None and not (math.isfinite(self.gsd) and 0.01 <= self.gsd <= 100):
+            raise MetaSimError(f"--gsd must be between 0.01 and 100 metres per pixel, not {self.gsd}")
+        if self.views is not None and self.views not in VIEW_COUNTS:
+            raise MetaSimError(f"--views must be one of {', '.join(map(str, VIEW_COUNTS))}, not {self.views}")
+
 
 def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "target"
@@ -52,7 +69,7 @@ def group_tiles(tiles: list, group_size: int) -> list[list]:
 
 
 def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: InferSettings = InferSettings(),
-          bars: Bars | None = None) -> dict:
+          bars: Bars | None = None, overwrite: bool = False) -> dict:
     """Infer the designs behind the images in ``target_dir`` with the NAMS checkpoint at
     ``checkpoint_path``; write presets and a report into ``out_dir`` and return the report.
 
@@ -67,6 +84,10 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     for the first 12 groups). The returned dict is what ``report.json`` holds: counts, skipped
     files, model id, method, seconds, the population and each group's design and confidence.
 
+    The outputs are written into a new folder beside ``out_dir`` and put in its place at the end, so
+    ``out_dir`` holds one whole run: an existing ``out_dir`` with files in it is replaced only with
+    ``overwrite`` (else MetaSimError before any work).
+
     Raises MetaSimError when the checkpoint is missing, unreadable or not a NAMS model, its
     extractor cannot be rebuilt (e.g. a backbone without ``settings.weights``), ``target_dir`` is
     not a folder or holds no readable image, an image is too small for a tile, or a setting is out
@@ -77,6 +98,12 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     from .features import features_for_groups
     from .roofcolour import checkpoint_extractor
 
+    settings.check()
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not (out_dir.is_dir() and (overwrite or not any(out_dir.iterdir()))):
+        raise MetaSimError(f"{out_dir} already exists and holds files; pass --overwrite to replace the earlier "
+                           "run's outputs, or choose another --out")
+    writable_dir(out_dir.parent)
     started = time.perf_counter()
     ckpt = load_checkpoint(checkpoint_path, "nams")
     extractor = checkpoint_extractor(ckpt, Path(settings.weights) if settings.weights else None)
@@ -98,7 +125,13 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
                      bars=bars, **settings.search_options())
     search_seconds = time.perf_counter() - started
 
-    out_dir = Path(out_dir)
+    with atomic_dir(out_dir, replace=True) as folder:
+        return _write_outputs(folder, target_dir, ckpt, settings, groups, results, views, paths, targets, skipped,
+                              read_seconds, search_seconds)
+
+
+def _write_outputs(out_dir: Path, target_dir, ckpt, settings, groups, results, views, paths, targets, skipped,
+                   read_seconds, search_seconds) -> dict:
     stem = _slug(Path(target_dir).resolve().name)
     presets = []
     for index, (group, result) in enumerate(zip(groups, results)):

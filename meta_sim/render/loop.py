@@ -13,7 +13,6 @@ skipped, so a rerun resumes an interrupted job.
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Callable
 
 from ..core.errors import MetaSimError
 from ..core.extras import require
+from ..core.fileio import writable_dir
 from ..sim import meshes, tiles
 from ..sim.design import DesignSpace
 from ..sim.layout import LayoutParams, layout_for_tiles
@@ -88,7 +88,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
     from ..blender.scene import CityScene, Rect, blender_version, bounding_rect  # bpy only when rendering
 
     out_dir = Path(settings.out_dir)
-    _check_writable(out_dir)
+    writable_dir(out_dir)
     software = tiles.software_versions(blender=blender_version())
     summary = RenderSummary()
     by_city: dict = defaultdict(list)
@@ -173,13 +173,3 @@ def _cut(block, tile, settings: RenderSettings):
     col = int(round((tile.x0 - block.x0) / settings.pixel_size_m))
     row = int(round((block.y1 - tile.y1) / settings.pixel_size_m))
     return slice(row, row + settings.tile_px), slice(col, col + settings.tile_px)
-
-
-def _check_writable(out_dir: Path) -> None:
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out_dir):  # a unique name: concurrent workers share the folder
-            pass
-    except OSError as exc:
-        raise MetaSimError(f"cannot write to output folder {out_dir}: {exc.strerror}; "
-                           "choose another --out") from None

@@ -10,6 +10,11 @@ from ..sim.quality import get_preset
 from ..sim.textures import ensure_default_bank, ensure_heldout_bank, load_bank
 from .jobs import RenderSettings, design_jobs, sample_designs, single_job
 
+# Bounds of the whole-number options: a city seed is a numpy seed (not negative); beyond these a render
+# would not fit a machine's memory (tile pixels) or a folder (tiles, designs).
+LIMITS = (("seed", 0, 2**63 - 1), ("tiles", 1, 4096), ("tile_px", 16, 8192), ("cities", 1, 100_000))
+MAX_DESIGNS = 10_000_000
+
 
 def plan(options: dict):
     """Validated (jobs, settings) from parsed options (``RENDER_OPTIONS`` dests); MetaSimError on bad input.
@@ -21,9 +26,12 @@ def plan(options: dict):
         raise MetaSimError("give an output folder with --out")
     if (options.get("design") is None) == (options.get("random_designs") is None):
         raise MetaSimError("give exactly one of --design or --random-designs")
-    for name, low in (("tiles", 1), ("tile_px", 16), ("cities", 1)):
-        if options[name] < low:
-            raise MetaSimError(f"--{name.replace('_', '-')} must be at least {low}")
+    for name, low, high in LIMITS:
+        value = options[name]
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+            raise MetaSimError(f"--{name.replace('_', '-')} must be a whole number from {low} to {high}, not {value!r}")
+    if options.get("random_designs") is not None and not 1 <= options["random_designs"] <= MAX_DESIGNS:
+        raise MetaSimError(f"--random-designs must be from 1 to {MAX_DESIGNS}")
     if not 0.01 <= options["gsd"] <= 10.0:
         raise MetaSimError("--gsd must be between 0.01 and 10 metres per pixel")
     preset = get_preset(options["preset"])
@@ -40,8 +48,6 @@ def plan(options: dict):
     if options.get("design") is not None:
         jobs = [single_job(space, space.parse(options["design"], extra), options["seed"])]
     else:
-        if options["random_designs"] < 1:
-            raise MetaSimError("--random-designs must be at least 1")
         designs = sample_designs(space, options["random_designs"], options["seed"])
         jobs = design_jobs(space, designs, options["seed"], options["cities"])
     settings = RenderSettings(space=space, banks=banks + [heldout], preset=preset,

@@ -21,6 +21,8 @@ Pure Python: no torch, no bpy.
 from __future__ import annotations
 
 import json
+import math
+import os
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +55,17 @@ class DesignPreset:
         shares = self.vote_shares.get(parameter) or self.distribution.get(parameter) or {}
         return float(shares.get(str(self.design.get(parameter)), 1.0 if not shares else 0.0))
 
+    def target(self) -> str:
+        """Where the preset's images came from: how many, and their common folder."""
+        images = [str(p) for p in self.source_images]
+        if not images:
+            return "no target images recorded"
+        try:
+            common = os.path.commonpath(images) if len(images) > 1 else os.path.dirname(images[0])
+        except ValueError:  # absolute and relative paths mixed
+            common = "several folders"
+        return f"{len(images)} image{'s' if len(images) != 1 else ''} in {common or '.'}"
+
     def to_dict(self) -> dict:
         out = {"format": FORMAT, "version": VERSION, "kind": self.kind, "name": self.name,
                "design_space": self.design_space, "design": self.design,
@@ -80,11 +93,11 @@ class DesignPreset:
         design = data.get("design")
         if not isinstance(design, Mapping) or not design:
             raise MetaSimError("preset has no design")
-        preset = cls(kind=kind, name=str(data.get("name", "")), design_space=str(data.get("design_space", "")),
-                     design=dict(design), vote_shares=_mapping(data, "vote_shares"),
-                     search=_mapping(data, "search"), source_images=list(data.get("source_images") or []),
-                     model_id=str(data.get("model_id", "")), distribution=_mapping(data, "distribution"),
-                     designs=list(data.get("designs") or []))
+        preset = cls(kind=kind, name=_text(data, "name"), design_space=_text(data, "design_space"),
+                     design=_design(design, "design"), vote_shares=_shares(data, "vote_shares"),
+                     search=_plain_mapping(data, "search"), source_images=_source_images(data),
+                     model_id=_text(data, "model_id"), distribution=_shares(data, "distribution"),
+                     designs=_designs(data))
         if space is not None:
             try:
                 preset.design = space.validate(preset.design, extra)
@@ -93,11 +106,81 @@ class DesignPreset:
         return preset
 
 
+MAX_TEXT = 1000
+MAX_ITEMS = 100_000
+
+
 def _mapping(data: Mapping, key: str) -> dict:
     value = data.get(key) or {}
     if not isinstance(value, Mapping):
         raise MetaSimError(f"preset field {key!r} must be an object")
     return dict(value)
+
+
+def _text(data: Mapping, key: str) -> str:
+    value = data.get(key, "")
+    if not isinstance(value, str) or len(value) > MAX_TEXT:
+        raise MetaSimError(f"preset field {key!r} must be a string of at most {MAX_TEXT} characters")
+    return value
+
+
+def _scalar(value, where: str):
+    """A design value: an id (string) or a finite number."""
+    if isinstance(value, str) and len(value) <= MAX_TEXT:
+        return value
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        return value
+    raise MetaSimError(f"preset field {where} must be an id or a finite number, not {value!r}")
+
+
+def _design(value, where: str) -> dict:
+    if not isinstance(value, Mapping) or not value:
+        raise MetaSimError(f"preset field {where} must be a non-empty object")
+    return {str(k): _scalar(v, f"{where}.{k}") for k, v in value.items()}
+
+
+def _shares(data: Mapping, key: str) -> dict:
+    """parameter -> choice -> share in [0, 1]."""
+    out = {}
+    for param, shares in _mapping(data, key).items():
+        if not isinstance(shares, Mapping):
+            raise MetaSimError(f"preset field {key}.{param} must map choices to shares")
+        for choice, share in shares.items():
+            if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0 <= share <= 1:
+                raise MetaSimError(f"preset field {key}.{param}.{choice} must be a share in [0, 1], not {share!r}")
+        out[str(param)] = {str(c): float(s) for c, s in shares.items()}
+    return out
+
+
+def _plain_mapping(data: Mapping, key: str) -> dict:
+    """An object of strings, finite numbers, booleans and None (the search's settings and loss)."""
+    out = _mapping(data, key)
+    for name, value in out.items():
+        if not (value is None or isinstance(value, (str, bool)) or
+                (isinstance(value, (int, float)) and math.isfinite(value))):
+            raise MetaSimError(f"preset field {key}.{name} must be a string, a finite number or null")
+    return out
+
+
+def _source_images(data: Mapping) -> list:
+    value = data.get("source_images") or []
+    if not isinstance(value, list) or len(value) > MAX_ITEMS or not all(
+            isinstance(p, str) and 0 < len(p) <= MAX_TEXT for p in value):
+        raise MetaSimError("preset field 'source_images' must be a list of paths")
+    return list(value)
+
+
+def _designs(data: Mapping) -> list:
+    value = data.get("designs") or []
+    if not isinstance(value, list) or len(value) > MAX_ITEMS:
+        raise MetaSimError("preset field 'designs' must be a list")
+    out = []
+    for index, entry in enumerate(value):
+        count = entry.get("count") if isinstance(entry, Mapping) else None
+        if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+            raise MetaSimError(f"preset field designs[{index}] must hold a design and a count of at least 1")
+        out.append({"design": _design(entry.get("design"), f"designs[{index}].design"), "count": count})
+    return out
 
 
 def save_preset(path: str | Path, preset: DesignPreset) -> Path:

@@ -228,7 +228,7 @@ def test_render_cli_reports_unwritable_output(tmp_path):
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
     result = _cli("render", "--design", "flat_roof=1,sloped_roof=1", "--out", blocker / "tiles")
-    assert result.exit_code == 2 and "cannot write to output folder" in result.output
+    assert result.exit_code == 2 and "cannot write to folder" in result.output
 
 
 def test_render_cli_reports_missing_texture_file(tmp_path, bank):

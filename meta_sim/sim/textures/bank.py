@@ -233,6 +233,16 @@ def _histograms(images) -> np.ndarray:
     return np.stack([hsv_cone_histogram(img) for img in images])
 
 
+MIN_SIZE, MAX_SIZE = 8, 4096
+
+
+def check_size(size) -> int:
+    """A texture side in pixels, or MetaSimError (a bank of 4096 x 4096 textures is already 84 x 48 MB)."""
+    if isinstance(size, bool) or not isinstance(size, int) or not MIN_SIZE <= size <= MAX_SIZE:
+        raise MetaSimError(f"--size must be a whole number of pixels from {MIN_SIZE} to {MAX_SIZE}, not {size!r}")
+    return size
+
+
 def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: bool = False) -> TextureBank:
     """Generate the default (or held-out) procedural bank into ``out_dir``.
 
@@ -240,6 +250,7 @@ def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: boo
     (bank against itself); the held-out bank also gets
     ``similarity_to_default.json`` (held-out rows, default-bank columns).
     """
+    check_size(size)
     out = Path(out_dir)
     recipes = procedural.recipes(heldout=heldout)
     images = [procedural.generate(r, size) for r in recipes]
@@ -316,8 +327,8 @@ def build_bank_from_folder(
     src = Path(src_dir).resolve()
     out = Path(out_dir).resolve()
     repeat_m = _positive_metres(repeat_m, "repeat_m")
-    if size is not None and (isinstance(size, bool) or not isinstance(size, int) or size < 8):
-        raise MetaSimError(f"size must be a whole number of pixels >= 8, got {size!r}")
+    if size is not None:
+        check_size(size)
     if not src.is_dir():
         raise MetaSimError(f"texture folder not found: {src}; it should hold flat/ and sloped/ subfolders of images")
     if out == src or src in out.parents:

@@ -1,0 +1,65 @@
+"""Every command checks its options before it reads, renders or writes anything.
+
+Each row is a command line a user could type; each must exit 2 with one line on stderr, no
+traceback, and leave no file behind.
+"""
+
+import pytest
+from click.testing import CliRunner
+
+from meta_sim.cli import main as cli
+
+DESIGN = ["--design", "flat_roof=0,sloped_roof=0"]
+SMALL = ["--tiles", "1", "--tile-px", "32"]
+
+BAD = [
+    ("render", "--design", "flat_roof=²,sloped_roof=0", *SMALL, "--out", "{tmp}/out"),
+    ("render", "--random-designs", "1", "--seed", "-1", *SMALL, "--out", "{tmp}/out"),
+    ("render", *DESIGN, "--seed", "-1", *SMALL, "--out", "{tmp}/out"),
+    ("render", *DESIGN, "--tiles", "1", "--tile-px", "100000", "--out", "{tmp}/out"),
+    ("render", *DESIGN, "--tiles", "0", "--out", "{tmp}/out"),
+    ("render", *DESIGN, *SMALL, "--gsd", "nan", "--out", "{tmp}/out"),
+    ("render", "--random-designs", "0", *SMALL, "--out", "{tmp}/out"),
+    ("render", *DESIGN, *SMALL, "--out", "/proc/meta-sim-nope"),
+    ("render", *DESIGN, *SMALL, "--space", "{tmp}/missing.json", "--out", "{tmp}/out"),
+    ("render", "--design", "flat_roof=0", *SMALL, "--out", "{tmp}/out"),
+    ("textures", "build", "--size", "0", "--out", "{tmp}/bank"),
+    ("textures", "build", "--size", "100000", "--out", "{tmp}/bank"),
+    ("textures", "build", "--from", "{tmp}/no-photos", "--out", "{tmp}/bank"),
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "--group-size", "0"),
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "-S", "0"),
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "-M", "0"),
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "--gsd", "-1"),
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "/proc/meta-sim-nope/out"),
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out"),  # no such model
+    ("train", "--out", "/proc/meta-sim-nope", "--designs", "2", "--cache", "{tmp}/cache"),
+    ("eval", "e1", "--out", "{tmp}/out", "--targets", "0", "--cache", "{tmp}/cache"),
+    ("eval", "e1", "--out", "{tmp}/out", "-S", "5", "-M", "2", "--cache", "{tmp}/cache"),
+    ("jobs", "plan", *DESIGN, "--tiles", "0", "--out", "{tmp}/job.json"),
+    ("jobs", "status", "{tmp}/missing.json"),
+    ("jobs", "run", "{tmp}/missing.json"),
+]
+
+
+def _files(folder):
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+@pytest.mark.parametrize("args", BAD, ids=[" ".join(a[:2]) + f" #{i}" for i, a in enumerate(BAD)])
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args):
+    before = _files(tmp_path)
+    result = CliRunner().invoke(cli, [a.format(tmp=tmp_path) for a in args])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert isinstance(result.exception, SystemExit)  # no traceback
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(("error: ", "Error: ")), result.output
+    assert _files(tmp_path) == before
+
+
+def test_infer_into_a_folder_of_an_earlier_run_needs_overwrite(tmp_path):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "report.md").write_text("earlier run")
+    result = CliRunner().invoke(cli, ["infer", str(tmp_path), "--model", str(tmp_path / "nams.pt"),
+                                      "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and "--overwrite" in result.output
+    assert (tmp_path / "out" / "report.md").read_text() == "earlier run"
