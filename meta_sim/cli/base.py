@@ -9,6 +9,7 @@ import sys
 import click
 
 from ..core.errors import MetaSimError
+from ..core.progress import LineBar, on_terminal
 
 # nams.model.ARCHITECTURES, named here so that `--help` does not import torch (a test keeps them equal).
 ARCHITECTURE_NAMES = ("paper", "factorised", "additive")
@@ -74,7 +75,8 @@ class _Bars:
             if stage != self.stage:  # a stage already closed
                 return
             if self.bar is None:
-                self.bar = tqdm(total=total, desc=label, unit="it", leave=True)
+                self.bar = (tqdm(total=total, desc=label, unit="it", leave=True) if on_terminal()
+                            else LineBar(total, label))
             self.bar.update(n)
 
         return update

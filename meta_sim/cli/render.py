@@ -8,6 +8,7 @@ import click
 
 from ..core.extras import require
 from ..core.fileio import writable_dir
+from ..core.progress import LineBar, on_terminal
 from .base import main
 
 
@@ -29,7 +30,9 @@ def _render_command():
         require("bpy", "rendering")  # before planning builds the banks
         jobs, settings = plan(options)
         writable_dir(settings.out_dir)
-        with tqdm(total=len(jobs) * settings.n_tiles, unit="tile", desc="render") as bar:
+        total = len(jobs) * settings.n_tiles
+        bar = tqdm(total=total, unit="tile", desc="render") if on_terminal() else LineBar(total, "render", "tile")
+        with bar:
             summary = render_jobs(jobs, settings, bar.update)
         click.echo(f"{summary.written} tiles written, {summary.skipped} already done, in {settings.out_dir}")
 

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from ..core.errors import MetaSimError
 from ..core.extras import require
+from ..core.progress import LineBar, on_terminal
 from . import manifest as farm
 
 EXECUTORS = ("local", "dask")
@@ -253,8 +254,12 @@ def run(manifest: farm.Manifest, options: RunOptions = RunOptions()) -> RunSumma
     new_tiles = {t.name: sum(1 for _, state in status.states[t.name] if state != farm.DONE) for t in pending}
     pool = _DaskPool(options.workers, options.scheduler) if options.executor == "dask" else _LocalPool(options.workers)
     attempts = Counter()
-    bar = tqdm(total=summary.tiles, initial=summary.already_done, unit="tile", desc="render",
-               disable=not options.progress)
+    if not options.progress:
+        bar = tqdm(total=summary.tiles, disable=True)
+    elif on_terminal():
+        bar = tqdm(total=summary.tiles, initial=summary.already_done, unit="tile", desc="render")
+    else:
+        bar = LineBar(summary.tiles, "render", "tile", initial=summary.already_done)
 
     def submit(tasks):
         data = manifest.subset(tasks).to_dict()  # out_dir absolute: the worker may run anywhere

@@ -212,7 +212,7 @@ def _cli(*args):
 @pytest.mark.parametrize("args, message", [
     (["--design", "flat_roof=no-such,sloped_roof=1"], "unknown choice 'no-such'"),
     (["--design", "flat_roof=1,sloped_roof=1", "--preset", "ultra"], "unknown render preset 'ultra'"),
-    (["--design", "flat_roof=1,sloped_roof=1", "--tiles", "0"], "--tiles must be at least 1"),
+    (["--design", "flat_roof=1,sloped_roof=1", "--tiles", "0"], "--tiles must be a whole number from 1 to"),
     (["--design", "flat_roof=1"], "missing sloped_roof"),
     ([], "exactly one of --design or --random-designs"),
 ])
