@@ -92,11 +92,11 @@ def dataset_command(**o):
 
     dataset, settings = _configs(o)
     bars = _Bars()
-    features, seconds = prepare_features(dataset, settings, o["cache"], bars)
+    features, seconds, rendered = prepare_features(dataset, settings, o["cache"], bars)
     bars.close()
-    click.echo(f"{len(features.names)} designs x {dataset.tiles} tiles, features {tuple(features.features.shape)} "
-               f"in {dataset_dir(dataset, o['cache'])} (render {seconds['render']:.0f} s, "
-               f"features {seconds['features']:.0f} s)")
+    click.echo(f"{len(features.names)} designs x {dataset.tiles} tiles ({rendered} rendered now), features "
+               f"{tuple(features.features.shape)} in {dataset_dir(dataset, o['cache'])} "
+               f"(render {seconds['render']:.0f} s, features {seconds['features']:.0f} s)")
 
 
 @main.command("train")

@@ -94,6 +94,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             os.fsync(fh.fileno())
         os.chmod(tmp, _file_mode())
         os.replace(tmp, path)
+    except OSError as exc:  # disk full, quota, permissions: one line for the user, nothing left behind
+        Path(tmp).unlink(missing_ok=True)
+        raise MetaSimError(f"cannot write {path}: {exc.strerror or exc}") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -176,7 +176,7 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     with tempfile.TemporaryDirectory() as out:
         from ..pipeline.workflow import prepare_features
 
-        feature_set, _ = prepare_features(dataset, settings, root)
+        feature_set = prepare_features(dataset, settings, root).features
         result["train_seconds"] = {k: round(v, 2) for k, v in
                                    train_models(feature_set, Path(out), settings, dataset).items()}
     return result

@@ -69,7 +69,7 @@ def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Pat
     root = Path(root or cache_root())
     dataset = dataset or DatasetConfig()
     folder = dataset_dir(dataset, root)
-    jobs = render_training_set(folder, dataset, bars("render training set", dataset.designs * dataset.tiles)
+    jobs, _ = render_training_set(folder, dataset, bars("render training set", dataset.designs * dataset.tiles)
                                if bars else None)
     update = bars("training roofs", len(jobs)) if bars else None
     sums = {kind: {} for kind in ROOF_CLASS_OF}

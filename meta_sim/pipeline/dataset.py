@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable, NamedTuple
@@ -26,6 +27,8 @@ from ..core.fileio import atomic_path
 from ..sim.design import DesignSpace
 
 CACHE_VERSION = 1
+# The tile-feature cache is saved at least this often while it grows, so a killed run resumes there.
+SAVE_SECONDS = 60.0
 
 
 @dataclass(frozen=True)
@@ -96,7 +99,8 @@ class TileFeatures(NamedTuple):
 
 def render_training_set(root: Path, config: DatasetConfig, progress: Callable[[int], None] | None = None):
     """Render (or finish rendering) the training set's tiles into ``root/tiles`` with the default
-    texture bank; returns the render jobs (one per design).
+    texture bank; returns the render jobs (one per design) and the ``RenderSummary`` (tiles written,
+    tiles already there).
 
     Tiles already rendered with the same settings are kept, so a rerun resumes. ``progress(n)`` is
     called as tiles are done. Needs ``bpy``; raises MetaSimError for an unknown design space or
@@ -112,8 +116,7 @@ def render_training_set(root: Path, config: DatasetConfig, progress: Callable[[i
     settings = RenderSettings(space=space, banks=[ensure_default_bank()], preset=get_preset(config.preset),
                               out_dir=Path(root) / "tiles", n_tiles=config.tiles, tile_px=config.tile_px,
                               pixel_size_m=config.pixel_size_m)
-    render_jobs(jobs, settings, progress)
-    return jobs
+    return jobs, render_jobs(jobs, settings, progress)
 
 
 def job_tiles(tile_dir: Path, name: str, n_tiles: int) -> list[Path]:
@@ -182,13 +185,15 @@ def _tile_features(root: Path, config: DatasetConfig, space: DesignSpace, names:
     cached = {name: tiles for name, tiles in _load_cache(cache_path, extractor.id, views).items()
               if len(tiles) == config.tiles}
     missing = [name for name in names if name not in cached]
-    for name in missing:
+    saved = time.monotonic()
+    for count, name in enumerate(missing, 1):
         paths = _existing_tiles(root, name, config.tiles)
         cached[name] = features_for_groups([[read_image(p)] for p in paths], extractor, views)
+        if count == len(missing) or time.monotonic() - saved >= SAVE_SECONDS:
+            _save_cache(cache_path, cached, extractor.id, views, space)
+            saved = time.monotonic()
         if progress:
             progress(1)
-    if missing:
-        _save_cache(cache_path, cached, extractor.id, views, space)
     return cached
 
 

@@ -13,11 +13,13 @@ import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import torch
 
 from ..core.cache import cache_root
 from ..core.errors import MetaSimError
+from ..core.locks import locked
 from ..core.progress import Bars
 from ..nams.model import DEFAULT_ARCHITECTURE, architecture_options
 from .dataset import DatasetConfig, FeatureSet, build_features, render_training_set
@@ -73,6 +75,15 @@ class ModelSettings:
         return hashlib.sha256(blob.encode()).hexdigest()[:12]
 
 
+class Prepared(NamedTuple):
+    """A training set's features, the seconds spent on them ("render", "features") and how many of
+    its tiles this call rendered (0 when another run had rendered them all)."""
+
+    features: FeatureSet
+    seconds: dict
+    tiles_rendered: int
+
+
 @dataclass
 class Models:
     """What ``ensure_models`` returns: the NAMS and DR checkpoint paths, the training set's features,
@@ -95,17 +106,25 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
     """Render what is missing of the training set and compute what is missing of its features.
 
     With ``settings.roof_colour`` the roof finder is learnt first (once per training set) and the
-    features end in its roof-colour histograms. Returns the FeatureSet and the seconds spent
-    rendering ("render") and on features ("features"); ``bars`` makes a progress bar per stage.
+    features end in its roof-colour histograms. Returns them as ``Prepared``; ``bars`` makes a
+    progress bar per stage. Another process preparing the same set holds its lock until it is done.
     Raises MetaSimError for an unknown space, preset, extractor or roof finder, a missing ``bpy``
     while tiles are missing, or an unreadable tile.
     """
-    from .features import make_extractor
 
     folder = dataset_dir(config, root)
+    with locked(folder):  # another process preparing the same set: wait for it, then find its work done
+        return _prepare_features(folder, config, settings, bars)
+
+
+def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettings,
+                      bars: Bars | None) -> tuple[FeatureSet, dict]:
+    from .features import make_extractor
+
     seconds = {}
     started = time.perf_counter()
-    render_training_set(folder, config, bars("render training set", config.designs * config.tiles) if bars else None)
+    _, summary = render_training_set(folder, config,
+                                     bars("render training set", config.designs * config.tiles) if bars else None)
     seconds["render"] = time.perf_counter() - started
     extractor = make_extractor(settings.extractor, Path(settings.weights) if settings.weights else None)
     started = time.perf_counter()
@@ -126,7 +145,7 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
     features = build_features(folder, config, extractor, settings.views,
                               bars("features", config.designs) if bars else None)
     seconds["features"] = time.perf_counter() - started
-    return features, seconds
+    return Prepared(features, seconds, summary.written)
 
 
 def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, dataset: DatasetConfig,
@@ -179,12 +198,13 @@ def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | N
     """
     from ..nams import load_checkpoint
 
-    features, seconds = prepare_features(config, settings, root, bars)
+    features, seconds, _ = prepare_features(config, settings, root, bars)
     folder = Path(root or cache_root()) / "models" / settings.key(config, features.extractor_id)
     paths = {kind: folder / f"{kind}.pt" for kind in ("nams", "dr")}
-    try:
-        for kind, path in paths.items():
-            load_checkpoint(path, kind)
-    except MetaSimError:
-        seconds.update(train_models(features, folder, settings, config, bars))
+    with locked(folder):
+        try:
+            for kind, path in paths.items():
+                load_checkpoint(path, kind)
+        except MetaSimError:
+            seconds.update(train_models(features, folder, settings, config, bars))
     return Models(paths["nams"], paths["dr"], features, seconds)

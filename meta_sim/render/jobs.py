@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.fileio import write_text_atomic
+from ..core.locks import locked
 from ..core.names import safe_name
 from ..sim import tiles
 from ..sim.design import DesignSpace
@@ -103,16 +104,17 @@ def write_job_manifest(out_dir: Path, jobs: list[Job], settings: RenderSettings)
     """``designs.json`` beside the tiles: every job rendered into the folder, with its design,
     city seed, settings and tile names (jobs already listed by an earlier run are kept)."""
     path = Path(out_dir) / "designs.json"
-    entries = {}
-    if path.is_file():
-        try:
-            entries = {e["name"]: e for e in json.loads(path.read_text()).get("jobs", [])}
-        except (ValueError, KeyError, TypeError, AttributeError):
-            entries = {}  # a damaged manifest is rebuilt from this run
-    for job in jobs:
-        entries[job.name] = {"name": job.name, "design": job.design, "city_seed": job.city_seed,
-                             "design_space": settings.space.name, "preset": settings.preset.name,
-                             "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m,
-                             "tiles": [tile_path(out_dir, job, j).name for j in range(settings.n_tiles)]}
-    data = {"format": "meta-sim-render-job", "version": 1, "jobs": [entries[k] for k in sorted(entries)]}
-    return write_text_atomic(path, json.dumps(data, indent=1) + "\n")
+    with locked(path):  # two renders into one folder must not lose each other's entries
+        entries = {}
+        if path.is_file():
+            try:
+                entries = {e["name"]: e for e in json.loads(path.read_text()).get("jobs", [])}
+            except (ValueError, KeyError, TypeError, AttributeError):
+                entries = {}  # a damaged manifest is rebuilt from this run
+        for job in jobs:
+            entries[job.name] = {"name": job.name, "design": job.design, "city_seed": job.city_seed,
+                                 "design_space": settings.space.name, "preset": settings.preset.name,
+                                 "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m,
+                                 "tiles": [tile_path(out_dir, job, j).name for j in range(settings.n_tiles)]}
+        data = {"format": "meta-sim-render-job", "version": 1, "jobs": [entries[k] for k in sorted(entries)]}
+        return write_text_atomic(path, json.dumps(data, indent=1) + "\n")

@@ -80,3 +80,15 @@ def test_a_temporary_file_is_abandoned_only_when_its_writer_is_gone(tmp_path):
         path.write_bytes(b"half")
     assert fileio.abandoned(dead) and not fileio.abandoned(foreign)
     assert fileio.abandoned(foreign, now=time.time() + fileio.STALE_SECONDS + 1)
+
+
+def test_a_full_disk_is_one_line_and_leaves_no_temporary(tmp_path):
+    import errno
+
+    from meta_sim.core.errors import MetaSimError
+
+    with pytest.raises(MetaSimError, match=r"cannot write .*cache\.pt: No space left on device"):
+        with atomic_path(tmp_path / "cache.pt") as tmp:
+            tmp.write_bytes(b"part")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert list(tmp_path.iterdir()) == []

@@ -232,22 +232,28 @@ class CountingExtractor:
         return torch.cat([mean, mean.square()], dim=1)
 
 
-def test_design_features_are_the_means_of_the_cached_tile_features(tmp_path):
+def _fake_training_set(folder, config):
+    """Tiles of random colours for ``config``'s designs, written as the renderer names them."""
     from meta_sim.render.jobs import sample_designs
     from meta_sim.sim import tiles
 
-    config = DatasetConfig(designs=3, tiles=2, seed=4, space="rooftops-v1")
     space = DesignSpace.load(config.space)
     designs = sample_designs(space, config.designs, config.seed)
     rng = np.random.default_rng(0)
     zeros = np.zeros((24, 24), np.uint32)
-    (tmp_path / "tiles").mkdir()
+    (folder / "tiles").mkdir()
     for k, design in enumerate(designs):
         for j in range(config.tiles):
             meta = tiles.tile_metadata(design=design, space=space.name, city_seed=k, tile_index=j, origin_m=(0, 0),
                                        size_px=(24, 24), pixel_size_m=0.3, preset="fast")
             rgb = (rng.random((24, 24, 3)) * rng.random(3)).astype(np.float32)
-            tiles.write_tile(tmp_path / "tiles" / f"d{k:05d}_t{j:02d}.exr", rgb, zeros, zeros, meta)
+            tiles.write_tile(folder / "tiles" / f"d{k:05d}_t{j:02d}.exr", rgb, zeros, zeros, meta)
+    return space, designs
+
+
+def test_design_features_are_the_means_of_the_cached_tile_features(tmp_path):
+    config = DatasetConfig(designs=3, tiles=2, seed=4, space="rooftops-v1")
+    space, designs = _fake_training_set(tmp_path, config)
 
     extractor = CountingExtractor()
     counted = []
@@ -277,3 +283,25 @@ def test_design_features_are_the_means_of_the_cached_tile_features(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert build_tile_features(tmp_path, config, extractor).features.shape == (3, 2, 6)
+
+
+def test_a_killed_feature_pass_resumes_where_its_cache_was_last_saved(tmp_path, monkeypatch):
+    from meta_sim.pipeline import dataset
+
+    config = DatasetConfig(designs=5, tiles=1, seed=4, space="rooftops-v1")
+    _fake_training_set(tmp_path, config)
+    monkeypatch.setattr(dataset, "SAVE_SECONDS", 0.0)  # save after every design
+
+    def killed_after_three(n):
+        done.append(n)
+        if len(done) == 3:
+            raise KeyboardInterrupt  # as a kill would stop it, after the third design's features
+
+    done, extractor = [], CountingExtractor()
+    with pytest.raises(KeyboardInterrupt):
+        build_tile_features(tmp_path, config, extractor, progress=killed_after_three)
+    assert extractor.images == 3 and not list(tmp_path.glob(".*tmp*"))
+    extractor.images = 0
+    again = build_tile_features(tmp_path, config, extractor)
+    assert extractor.images == 2  # only the two designs the killed pass had not reached
+    assert again.features.shape == (5, 1, 6)

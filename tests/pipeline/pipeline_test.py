@@ -267,3 +267,14 @@ def test_render_without_bpy_names_the_extra_to_install(tmp_path):
     assert done.returncode == 2
     assert done.stderr.strip() == "error: rendering needs the bpy package: pip install 'meta-sim[render]'"
     assert not (tmp_path / "out").exists()  # nothing written
+
+
+def test_two_processes_sharing_a_cache_prepare_a_training_set_once(tmp_path):
+    """Both succeed; the tiles are rendered by one of them (the other waits on the entry's lock)."""
+    args = [sys.executable, "-m", "meta_sim.cli", "dataset", "--designs", "6", "--tiles", "1", "--cities", "1",
+            "--tile-px", "32", "--gsd", "3.6", "--no-roof-colour", "--views", "1", "--cache", str(tmp_path / "c")]
+    runs = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outputs = [run.communicate(timeout=600) for run in runs]
+    assert [run.returncode for run in runs] == [0, 0], [err for _, err in outputs]
+    rendered = sorted(int(re.search(r"\((\d+) rendered now\)", out)[1]) for out, _ in outputs)
+    assert rendered == [0, 6]
