@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -60,6 +60,11 @@ bench-tradeoff: setup
 
 bench-farm: setup
 	$(BIN)/meta-sim bench farm --out benchmarks/farm.json
+
+# Peak memory and throughput of `meta-sim infer` on 180, 1,440 and 11,520 real tiles (links to
+# ../shared/realdata) and one 16,000 x 16,000 px image; trains the default model first if it is not cached.
+bench-infer: setup
+	$(BIN)/meta-sim bench infer --out benchmarks/infer.json
 
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from ..core.errors import MetaSimError
 from ..experiments.publish import DOCS, publish
 from .base import _Bars, _torch_threads, main
 
@@ -119,3 +120,35 @@ def bench_farm_command(out, docs, designs, tiles):
 
 if __name__ == "__main__":
     main()
+
+
+@bench.command("infer")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/infer.json"), show_default=True)
+@click.option("--model", type=click.Path(path_type=Path), default=None,
+              help="NAMS checkpoint (default: the cached default model, trained first if missing)")
+@click.option("--sizes", default="180,1440,11520", show_default=True, help="images per folder, comma-separated")
+@click.option("--big-px", type=int, default=16000, show_default=True, help="side of the one large image (0: none)")
+@click.option("--realdata", type=click.Path(path_type=Path), default=None,
+              help="the shared real tiles (default: ../shared/realdata beside the repository)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_torch_threads
+def bench_infer_command(out, docs, model, sizes, big_px, realdata, cache):
+    """Peak memory and throughput of `meta-sim infer` on growing folders of real tiles and one huge image."""
+    from ..experiments.infer_bench import REALDATA, bench_infer, format_infer_table
+
+    try:
+        counts = tuple(int(s) for s in sizes.split(",") if s.strip())
+    except ValueError:
+        raise MetaSimError(f"--sizes must be whole numbers separated by commas, not {sizes!r}") from None
+    if not counts or min(counts) < 1 or big_px < 0:
+        raise MetaSimError("--sizes must be positive and --big-px at least 0")
+    if model is None:
+        from ..pipeline.dataset import DatasetConfig
+        from ..pipeline.workflow import ModelSettings, ensure_models
+
+        bars = _Bars()
+        model = ensure_models(DatasetConfig(), ModelSettings(), cache, bars).nams_path
+        bars.close()
+    result = bench_infer(Path(model), counts, big_px, realdata or REALDATA)
+    _publish(result, out, format_infer_table(result), "infer", docs)

@@ -26,6 +26,9 @@ from ..nams.search import SearchOptions
 from ..sim.presets import DesignPreset, population, save_preset
 
 METHODS = ("auto", "adjoint", "exhaustive")
+# Groups featurised and searched together: memory stays that of one batch whatever the folder holds.
+BATCH_GROUPS = 16
+REPORT_GROUPS = 12  # groups drawn in report.png
 
 
 @dataclass(frozen=True)
@@ -61,13 +64,6 @@ def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "target"
 
 
-def group_tiles(tiles: list, group_size: int) -> list[list]:
-    """Consecutive groups of ``group_size`` (the last one may be smaller)."""
-    if group_size < 1:
-        raise MetaSimError("--group-size must be at least 1")
-    return [tiles[i:i + group_size] for i in range(0, len(tiles), group_size)]
-
-
 def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: InferSettings = InferSettings(),
           bars: Bars | None = None, overwrite: bool = False) -> dict:
     """Infer the designs behind the images in ``target_dir`` with the NAMS checkpoint at
@@ -93,9 +89,8 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     not a folder or holds no readable image, an image is too small for a tile, or a setting is out
     of range.
     """
-    from ..nams import load_checkpoint, search
-    from ..sim.imageio import list_images, load_targets
-    from .features import features_for_groups
+    from ..nams import load_checkpoint
+    from ..sim.imageio import list_images
     from .roofcolour import checkpoint_extractor
 
     settings.check()
@@ -104,64 +99,109 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
         raise MetaSimError(f"{out_dir} already exists and holds files; pass --overwrite to replace the earlier "
                            "run's outputs, or choose another --out")
     writable_dir(out_dir.parent)
-    started = time.perf_counter()
     ckpt = load_checkpoint(checkpoint_path, "nams")
     extractor = checkpoint_extractor(ckpt, Path(settings.weights) if settings.weights else None)
     paths, skipped = list_images(target_dir)
-    tile_px = int(ckpt.extra.get("tile_px", 384))
-    render_gsd = float(ckpt.extra.get("pixel_size_m", 0.3))
-    targets = load_targets(paths, tile_px, settings.gsd, render_gsd,
-                           bars("read target images", len(paths)) if bars else None)
-    groups = group_tiles(targets, settings.group_size)
-    views = settings.views or int(ckpt.extra.get("views", 8))
-    feats = features_for_groups([[t for _, t in g] for g in groups], extractor, views,
-                                progress=bars("target features", len(targets)) if bars else None)
-    read_seconds = time.perf_counter() - started
-
-    started = time.perf_counter()
-    normed = ckpt.feature_norm.apply(feats)
-    generator = torch.Generator().manual_seed(settings.seed)
-    results = search(ckpt.model, normed, ckpt.space, settings.method, generator=generator,
-                     bars=bars, **settings.search_options())
-    search_seconds = time.perf_counter() - started
-
+    run = _Run(ckpt, extractor, settings, _slug(Path(target_dir).resolve().name))
+    progress = bars("target images", len(paths)) if bars else None
+    tiles = _tile_stream(paths, skipped, int(ckpt.extra.get("tile_px", 384)), settings.gsd,
+                         float(ckpt.extra.get("pixel_size_m", 0.3)), progress)
     with atomic_dir(out_dir, replace=True) as folder:
-        return _write_outputs(folder, target_dir, ckpt, settings, groups, results, views, paths, targets, skipped,
-                              read_seconds, search_seconds)
+        for batch in _chunks(_chunks(tiles, settings.group_size), BATCH_GROUPS):
+            run.search(batch, folder)
+        if not run.presets:
+            listing = "; ".join(f"{p.name} ({why})" for p, why in skipped[:5])
+            raise MetaSimError(f"no readable images in {target_dir}; {len(skipped)} files skipped: {listing}")
+        return run.finish(folder, target_dir, paths, skipped)
 
 
-def _write_outputs(out_dir: Path, target_dir, ckpt, settings, groups, results, views, paths, targets, skipped,
-                   read_seconds, search_seconds) -> dict:
-    stem = _slug(Path(target_dir).resolve().name)
-    presets = []
-    for index, (group, result) in enumerate(zip(groups, results)):
-        sources = sorted({str(p) for p, _ in group})
-        preset = DesignPreset(kind="group", name=f"{stem}-{index:03d}", design_space=ckpt.space.name,
-                              design=result.design, vote_shares=result.votes,
-                              search={"method": result.method, "loss": result.best_loss,
-                                      "mean_loss": result.mean_loss, **settings.search_options(),
-                                      "views": views, "tiles": len(group)},
-                              source_images=sources, model_id=ckpt.model_id)
-        save_preset(out_dir / "presets" / f"{preset.name}.json", preset)
-        presets.append(preset)
-    pop = population(presets, ckpt.space, f"{stem}-population", ckpt.model_id)
-    save_preset(out_dir / "population.json", pop)
-    report = {"target_dir": str(target_dir), "images": len(paths), "tiles": len(targets),
-              "group_count": len(groups),
-              "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
-              "architecture": ckpt.model.config.architecture,
-              "method": results[0].method if results else settings.method,
-              "seconds": {"read_and_features": read_seconds, "search": search_seconds,
-                          "search_per_group": search_seconds / max(1, len(groups))},
-              "population": pop.distribution,
-              "groups": [{"name": p.name, "design": p.design,
-                          "confidence": {n: p.confidence(n) for n in ckpt.space.names},
-                          "sources": p.source_images} for p in presets]}
-    _write_report(out_dir, report, groups, presets, ckpt.space)
-    return report
+def _tile_stream(paths, skipped: list, tile_px: int, gsd: float | None, render_gsd: float, progress):
+    """``(path, tile)`` for every tile of every image, in order, read one image (or one window of a large
+    one) at a time. An image whose pixels cannot be read is added to ``skipped`` with the reason."""
+    from ..sim.imageio import image_tiles
+
+    for path in paths:
+        try:
+            for tile in image_tiles(path, tile_px, gsd, render_gsd):
+                yield path, tile
+        except MetaSimError as exc:
+            skipped.append((path, str(exc).removeprefix(f"{path}: ")))
+        if progress:
+            progress(1)
 
 
-def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
+def _chunks(items, size: int):
+    """Lists of ``size`` consecutive items (the last may be shorter), drawn as they are needed."""
+    chunk = []
+    for item in items:
+        chunk.append(item)
+        if len(chunk) == size:
+            yield chunk
+            chunk = []
+    if chunk:
+        yield chunk
+
+
+class _Run:
+    """What an inference keeps while its groups stream past: one small preset per group, the first
+    groups' first tiles for the report's picture, counts and times."""
+
+    def __init__(self, ckpt, extractor, settings: InferSettings, stem: str):
+        self.ckpt, self.extractor, self.settings, self.stem = ckpt, extractor, settings, stem
+        self.views = settings.views or int(ckpt.extra.get("views", 8))
+        self.generator = torch.Generator().manual_seed(settings.seed)
+        self.presets, self.thumbnails, self.tiles = [], [], 0
+        self.seconds = {"features": 0.0, "search": 0.0}
+        self.method = settings.method
+
+    def search(self, groups: list, out_dir: Path) -> None:
+        """Features, search and one preset file per group, for one batch of groups."""
+        from ..nams import search
+        from .features import features_for_groups
+
+        started = time.perf_counter()
+        feats = features_for_groups([[t for _, t in g] for g in groups], self.extractor, self.views)
+        self.seconds["features"] += time.perf_counter() - started
+        started = time.perf_counter()
+        results = search(self.ckpt.model, self.ckpt.feature_norm.apply(feats), self.ckpt.space, self.settings.method,
+                         generator=self.generator, **self.settings.search_options())
+        self.seconds["search"] += time.perf_counter() - started
+        for group, result in zip(groups, results):
+            index = len(self.presets)
+            preset = DesignPreset(kind="group", name=f"{self.stem}-{index:03d}", design_space=self.ckpt.space.name,
+                                  design=result.design, vote_shares=result.votes,
+                                  search={"method": result.method, "loss": result.best_loss,
+                                          "mean_loss": result.mean_loss, **self.settings.search_options(),
+                                          "views": self.views, "tiles": len(group)},
+                                  source_images=sorted({str(p) for p, _ in group}), model_id=self.ckpt.model_id)
+            save_preset(out_dir / "presets" / f"{preset.name}.json", preset)
+            self.presets.append(preset)
+            if len(self.thumbnails) < REPORT_GROUPS:
+                self.thumbnails.append(group[0][1])
+            self.tiles += len(group)
+            self.method = result.method
+
+    def finish(self, out_dir: Path, target_dir, paths, skipped) -> dict:
+        """The population preset and the report, once every group is written; returns the report."""
+        ckpt, presets = self.ckpt, self.presets
+        images = len([p for p in paths if p not in {s for s, _ in skipped}])
+        pop = population(presets, ckpt.space, f"{self.stem}-population", ckpt.model_id)
+        save_preset(out_dir / "population.json", pop)
+        report = {"target_dir": str(target_dir), "images": images, "tiles": self.tiles,
+                  "group_count": len(presets),
+                  "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
+                  "architecture": ckpt.model.config.architecture, "method": self.method,
+                  "seconds": {"read_and_features": self.seconds["features"], "search": self.seconds["search"],
+                              "search_per_group": self.seconds["search"] / len(presets)},
+                  "population": pop.distribution,
+                  "groups": [{"name": p.name, "design": p.design,
+                              "confidence": {n: p.confidence(n) for n in ckpt.space.names},
+                              "sources": p.source_images} for p in presets]}
+        _write_report(out_dir, report, self.thumbnails, presets, ckpt.space)
+        return report
+
+
+def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space) -> None:
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
     from ..sim.textures.pngio import write_png
     from ..sim.textures.sheet import render_sheet
@@ -190,8 +230,8 @@ def _write_report(out_dir: Path, report: dict, groups, presets, space) -> None:
         return bank.load_image(texture_id) if bank else np.zeros((8, 8, 3), np.uint8)
 
     rows = []
-    for group, preset in list(zip(groups, presets))[:12]:
-        tile = np.floor(np.clip(group[0][1], 0, 1) * 255 + 0.5).astype(np.uint8)
+    for first_tile, preset in zip(thumbnails, presets):
+        tile = np.floor(np.clip(first_tile, 0, 1) * 255 + 0.5).astype(np.uint8)
         row = [(f"G{preset.name[-3:]}", tile)]
         for name in space.names:
             value = preset.design[name]

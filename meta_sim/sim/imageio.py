@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import math
 import struct
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Callable
 
@@ -43,6 +44,9 @@ MIN_TILE_PX = 16
 _LINEAR_FORMATS = ("openexr", "hdr")
 # Resampling beyond this side length means a wrong pixel size, not a real image.
 _MAX_SIDE_PX = 32768
+# Images up to this many pixels are read whole (a 40-megapixel float image is about 0.5 GB); larger
+# targets are read in windows (``image_tiles``), and readers that cannot window refuse them.
+MAX_WHOLE_PIXELS = 40_000_000
 
 
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
@@ -55,8 +59,14 @@ def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """The image at ``path`` as float32 (H, W, 3) sRGB in [0, 1] (see the module docstring)."""
+    """The image at ``path`` as float32 (H, W, 3) sRGB in [0, 1] (see the module docstring).
+    MetaSimError for an image of more than ``MAX_WHOLE_PIXELS`` pixels: ``image_tiles`` reads
+    those in windows."""
     pixels, names, fmt = _read_pixels(Path(path), "float")
+    return _display(pixels, names, fmt)
+
+
+def _display(pixels: np.ndarray, names: tuple, fmt: str) -> np.ndarray:
     rgb = _pick_rgb(pixels, names)
     if fmt in _LINEAR_FORMATS:
         return linear_to_srgb(rgb).astype(np.float32)
@@ -65,13 +75,83 @@ def read_image(path: str | Path) -> np.ndarray:
 
 def read_rgb8(path: str | Path) -> np.ndarray:
     """The image at ``path`` as uint8 (H, W, 3), values as stored (OpenImageIO scales 16-bit and
-    float to 8 bit); channels are picked as for ``read_image``."""
+    float to 8 bit); channels are picked as for ``read_image``. MetaSimError beyond
+    ``MAX_WHOLE_PIXELS``."""
     pixels, names, _ = _read_pixels(Path(path), "uint8")
     return np.ascontiguousarray(_pick_rgb(pixels, names), dtype=np.uint8)
 
 
-def _read_pixels(path: Path, fmt) -> tuple[np.ndarray, tuple, str]:
-    """All channels of the first subimage, or MetaSimError saying why not."""
+def image_size(path: str | Path) -> tuple[int, int]:
+    """(width, height) of the image at ``path`` from its header alone; MetaSimError when the file is
+    missing, empty or not an image OpenImageIO can open."""
+    image = _open(Path(path))
+    try:
+        spec = image.spec()
+        return spec.width, spec.height
+    finally:
+        image.close()
+
+
+def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
+                render_gsd: float = RENDER_PIXEL_SIZE_M) -> Iterator[np.ndarray]:
+    """The tiles of the image at ``path`` as ``load_targets`` cuts them, row of tiles by row of tiles.
+
+    The pixel size is ``gsd`` when given, else the file's own metadata, else ``render_gsd``. An image
+    of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one in windows of the source rows that one
+    row of tiles needs, so memory stays bounded whatever its size (the tiles are the same).
+    """
+    path = Path(path)
+    width, height = image_size(path)
+    size = gsd if gsd is not None else image_pixel_size_m(path)
+    scale = 1.0 if size is None else size / render_gsd
+    if abs(scale - 1.0) < 1e-6:
+        out_h, out_w = height, width
+    else:
+        out_h, out_w = round(height * scale), round(width * scale)
+        if min(out_h, out_w) < 1 or max(out_h, out_w) > _MAX_SIDE_PX:
+            raise MetaSimError(f"resampling a {width}x{height} image from {size} m to {render_gsd} m pixels "
+                               f"would make it {out_w}x{out_h}; check the pixel size (pass --gsd)")
+    if min(out_h, out_w) < MIN_TILE_PX:
+        raise MetaSimError(f"{path}: {out_w}x{out_h} px at {render_gsd} m/px is smaller than "
+                           f"the {MIN_TILE_PX} px minimum; remove it or use larger images")
+    if width * height <= MAX_WHOLE_PIXELS:
+        img = read_image(path)
+        if size is not None:
+            img = resample(img, size, render_gsd)
+        yield from cut_tiles(img, tile_px)
+        return
+    yield from _windowed_tiles(path, tile_px, scale, (height, width), (out_h, out_w))
+
+
+def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_shape: tuple) -> Iterator[np.ndarray]:
+    (height, width), (out_h, out_w) = shape, out_shape
+    resampled = abs(scale - 1.0) >= 1e-6
+    if resampled:
+        row_index, row_weight = _resample_weights(height, scale, out_h)
+    image = _open(path)
+    try:
+        spec, fmt = image.spec(), image.format_name()
+        names = tuple(spec.channelnames)
+        for r0, r1 in _spans(out_h, tile_px):
+            y0, y1 = (int(row_index[r0:r1].min()), int(row_index[r0:r1].max()) + 1) if resampled else (r0, r1)
+            pixels = image.read_scanlines(0, 0, y0, y1, 0, 0, spec.nchannels, "float")
+            error = image.geterror()
+            if pixels is None or error:
+                raise MetaSimError(f"{path}: pixels unreadable from row {y0}, the file is truncated or damaged "
+                                   f"({_first_line(error) or 'no detail'})")
+            strip = _display(np.asarray(pixels).reshape(y1 - y0, width, -1), names, fmt)
+            if resampled:
+                rows = np.zeros((r1 - r0, width, 3), np.float32)
+                for tap in range(row_index.shape[1]):
+                    rows += strip[row_index[r0:r1, tap] - y0] * row_weight[r0:r1, tap, None, None]
+                strip = _resample_axis(rows, scale, out_w, axis=1)
+            yield from cut_tiles(strip, tile_px)
+    finally:
+        image.close()
+
+
+def _open(path: Path):
+    """An open ImageInput for ``path``, or MetaSimError saying why not."""
     if not path.is_file():
         raise MetaSimError(f"{path}: no such file")
     if path.stat().st_size == 0:
@@ -88,8 +168,17 @@ def _read_pixels(path: Path, fmt) -> tuple[np.ndarray, tuple, str]:
         # The message for an unknown format only repeats the path.
         known = "could not find a format reader" not in detail
         raise MetaSimError(f"{path}: not an image OpenImageIO can read" + (f" ({detail})" if known and detail else ""))
+    return image
+
+
+def _read_pixels(path: Path, fmt) -> tuple[np.ndarray, tuple, str]:
+    """All channels of the first subimage, or MetaSimError saying why not (``MAX_WHOLE_PIXELS``)."""
+    image = _open(path)
     try:
         spec = image.spec()
+        if spec.width * spec.height > MAX_WHOLE_PIXELS:
+            raise MetaSimError(f"{path}: {spec.width}x{spec.height} pixels is more than this reader takes whole "
+                               f"({MAX_WHOLE_PIXELS // 1_000_000} megapixels); crop or shrink the image")
         pixels = image.read_image(0, 0, 0, spec.nchannels, fmt)
         # A truncated file may still yield pixels (JPEG, TIFF fill the rest); the error says so.
         error = image.geterror()
@@ -342,11 +431,11 @@ def _spans(n: int, tile: int) -> list[tuple[int, int]]:
 
 
 def list_images(folder: str | Path) -> tuple[list[Path], list[tuple[Path, str]]]:
-    """The readable images directly in ``folder`` (sorted by name) and the files skipped, with why.
+    """The images directly in ``folder`` (sorted by name) and the files skipped, with why.
 
-    Every file's pixels are read, because only that catches a truncated
-    file. Hidden files and sub-folders are ignored. Raises MetaSimError when
-    no image is readable.
+    Only headers are read here, so listing a large folder costs little; a file whose pixels turn
+    out damaged is skipped when it is read (``image_tiles``). Hidden files and sub-folders are
+    ignored. Raises MetaSimError when no file is an image.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -356,7 +445,7 @@ def list_images(folder: str | Path) -> tuple[list[Path], list[tuple[Path, str]]]
         if path.name.startswith(".") or not path.is_file():
             continue
         try:
-            _read_pixels(path, oiio.UNKNOWN)  # native type: the cheapest complete read
+            image_size(path)
             paths.append(path)
         except MetaSimError as exc:
             skipped.append((path, str(exc).removeprefix(f"{path}: ")))
@@ -377,14 +466,7 @@ def load_targets(paths, tile_px: int, gsd: float | None = None, render_gsd: floa
     """
     targets = []
     for path in map(Path, paths):
-        img = read_image(path)
-        size = gsd if gsd is not None else image_pixel_size_m(path)
-        if size is not None:
-            img = resample(img, size, render_gsd)
-        if min(img.shape[:2]) < MIN_TILE_PX:
-            raise MetaSimError(f"{path}: {img.shape[1]}x{img.shape[0]} px at {render_gsd} m/px is smaller than "
-                               f"the {MIN_TILE_PX} px minimum; remove it or use larger images")
-        targets.extend((path, tile) for tile in cut_tiles(img, tile_px))
+        targets.extend((path, tile) for tile in image_tiles(path, tile_px, gsd, render_gsd))
         if progress:
             progress(1)
     return targets

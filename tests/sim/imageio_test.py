@@ -11,6 +11,7 @@ from meta_sim.sim import tiles
 from meta_sim.sim.imageio import (
     cut_tiles,
     image_pixel_size_m,
+    image_tiles,
     linear_to_srgb,
     list_images,
     load_targets,
@@ -115,15 +116,17 @@ def test_unreadable_files_raise_and_are_skipped_with_reasons(tmp_path):
     (tmp_path / "g_fake.png").write_text("not a png either")
     (tmp_path / ".hidden.png").write_bytes(b"")
     (tmp_path / "subfolder").mkdir()
-    paths, skipped = list_images(tmp_path)
-    assert paths == [exr, good]
+    paths, skipped = list_images(tmp_path)  # headers only: a PNG cut in half still has its header
+    assert paths == [exr, good, tmp_path / "c_truncated.png"]
     reasons = {p.name: why for p, why in skipped}
-    assert set(reasons) == {"c_truncated.png", "d_truncated.exr", "e_empty.jpg", "f_notes.txt", "g_fake.png"}
-    assert "truncated" in reasons["c_truncated.png"] and "truncated" in reasons["d_truncated.exr"]
+    assert set(reasons) == {"d_truncated.exr", "e_empty.jpg", "f_notes.txt", "g_fake.png"}
+    assert "truncated" in reasons["d_truncated.exr"]
     assert "empty" in reasons["e_empty.jpg"] and "not an image" in reasons["f_notes.txt"]
-    for name in reasons:
+    for name in [*reasons, "c_truncated.png"]:
         with pytest.raises(MetaSimError, match=name):
             read_image(tmp_path / name)
+    with pytest.raises(MetaSimError, match="truncated"):
+        list(image_tiles(tmp_path / "c_truncated.png", 16))
     with pytest.raises(MetaSimError, match="no such file"):
         read_image(tmp_path / "missing.png")
 
@@ -240,3 +243,19 @@ def test_real_photos(pattern):
         assert np.all(np.isfinite(img)) and 0.0 <= img.min() and img.max() <= 1.0
         assert img.std() > 0.02  # a real photo, not a blank
         assert image_pixel_size_m(path) is None
+
+
+@pytest.mark.parametrize("gsd", [None, 0.3, 0.15, 0.5, 0.71])
+def test_a_large_image_read_in_windows_gives_the_tiles_of_a_whole_read(tmp_path, monkeypatch, gsd):
+    from meta_sim.sim import imageio
+
+    rng = np.random.default_rng(3)
+    pixels = (rng.random((331, 277, 3)) * 255).astype(np.uint8)
+    path = _write(tmp_path / "big.png", pixels, oiio.UINT8)
+    whole = list(image_tiles(path, 64, gsd))
+    monkeypatch.setattr(imageio, "MAX_WHOLE_PIXELS", 1000)  # every image is "large" now
+    windowed = list(image_tiles(path, 64, gsd))
+    assert [t.shape for t in windowed] == [t.shape for t in whole]
+    assert max(float(np.abs(a - b).max()) for a, b in zip(windowed, whole)) < 1e-5
+    with pytest.raises(MetaSimError, match="more than this reader takes whole"):
+        read_image(path)
