@@ -218,8 +218,8 @@ def _pick_rgb(pixels: np.ndarray, names: tuple) -> np.ndarray:
 def image_pixel_size_m(path: str | Path) -> float | None:
     """Ground size of one pixel in metres, from the file's metadata, or None when it does not say.
 
-    Read from our EXR tiles' ``metasim:pixel_size_m`` header and from GeoTIFF
-    tags (see ``_geotiff_pixel_size_m``).
+    Read from our EXR tiles' ``metasim:pixel_size_m`` header, from GeoTIFF tags (see
+    ``_geotiff_pixel_size_m``), else from a world file beside the image (``world_file_pixel_size_m``).
     """
     path = Path(path)
     image = oiio.ImageInput.open(str(path))
@@ -236,9 +236,49 @@ def image_pixel_size_m(path: str | Path) -> float | None:
             return _valid_size(float(json.loads(value) if isinstance(value, str) else value))
         except (TypeError, ValueError):
             return None
-    if format_name == "tiff":
-        return _geotiff_pixel_size_m(path)
-    return None
+    size = _geotiff_pixel_size_m(path) if format_name == "tiff" else None
+    return size if size is not None else world_file_pixel_size_m(path)
+
+
+# Files GIS tools put beside an image: its world file, projection, statistics and overviews. They are
+# read with the image they belong to, never listed as targets.
+SIDECAR_SUFFIXES = (".tfw", ".tifw", ".tiffw", ".pgw", ".pngw", ".jgw", ".jpgw", ".jpegw", ".wld", ".prj", ".xml",
+                    ".ovr", ".aux")
+_FEET = {"foot_us": 1200.0 / 3937.0, "us survey foot": 1200.0 / 3937.0, "foot": 0.3048, "international foot": 0.3048}
+
+
+def world_file_pixel_size_m(path: str | Path) -> float | None:
+    """The pixel size from the image's world file (``.tfw``, ``.pgw``, ``.jgw``, ``.wld``, ...), or None.
+
+    A world file holds six numbers: the pixel's x size, two rotation terms, its y size (negative), and
+    the top-left pixel's centre. Their unit comes from the ``.prj`` beside it when there is one (a
+    geographic CRS in degrees is converted at the image's latitude; a projected one in metres or feet);
+    without a ``.prj`` they are taken as metres.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    names = [suffix[:2] + suffix[-1:] + "w", suffix + "w", ".wld"] if len(suffix) > 1 else [".wld"]
+    world = next((w for w in (path.with_suffix(s) for s in names) if w.is_file()), None)
+    if world is None:
+        return None
+    try:
+        a, d, b, e, _, f = (float(v) for v in world.read_text().split()[:6])
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    if not all(math.isfinite(v) for v in (a, d, b, e, f)):
+        return None
+    sx, sy = math.hypot(a, d), math.hypot(b, e)
+    prj = path.with_suffix(".prj")
+    wkt = prj.read_text(errors="replace")[:20000].lower() if prj.is_file() else ""
+    if wkt.startswith("geogcs") or wkt.startswith("geogcrs"):
+        lat = math.radians(max(-89.0, min(89.0, f)))
+        return _valid_size(0.5 * (sx * math.cos(lat) + sy) * _METRES_PER_DEGREE)
+    unit = 1.0
+    for name, metres in _FEET.items():
+        if f'unit["{name}"' in wkt or f"lengthunit[\"{name}\"" in wkt:
+            unit = metres
+            break
+    return _valid_size(0.5 * (sx + sy) * unit)
 
 
 def _valid_size(size: float) -> float | None:
@@ -442,7 +482,7 @@ def list_images(folder: str | Path) -> tuple[list[Path], list[tuple[Path, str]]]
         raise MetaSimError(f"{folder} is not a folder; pass a folder of images")
     paths, skipped = [], []
     for path in sorted(folder.iterdir(), key=lambda p: p.name):
-        if path.name.startswith(".") or not path.is_file():
+        if path.name.startswith(".") or not path.is_file() or path.suffix.lower() in SIDECAR_SUFFIXES:
             continue
         try:
             image_size(path)
