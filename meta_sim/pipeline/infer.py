@@ -104,7 +104,8 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     paths, skipped = list_images(target_dir)
     run = _Run(ckpt, extractor, settings, _slug(Path(target_dir).resolve().name))
     progress = bars("target images", len(paths)) if bars else None
-    tiles = _tile_stream(paths, skipped, int(ckpt.extra.get("tile_px", 384)), settings.gsd,
+    nodata = {}
+    tiles = _tile_stream(paths, skipped, nodata, int(ckpt.extra.get("tile_px", 384)), settings.gsd,
                          float(ckpt.extra.get("pixel_size_m", 0.3)), progress)
     with atomic_dir(out_dir, replace=True) as folder:
         for batch in _chunks(_chunks(tiles, settings.group_size), BATCH_GROUPS):
@@ -112,20 +113,25 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
         if not run.presets:
             listing = "; ".join(f"{p.name} ({why})" for p, why in skipped[:5])
             raise MetaSimError(f"no readable images in {target_dir}; {len(skipped)} files skipped: {listing}")
-        return run.finish(folder, target_dir, paths, skipped)
+        return run.finish(folder, target_dir, paths, skipped, nodata)
 
 
-def _tile_stream(paths, skipped: list, tile_px: int, gsd: float | None, render_gsd: float, progress):
+def _tile_stream(paths, skipped: list, nodata: dict, tile_px: int, gsd: float | None, render_gsd: float,
+                 progress):
     """``(path, tile)`` for every tile of every image, in order, read one image (or one window of a large
-    one) at a time. An image whose pixels cannot be read is added to ``skipped`` with the reason."""
+    one) at a time. An image whose pixels cannot be read is added to ``skipped`` with the reason; tiles
+    left out as no-data are counted per image in ``nodata``."""
     from ..sim.imageio import image_tiles
 
     for path in paths:
+        dropped = []
         try:
-            for tile in image_tiles(path, tile_px, gsd, render_gsd):
+            for tile in image_tiles(path, tile_px, gsd, render_gsd, dropped):
                 yield path, tile
         except MetaSimError as exc:
             skipped.append((path, str(exc).removeprefix(f"{path}: ")))
+        if dropped:
+            nodata[str(path)] = len(dropped)
         if progress:
             progress(1)
 
@@ -181,7 +187,7 @@ class _Run:
             self.tiles += len(group)
             self.method = result.method
 
-    def finish(self, out_dir: Path, target_dir, paths, skipped) -> dict:
+    def finish(self, out_dir: Path, target_dir, paths, skipped, nodata: dict) -> dict:
         """The population preset and the report, once every group is written; returns the report."""
         ckpt, presets = self.ckpt, self.presets
         images = len([p for p in paths if p not in {s for s, _ in skipped}])
@@ -190,6 +196,7 @@ class _Run:
         report = {"target_dir": str(target_dir), "images": images, "tiles": self.tiles,
                   "group_count": len(presets),
                   "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
+                  "nodata_tiles": nodata,
                   "architecture": ckpt.model.config.architecture, "method": self.method,
                   "seconds": {"read_and_features": self.seconds["features"], "search": self.seconds["search"],
                               "search_per_group": self.seconds["search"] / len(presets)},
@@ -218,6 +225,9 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
         lines.append(f"| {g['name']} | {cells} |")
     if report["skipped"]:
         lines += ["", "Skipped files:", ""] + [f"- {s['path']}: {s['reason']}" for s in report["skipped"]]
+    if report["nodata_tiles"]:
+        lines += ["", "Tiles left out as mostly no-data:", ""]
+        lines += [f"- {p}: {n}" for p, n in report["nodata_tiles"].items()]
     lines += ["", "Population (share of groups per choice):", ""]
     for name, shares in report["population"].items():
         lines.append(f"- {name}: " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items()))

@@ -12,9 +12,10 @@ space:
 * Channels: ``R, G, B`` by name when present (the first layer that has
   them, so our tiles' part 0 and multi-layer EXRs work), else ``Y`` (grey);
   otherwise by position: 1 channel is grey, 2 are grey + alpha, 3 or more
-  give the first three. Alpha is dropped, not composited: no-data pixels
-  keep whatever colour the file stores. OpenImageIO is asked not to
-  premultiply (``oiio:UnassociatedAlpha``), so RGB is the colour as stored.
+  give the first three. Alpha is not composited: OpenImageIO is asked not
+  to premultiply (``oiio:UnassociatedAlpha``), so RGB is the colour as
+  stored; ``image_tiles`` uses alpha (and a TIFF's GDAL_NODATA value) to
+  leave out tiles that are mostly no-data.
 * NaN becomes 0, +Inf 1, -Inf 0, then everything is clipped to [0, 1]
   (HDR highlights saturate): the result is always finite.
 
@@ -93,12 +94,15 @@ def image_size(path: str | Path) -> tuple[int, int]:
 
 
 def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
-                render_gsd: float = RENDER_PIXEL_SIZE_M) -> Iterator[np.ndarray]:
+                render_gsd: float = RENDER_PIXEL_SIZE_M, dropped: list | None = None) -> Iterator[np.ndarray]:
     """The tiles of the image at ``path`` as ``load_targets`` cuts them, row of tiles by row of tiles.
 
     The pixel size is ``gsd`` when given, else the file's own metadata, else ``render_gsd``. An image
     of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one in windows of the source rows that one
     row of tiles needs, so memory stays bounded whatever its size (the tiles are the same).
+
+    No-data pixels (alpha 0, or a TIFF's ``GDAL_NODATA`` value) are not imagery: a tile with more
+    than ``NODATA_MAX_SHARE`` of them is left out, and ``dropped`` (when given) gets one entry for it.
     """
     path = Path(path)
     width, height = image_size(path)
@@ -114,16 +118,19 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
     if min(out_h, out_w) < MIN_TILE_PX:
         raise MetaSimError(f"{path}: {out_w}x{out_h} px at {render_gsd} m/px is smaller than "
                            f"the {MIN_TILE_PX} px minimum; remove it or use larger images")
+    nodata = _nodata_value(path)
     if width * height <= MAX_WHOLE_PIXELS:
-        img = read_image(path)
+        pixels, names, fmt = _read_pixels(path, "float")
+        img = _with_validity(_display(pixels, names, fmt), pixels, names, nodata)
         if size is not None:
             img = resample(img, size, render_gsd)
-        yield from cut_tiles(img, tile_px)
+        yield from _imagery(cut_tiles(img, tile_px), dropped)
         return
-    yield from _windowed_tiles(path, tile_px, scale, (height, width), (out_h, out_w))
+    yield from _imagery(_windowed_tiles(path, tile_px, scale, (height, width), (out_h, out_w), nodata), dropped)
 
 
-def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_shape: tuple) -> Iterator[np.ndarray]:
+def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_shape: tuple,
+                    nodata: float | None) -> Iterator[np.ndarray]:
     (height, width), (out_h, out_w) = shape, out_shape
     resampled = abs(scale - 1.0) >= 1e-6
     if resampled:
@@ -139,15 +146,76 @@ def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_sh
             if pixels is None or error:
                 raise MetaSimError(f"{path}: pixels unreadable from row {y0}, the file is truncated or damaged "
                                    f"({_first_line(error) or 'no detail'})")
-            strip = _display(np.asarray(pixels).reshape(y1 - y0, width, -1), names, fmt)
+            pixels = np.asarray(pixels).reshape(y1 - y0, width, -1)
+            strip = _with_validity(_display(pixels, names, fmt), pixels, names, nodata)
             if resampled:
-                rows = np.zeros((r1 - r0, width, 3), np.float32)
+                rows = np.zeros((r1 - r0, width, strip.shape[2]), np.float32)
                 for tap in range(row_index.shape[1]):
                     rows += strip[row_index[r0:r1, tap] - y0] * row_weight[r0:r1, tap, None, None]
                 strip = _resample_axis(rows, scale, out_w, axis=1)
             yield from cut_tiles(strip, tile_px)
     finally:
         image.close()
+
+
+# A tile with more than this share of no-data pixels is not imagery enough to describe a place.
+NODATA_MAX_SHARE = 0.05
+_GDAL_NODATA = 42113  # TIFF tag (ASCII) GDAL writes the no-data value into
+
+
+def _nodata_value(path: Path) -> float | None:
+    """A TIFF's GDAL_NODATA value on OpenImageIO's float scale (0..1 for integer pixels), or None."""
+    image = _open(path)
+    try:
+        fmt, base = image.format_name(), str(image.spec().format)
+    finally:
+        image.close()
+    if fmt != "tiff":
+        return None
+    try:
+        raw = _tiff_tags(path, {_GDAL_NODATA}).get(_GDAL_NODATA)
+        value = float(raw[0].decode("ascii", "replace").strip("\x00 ")) if raw else None
+    except (OSError, struct.error, ValueError):
+        return None
+    if value is None or not math.isfinite(value):
+        return None
+    scale = {"uint8": 255.0, "uint16": 65535.0, "int16": 32767.0, "int8": 127.0}.get(base, 1.0)
+    return value / scale
+
+
+def _with_validity(rgb: np.ndarray, pixels: np.ndarray, names: tuple, nodata: float | None) -> np.ndarray:
+    """``rgb`` with a fourth channel, 1 where a pixel is imagery and 0 where it is no-data, when the file
+    says which pixels are no-data (an alpha channel, a GDAL_NODATA value); ``rgb`` as it is otherwise."""
+    masks = []
+    alpha = _alpha_channel(names)
+    if alpha is not None:
+        masks.append(pixels[:, :, alpha] > 0)
+    if nodata is not None:
+        colour = pixels[:, :, :min(3, pixels.shape[2])]
+        masks.append(~np.all(np.abs(colour - nodata) <= 1e-6 + 1e-6 * abs(nodata), axis=2))
+    if not masks:
+        return rgb
+    valid = np.logical_and.reduce(masks).astype(np.float32)
+    return np.concatenate([rgb, valid[:, :, None]], axis=2)
+
+
+def _alpha_channel(names: tuple) -> int | None:
+    for index, name in enumerate(names):
+        if name.rpartition(".")[2] in ("A", "a", "alpha"):
+            return index
+    return None
+
+
+def _imagery(tiles, dropped: list | None) -> Iterator[np.ndarray]:
+    """The RGB of tiles that are imagery; tiles with too much no-data are counted in ``dropped``."""
+    for tile in tiles:
+        if tile.shape[2] == 4:
+            if tile[:, :, 3].mean() < 1.0 - NODATA_MAX_SHARE:
+                if dropped is not None:
+                    dropped.append(1)
+                continue
+            tile = np.ascontiguousarray(tile[:, :, :3])
+        yield tile
 
 
 def _open(path: Path):
@@ -288,7 +356,7 @@ def _valid_size(size: float) -> float | None:
 # GeoTIFF: OpenImageIO does not expose these tags, so they are read from the first IFD directly.
 _TAG_HEIGHT, _TAG_WIDTH = 257, 256
 _TAG_PIXEL_SCALE, _TAG_TIEPOINT, _TAG_TRANSFORM, _TAG_GEOKEYS = 33550, 33922, 34264, 34735
-_TIFF_TYPES = {3: "H", 4: "I", 12: "d", 16: "Q"}  # SHORT, LONG, DOUBLE, LONG8: all the tags above use
+_TIFF_TYPES = {2: "s", 3: "H", 4: "I", 12: "d", 16: "Q"}  # ASCII, SHORT, LONG, DOUBLE, LONG8: what the tags use
 # EPSG unit codes (GeoTIFF ProjLinearUnitsGeoKey): metre, foot, US survey foot.
 _LINEAR_UNITS_M = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
 _WEB_MERCATOR = (3857, 3785, 900913)
@@ -381,7 +449,7 @@ def _tiff_tags(path: Path, wanted: set[int]) -> dict[int, tuple]:
             else:
                 f.seek(struct.unpack(order + ("I" if magic == 42 else "Q"), inline)[0])
                 data = f.read(size)
-            tags[tag] = struct.unpack(f"{order}{count}{item}", data)
+            tags[tag] = (data,) if item == "s" else struct.unpack(f"{order}{count}{item}", data)
         return tags
 
 

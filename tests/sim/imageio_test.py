@@ -279,3 +279,46 @@ def test_world_files_give_the_pixel_size_and_are_not_listed_as_images(tmp_path):
     assert image_pixel_size_m(tif) is None
     paths, skipped = list_images(tmp_path)
     assert paths == [tif, png] and skipped == []
+
+
+def _geotiff_with_nodata(path, pixels, nodata: str):
+    """A TIFF with GDAL's no-data tag (ASCII tag 42113), written by OpenImageIO and patched into its IFD."""
+    _write(path, pixels, oiio.UINT8)
+    import struct
+
+    data = bytearray(path.read_bytes())
+    order = "<" if data[:2] == b"II" else ">"
+    ifd = struct.unpack(order + "I", data[4:8])[0]
+    count = struct.unpack(order + "H", data[ifd:ifd + 2])[0]
+    text = nodata.encode() + b"\0"
+    if len(text) <= 4:  # a value of up to 4 bytes stands in the entry itself
+        value = text.ljust(4, b"\0")
+    else:
+        value = struct.pack(order + "I", len(data))
+        data += text
+    entries = [data[ifd + 2 + 12 * i: ifd + 14 + 12 * i] for i in range(count)]
+    entries.append(struct.pack(order + "HHI", 42113, 2, len(text)) + value)
+    entries.sort(key=lambda e: struct.unpack(order + "H", bytes(e[:2]))[0])
+    new_ifd = len(data)
+    data += struct.pack(order + "H", len(entries)) + b"".join(bytes(e) for e in entries) + struct.pack(order + "I", 0)
+    data[4:8] = struct.pack(order + "I", new_ifd)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def test_nodata_tiles_are_left_out_and_counted(tmp_path):
+    pixels = np.full((64, 128, 3), 120, np.uint8)
+    pixels[:, 64:] = 0  # the right half is the no-data value
+    tif = _geotiff_with_nodata(tmp_path / "ortho.tif", pixels, "0")
+    dropped = []
+    tiles = list(image_tiles(tif, 64, dropped=dropped))
+    assert len(tiles) == 1 and len(dropped) == 1 and tiles[0].shape == (64, 64, 3)
+    assert np.allclose(tiles[0], 120 / 255)
+    rgba = np.zeros((64, 128, 4), np.uint8)
+    rgba[:, :, :3] = 90
+    rgba[:, :64, 3] = 255  # the left half is opaque imagery, the right half transparent
+    png = _write(tmp_path / "alpha.png", rgba, oiio.UINT8)
+    dropped = []
+    assert len(list(image_tiles(png, 64, dropped=dropped))) == 1 and len(dropped) == 1
+    plain = _write(tmp_path / "plain.png", rgba[:, :, :3], oiio.UINT8)
+    assert len(list(image_tiles(plain, 64))) == 2  # no alpha, no tag: every tile is imagery
