@@ -82,6 +82,43 @@ def read_rgb8(path: str | Path) -> np.ndarray:
     return np.ascontiguousarray(_pick_rgb(pixels, names), dtype=np.uint8)
 
 
+def read_rgb8_square(path: str | Path, size: int) -> np.ndarray:
+    """The centre square of the image at ``path`` resized to ``size`` x ``size``, uint8 (H, W, 3) (what
+    a texture bank keeps of a photo). A photo of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one
+    a band of rows at a time, so memory stays bounded (the pixels are the same)."""
+    path = Path(path)
+    width, height = image_size(path)
+    side = min(width, height)
+    top, left = (height - side) // 2, (width - side) // 2
+    if width * height <= MAX_WHOLE_PIXELS:
+        return resize(read_rgb8(path)[top: top + side, left: left + side], size, size)
+    scale = size / side
+    row_index, row_weight = _resample_weights(side, scale, size)
+    out = np.zeros((size, size, 3), np.uint8)
+    image = _open(path)
+    try:
+        spec = image.spec()
+        names = tuple(spec.channelnames)
+        for r0 in range(0, size, 64):
+            r1 = min(size, r0 + 64)
+            y0, y1 = int(row_index[r0:r1].min()), int(row_index[r0:r1].max()) + 1
+            pixels = image.read_scanlines(0, 0, top + y0, top + y1, 0, 0, spec.nchannels, "uint8")
+            error = image.geterror()
+            if pixels is None or error:
+                raise MetaSimError(f"{path}: pixels unreadable, the file is truncated or damaged "
+                                   f"({_first_line(error) or 'no detail'})")
+            band = _pick_rgb(np.asarray(pixels).reshape(y1 - y0, width, -1), names)[:, left: left + side]
+            band = band.astype(np.float32)
+            rows = np.zeros((r1 - r0, side, 3), np.float32)
+            for tap in range(row_index.shape[1]):
+                rows += band[row_index[r0:r1, tap] - y0] * row_weight[r0:r1, tap, None, None]
+            rows = _resample_axis(rows, scale, size, axis=1)
+            out[r0:r1] = np.floor(np.clip(rows, 0.0, 255.0) + 0.5).astype(np.uint8)
+    finally:
+        image.close()
+    return out
+
+
 def image_size(path: str | Path) -> tuple[int, int]:
     """(width, height) of the image at ``path`` from its header alone; MetaSimError when the file is
     missing, empty or not an image OpenImageIO can open."""

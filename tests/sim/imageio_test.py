@@ -322,3 +322,16 @@ def test_nodata_tiles_are_left_out_and_counted(tmp_path):
     assert len(list(image_tiles(png, 64, dropped=dropped))) == 1 and len(dropped) == 1
     plain = _write(tmp_path / "plain.png", rgba[:, :, :3], oiio.UINT8)
     assert len(list(image_tiles(plain, 64))) == 2  # no alpha, no tag: every tile is imagery
+
+
+@pytest.mark.parametrize("size", [16, 40, 200])
+def test_a_large_photo_is_squared_in_bands_with_the_pixels_of_a_whole_read(tmp_path, monkeypatch, size):
+    from meta_sim.sim import imageio
+    from meta_sim.sim.imageio import read_rgb8_square
+
+    pixels = (np.random.default_rng(5).random((97, 150, 3)) * 255).astype(np.uint8)
+    path = _write(tmp_path / "photo.png", pixels, oiio.UINT8)
+    whole = read_rgb8_square(path, size)
+    monkeypatch.setattr(imageio, "MAX_WHOLE_PIXELS", 1000)
+    banded = read_rgb8_square(path, size)
+    assert whole.shape == banded.shape == (size, size, 3) and np.array_equal(whole, banded)

@@ -34,7 +34,7 @@ from ...core.cache import cache_root
 from ...core.errors import MetaSimError
 from ...core.fileio import atomic_dir, write_bytes_atomic
 from ...core.names import inside, safe_name
-from ..imageio import read_rgb8, resize
+from ..imageio import read_rgb8, read_rgb8_square
 from . import procedural
 from .pngio import write_png
 from .similarity import Similarity, hsv_cone_histogram, save_similarity, similarity_matrix
@@ -301,14 +301,6 @@ def _read_folder_options(src: Path, images: dict[str, Path]) -> dict[str, dict]:
     return data
 
 
-def _square(rgb: np.ndarray, size: int) -> np.ndarray:
-    """Centre-crop to a square, then resize to size x size by area averaging."""
-    h, w = rgb.shape[:2]
-    side = min(h, w)
-    top, left = (h - side) // 2, (w - side) // 2
-    return resize(rgb[top: top + side, left: left + side], size, size)
-
-
 def build_bank_from_folder(
     src_dir: str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -362,9 +354,7 @@ def build_bank_from_folder(
                 f"{origin[texture_id]} and {path} both give texture id {texture_id!r}; rename one of them"
             )
         origin[texture_id] = path
-        rgb = read_rgb8(path)
-        if size is not None:
-            rgb = _square(rgb, size)
+        rgb = read_rgb8(path) if size is None else read_rgb8_square(path, size)
         opts = options.get(key, {})
         textures.append((texture_id, opts.get("name", path.stem), kind, rgb))
         meta[texture_id] = (float(opts.get("repeat_m", repeat_m)), str(path))
