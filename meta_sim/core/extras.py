@@ -6,7 +6,7 @@ import importlib.util
 
 from .errors import MetaSimError
 
-EXTRAS = {"bpy": "render", "distributed": "farm", "matplotlib": "bench"}
+EXTRAS = {"bpy": "render", "distributed": "farm", "matplotlib": "bench", "pyproj": "geo"}
 
 
 def require(module: str, what: str) -> None:

@@ -436,13 +436,32 @@ def _geotiff_pixel_size_m(path: Path) -> float | None:
         return _valid_size(0.5 * (sx * math.cos(lat) + sy) * _METRES_PER_DEGREE)
     if model != 1:
         return None
-    unit = _LINEAR_UNITS_M.get(keys.get(3076, 9001))  # ProjLinearUnitsGeoKey, metres when absent
+    if 3076 in keys:  # ProjLinearUnitsGeoKey
+        unit = _LINEAR_UNITS_M.get(keys[3076])
+    else:  # the projected CRS's own unit, when pyproj (the `geo` extra) knows its code; else metres
+        unit = _crs_unit_m(keys.get(3072))
     if unit is None:
         return None
     size = 0.5 * (sx + sy) * unit
     if keys.get(3072) in _WEB_MERCATOR:  # ProjectedCSTypeGeoKey: mercator metres grow as 1 / cos(lat)
         size *= math.cos(2.0 * math.atan(math.exp(centre_y * unit / _EARTH_RADIUS_M)) - math.pi / 2.0)
     return _valid_size(size)
+
+
+def _crs_unit_m(code: int | None) -> float | None:
+    """Metres per unit of the projected CRS with EPSG ``code``: from pyproj when it is installed (the
+    `geo` extra; Blender's Python has none), else metres, the unit of most projected CRSs."""
+    if code is None or code in _WEB_MERCATOR or not 1024 <= code < 32767:
+        return 1.0
+    try:
+        import pyproj
+    except ImportError:
+        return 1.0
+    try:
+        axes = pyproj.CRS.from_epsg(code).axis_info
+    except pyproj.exceptions.CRSError:
+        return None
+    return float(axes[0].unit_conversion_factor) if axes else None
 
 
 def _geokeys(directory) -> dict[int, int]:

@@ -226,6 +226,8 @@ def test_geotiff_pixel_size(tmp_path):
     assert image_pixel_size_m(mercator) == pytest.approx(0.3, rel=1e-6)
     degrees = _write_geotiff(tmp_path / "deg.tif", (3e-6, 3e-6, 0), (0, 3, 0, 32.0, 0.0, 0), [(1024, 2)])
     assert image_pixel_size_m(degrees) == pytest.approx(3e-6 * math.pi * 6378137.0 / 180, rel=1e-6)
+    state_plane = _write_geotiff(tmp_path / "sp.tif", (0.5, 0.5, 0), (0,) * 6, [(1024, 1), (3072, 2263)])
+    assert image_pixel_size_m(state_plane) == pytest.approx(0.5 * 1200 / 3937)  # NY Long Island, US survey feet
     unknown_units = _write_geotiff(tmp_path / "u.tif", (1.0, 1.0, 0), (0,) * 6, [(1024, 1), (3076, 9036)])
     assert image_pixel_size_m(unknown_units) is None
     assert image_pixel_size_m(_write(tmp_path / "plain.tif", np.zeros((4, 4, 3), np.uint8), oiio.UINT8)) is None
