@@ -29,6 +29,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
@@ -129,7 +130,7 @@ def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
     try:
         model = build_model(found, payload["model_config"])
         model.load_state_dict(payload["state_dict"])
-    except (KeyError, RuntimeError, TypeError) as exc:
+    except _DAMAGED as exc:
         raise MetaSimError(f"{path}: the model does not match its config ({type(exc).__name__})") from None
     model.eval()
     space = DesignSpace.from_dict(payload["space"])
@@ -137,13 +138,37 @@ def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
         raise MetaSimError(f"{path}: its design space does not match its model")
     if getattr(model.config, "blocks", ()) and list(model.config.blocks) != space.widths():
         raise MetaSimError(f"{path}: its model's parameter blocks do not match its design space")
-    norm = FeatureNorm.from_dict(payload["feature_norm"])
+    try:
+        norm = FeatureNorm.from_dict(payload["feature_norm"])
+    except _DAMAGED as exc:
+        raise MetaSimError(f"{path}: its feature normalisation is damaged ({type(exc).__name__})") from None
+    _check_metadata(path, payload)
     feature_dim = model.config.feature_dim
     if norm.dim != feature_dim:
         raise MetaSimError(f"{path}: its feature normalisation does not match its model")
     return Checkpoint(kind=found, model=model, space=space, feature_norm=norm,
                       extractor_id=payload["extractor_id"], history=payload["history"],
                       extra=payload["extra"], model_id=_model_id(data))
+
+
+# What a damaged (but checksummed) structure raises while it is rebuilt: all mean "not usable".
+_DAMAGED = (KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError, OverflowError)
+# Settings inference reads from ``extra``: (check, what a valid value is).
+_EXTRA = {"tile_px": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 16 <= v <= 8192, "16..8192 px"),
+          "pixel_size_m": (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                           and 0 < v < 1e5, "a positive number of metres"),
+          "views": (lambda v: v in (1, 2, 4, 8) and not isinstance(v, bool), "1, 2, 4 or 8")}
+
+
+def _check_metadata(path: Path, payload: dict) -> None:
+    if not isinstance(payload.get("extractor_id"), str):
+        raise MetaSimError(f"{path}: its extractor id is damaged; retrain")
+    for name in ("history", "extra"):
+        if not isinstance(payload.get(name), dict):
+            raise MetaSimError(f"{path}: its {name} is damaged; retrain")
+    for key, (valid, what) in _EXTRA.items():
+        if key in payload["extra"] and not valid(payload["extra"][key]):
+            raise MetaSimError(f"{path}: extra.{key} must be {what}, not {payload['extra'][key]!r}")
 
 
 def model_id(path: str | Path) -> str:

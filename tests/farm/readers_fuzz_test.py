@@ -119,3 +119,47 @@ def test_texture_bank_reader(bank, data):
     document = data.draw(st.one_of(JSON, _mutations(valid)))
     _only_our_error(lambda d: TextureBank.from_dict(d, bank.root), document,
                     lambda b: [b.by_id(i) for kind in ("flat", "sloped") for i in b.ids(kind)])
+
+
+CHECKPOINT_FIELDS = ["model_config", "space", "feature_norm", "extractor_id", "extra", "history", "kind"]
+
+
+@FUZZ
+@given(field=st.sampled_from(CHECKPOINT_FIELDS), value=JSON)
+def test_checkpoint_metadata_reader(tmp_path_factory, field, value):
+    """A checkpoint whose metadata is wrong but whose checksum is right (made by hand or by a bug)."""
+    import io
+
+    import torch
+
+    from meta_sim.nams import NAMSConfig, build_model, load_checkpoint, save_checkpoint
+    from meta_sim.nams.checkpoint import _digest
+    from meta_sim.nams.norm import FeatureNorm
+
+    folder = tmp_path_factory.mktemp("ckpt")
+    model = build_model("nams", NAMSConfig(design_dim=SPACE.dim, feature_dim=4, hidden=(8, 8)))
+    norm = FeatureNorm.fit(torch.randn(20, 4, generator=torch.Generator().manual_seed(1)))
+    save_checkpoint(folder / "good.pt", "nams", model, model.config, SPACE.to_dict(), norm, "x")
+    payload = torch.load(folder / "good.pt", weights_only=True)
+    payload[field] = value
+    payload["digest"] = _digest({k: v for k, v in payload.items() if k != "digest"})
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    (folder / "bad.pt").write_bytes(buffer.getvalue())
+
+    def use(ckpt):
+        int(ckpt.extra.get("tile_px", 384)), float(ckpt.extra.get("pixel_size_m", 0.3))
+        str(ckpt.extractor_id)
+
+    _only_our_error(lambda path: load_checkpoint(path, "nams"), folder / "bad.pt", use)
+
+
+@FUZZ
+@given(st.one_of(JSON, st.dictionaries(st.sampled_from(["flat/a.png", "sloped/b.png", "c.png"]), JSON, max_size=3)))
+def test_photo_folder_options_reader(tmp_path_factory, options):
+    from meta_sim.sim.textures.bank import _read_folder_options
+
+    folder = tmp_path_factory.mktemp("photos")
+    (folder / "textures.json").write_text(json.dumps(options))
+    images = {"flat/a.png": folder / "flat" / "a.png", "sloped/b.png": folder / "sloped" / "b.png"}
+    _only_our_error(lambda _: _read_folder_options(folder, images), None)
