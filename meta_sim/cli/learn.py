@@ -76,11 +76,12 @@ def _configs(o):
             nams["hidden"] = [int(x) for x in o["hidden"].split(",")]
         except ValueError:
             raise MetaSimError("--hidden takes comma-separated integers, e.g. 1024,2048") from None
-    train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] else {}
-    return dataset, ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
-                                  views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
-                                  roof_colour=o["roof_colour"], roof_finder=o["roof_finder"],
-                                  roof_weight_power=o["roof_weight_power"])
+    train = {"max_epochs": o["max_epochs"]} if o["max_epochs"] is not None else {}
+    settings = ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
+                             views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
+                             roof_colour=o["roof_colour"], roof_finder=o["roof_finder"],
+                             roof_weight_power=o["roof_weight_power"])
+    return dataset.check(), settings.check()
 
 
 @main.command("dataset")

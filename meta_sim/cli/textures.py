@@ -65,8 +65,12 @@ def textures_list(bank):
 @click.option("--thumb", type=int, default=96, show_default=True, help="thumbnail size in pixels")
 def textures_sheet(bank, out, thumb):
     """Write a contact sheet PNG of a bank (flat textures first, then sloped)."""
+    from ..core.fileio import writable_dir
     from ..sim import textures as tx
 
+    if not 8 <= thumb <= 1024:
+        raise MetaSimError(f"--thumb must be from 8 to 1024 pixels, not {thumb}")
+    writable_dir(Path(out).parent)
     tx.contact_sheet(_bank(bank), out, thumb=thumb)
     click.echo(f"wrote {out}")
 

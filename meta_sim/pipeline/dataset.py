@@ -57,6 +57,23 @@ class DatasetConfig:
         """The paper's scale, 1,700 designs x 9 tiles, with any other field overridden."""
         return cls(**{"designs": 1700, "tiles": 9, **overrides})
 
+    def check(self) -> "DatasetConfig":
+        """This config, or MetaSimError for a field no render would accept (checked before any work)."""
+        from ..sim.design import DesignSpace
+        from ..sim.quality import get_preset
+
+        for name, low, high in (("designs", 1, 10_000_000), ("tiles", 1, 4096), ("seed", 0, 2**63 - 1),
+                                ("cities", 1, 100_000), ("tile_px", 16, 8192)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+                option = {"seed": "dataset-seed", "tile_px": "tile-px"}.get(name, name)
+                raise MetaSimError(f"--{option} must be a whole number from {low} to {high}, not {value!r}")
+        if not (isinstance(self.pixel_size_m, (int, float)) and 0.01 <= self.pixel_size_m <= 10.0):
+            raise MetaSimError(f"--gsd must be between 0.01 and 10 metres per pixel, not {self.pixel_size_m!r}")
+        get_preset(self.preset)
+        DesignSpace.load(self.space)
+        return self
+
     def identity(self) -> dict:
         """Every input of the training set: the fields and what of the render preset's settings
         sets its tiles apart (``RenderPreset.cache_fields``)."""

@@ -50,6 +50,25 @@ class ModelSettings:
     # A pixel counts p(roof kind) ** roof_weight_power in that kind's histogram (1: the plain probability).
     roof_weight_power: float = 4.0
 
+    def check(self) -> "ModelSettings":
+        """These settings, or MetaSimError for any that training would refuse (checked before any work)."""
+        import math
+
+        from ..nams import NAMSConfig, TrainConfig
+        from .features import VIEW_COUNTS
+        from .roofcolour import ROOF_FINDERS
+
+        hidden = architecture_options(self.architecture, ())["hidden"]
+        NAMSConfig.from_dict({"design_dim": 1, "feature_dim": 1, "hidden": hidden, **self.nams})
+        TrainConfig.from_dict({"seed": self.seed, **self.train})
+        if self.views not in VIEW_COUNTS:
+            raise MetaSimError(f"--views must be one of {', '.join(map(str, VIEW_COUNTS))}, not {self.views}")
+        if self.roof_finder not in ROOF_FINDERS:
+            raise MetaSimError(f"unknown roof finder {self.roof_finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
+        if not (math.isfinite(self.roof_weight_power) and 0 < self.roof_weight_power <= 64):
+            raise MetaSimError(f"--roof-weight-power must be above 0 and at most 64, not {self.roof_weight_power}")
+        return self
+
     def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
         """Names the cached models: every input, with the training and model defaults resolved, so
         that a change of a default (not only of an override) trains afresh."""
