@@ -27,7 +27,8 @@ from ..sim.presets import DesignPreset, population, save_preset
 
 METHODS = ("auto", "adjoint", "exhaustive")
 # Groups featurised and searched together: memory stays that of one batch whatever the folder holds.
-BATCH_GROUPS = 16
+# A larger batch is no faster and peaks higher (`make bench-infer`, docs/benchmarks.md).
+BATCH_GROUPS = 4
 REPORT_GROUPS = 12  # groups drawn in report.png
 
 

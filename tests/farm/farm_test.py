@@ -235,12 +235,12 @@ console.log(JSON.stringify({label: sandbox.JOB_TYPE.label, tasks, pwned: sandbox
 """
 
 
-def test_flamenco_job_type_parses_and_compiles_one_task_per_shard(tmp_path, reference):
+def _export_and_compile(tmp_path, manifest_path, shards):
+    """Export the manifest's Flamenco job type, check Node parses it, and compile it in a stub Flamenco."""
     if shutil.which("node") is None:
         pytest.skip("node is not installed: cannot parse the exported JavaScript")
-    manifest_path = tmp_path / "job.json"
     _plan(manifest_path)
-    result = _cli("jobs", "export-flamenco", manifest_path, "--out", tmp_path / "flamenco", "--shards", 3)
+    result = _cli("jobs", "export-flamenco", manifest_path, "--out", tmp_path / "flamenco", "--shards", shards)
     assert result.exit_code == 0, result.output
     script = tmp_path / "flamenco" / "meta_sim_job.js"
     check = subprocess.run(["node", "--check", str(script)], capture_output=True, text=True)
@@ -249,7 +249,12 @@ def test_flamenco_job_type_parses_and_compiles_one_task_per_shard(tmp_path, refe
     harness.write_text(NODE_HARNESS)
     run = subprocess.run(["node", str(harness), str(script)], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    compiled = json.loads(run.stdout)
+    return script, json.loads(run.stdout)
+
+
+def test_flamenco_job_type_parses_and_compiles_one_task_per_shard(tmp_path, reference):
+    manifest_path = tmp_path / "job.json"
+    _, compiled = _export_and_compile(tmp_path, manifest_path, 3)
     assert [t["name"] for t in compiled["tasks"]] == ["shard-0-of-3", "shard-1-of-3", "shard-2-of-3"]
     command = compiled["tasks"][1]["commands"][0]
     assert command["name"] == "blender-render" and command["params"]["exe"] == "{blender}"
@@ -261,22 +266,10 @@ def test_flamenco_job_type_parses_and_compiles_one_task_per_shard(tmp_path, refe
 
 def test_flamenco_export_of_a_hostile_path_runs_no_code(tmp_path, reference):
     """Quotes, newlines, U+2028 and script-like text in the manifest's path stay inside string literals."""
-    if shutil.which("node") is None:
-        pytest.skip("node is not installed: cannot parse the exported JavaScript")
     folder = tmp_path / 'evil"\n;globalThis.pwned = 1; <script>--><!--\u2028globalThis.pwned = 2;\'`${x}'
     folder.mkdir()
     manifest_path = folder / "job.json"
-    _plan(manifest_path)
-    result = _cli("jobs", "export-flamenco", manifest_path, "--out", tmp_path / "flamenco", "--shards", 2)
-    assert result.exit_code == 0, result.output
-    script = tmp_path / "flamenco" / "meta_sim_job.js"
+    script, compiled = _export_and_compile(tmp_path, manifest_path, 2)
     assert "<script>" not in script.read_text() and "\u2028" not in script.read_text()
-    check = subprocess.run(["node", "--check", str(script)], capture_output=True, text=True)
-    assert check.returncode == 0, check.stderr
-    harness = tmp_path / "harness.js"
-    harness.write_text(NODE_HARNESS)
-    run = subprocess.run(["node", str(harness), str(script)], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    compiled = json.loads(run.stdout)
     assert compiled["pwned"] is False
     assert compiled["tasks"][0]["commands"][0]["params"]["args"][6] == str(manifest_path.resolve())
