@@ -138,7 +138,7 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
     of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one in windows of the source rows that one
     row of tiles needs, so memory stays bounded whatever its size (the tiles are the same).
 
-    No-data pixels (alpha 0, or a TIFF's ``GDAL_NODATA`` value) are not imagery: a tile with more
+    No-data pixels (alpha 0, a TIFF's ``GDAL_NODATA`` value or its internal mask) are not imagery: a tile with more
     than ``NODATA_MAX_SHARE`` of them is left out, and ``dropped`` (when given) gets one entry for it.
     """
     path = Path(path)
@@ -155,19 +155,21 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
     if min(out_h, out_w) < MIN_TILE_PX:
         raise MetaSimError(f"{path}: {out_w}x{out_h} px at {render_gsd} m/px is smaller than "
                            f"the {MIN_TILE_PX} px minimum; remove it or use larger images")
-    nodata = _nodata_value(path)
+    nodata, mask = _nodata_value(path), _mask_subimage(path, width, height)
     if width * height <= MAX_WHOLE_PIXELS:
         pixels, names, fmt = _read_pixels(path, "float")
-        img = _with_validity(_display(pixels, names, fmt), pixels, names, nodata)
+        masked = _read_mask(path, mask, 0, height, width) if mask is not None else None
+        img = _with_validity(_display(pixels, names, fmt), pixels, names, nodata, masked)
         if size is not None:
             img = resample(img, size, render_gsd)
         yield from _imagery(cut_tiles(img, tile_px), dropped)
         return
-    yield from _imagery(_windowed_tiles(path, tile_px, scale, (height, width), (out_h, out_w), nodata), dropped)
+    yield from _imagery(_windowed_tiles(path, tile_px, scale, (height, width), (out_h, out_w), nodata, mask),
+                        dropped)
 
 
 def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_shape: tuple,
-                    nodata: float | None) -> Iterator[np.ndarray]:
+                    nodata: float | None, mask: int | None) -> Iterator[np.ndarray]:
     (height, width), (out_h, out_w) = shape, out_shape
     resampled = abs(scale - 1.0) >= 1e-6
     if resampled:
@@ -184,7 +186,8 @@ def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_sh
                 raise MetaSimError(f"{path}: pixels unreadable from row {y0}, the file is truncated or damaged "
                                    f"({_first_line(error) or 'no detail'})")
             pixels = np.asarray(pixels).reshape(y1 - y0, width, -1)
-            strip = _with_validity(_display(pixels, names, fmt), pixels, names, nodata)
+            masked = _read_mask(path, mask, y0, y1, width) if mask is not None else None
+            strip = _with_validity(_display(pixels, names, fmt), pixels, names, nodata, masked)
             if resampled:
                 rows = np.zeros((r1 - r0, width, strip.shape[2]), np.float32)
                 for tap in range(row_index.shape[1]):
@@ -220,10 +223,42 @@ def _nodata_value(path: Path) -> float | None:
     return value / scale
 
 
-def _with_validity(rgb: np.ndarray, pixels: np.ndarray, names: tuple, nodata: float | None) -> np.ndarray:
+def _mask_subimage(path: Path, width: int, height: int) -> int | None:
+    """The subimage of a TIFF's internal no-data mask (GDAL's, NewSubfileType 4, the image's size), or None."""
+    image = _open(path)
+    try:
+        if image.format_name() != "tiff":
+            return None
+        index = 1
+        while image.seek_subimage(index, 0):
+            spec = image.spec()
+            if (spec.getattribute("tiff:SubfileType") == 4 and spec.nchannels == 1
+                    and (spec.width, spec.height) == (width, height)):
+                return index
+            index += 1
+        return None
+    finally:
+        image.close()
+
+
+def _read_mask(path: Path, subimage: int, y0: int, y1: int, width: int) -> np.ndarray:
+    """Rows ``y0``..``y1`` of a TIFF's internal mask: True where the pixel is imagery."""
+    image = _open(path)
+    try:
+        rows = image.read_scanlines(subimage, 0, y0, y1, 0, 0, 1, "uint8")
+    finally:
+        image.close()
+    if rows is None:
+        raise MetaSimError(f"{path}: its no-data mask is unreadable, the file is truncated or damaged")
+    return np.asarray(rows).reshape(y1 - y0, width) > 0
+
+
+def _with_validity(rgb: np.ndarray, pixels: np.ndarray, names: tuple, nodata: float | None,
+                   mask: np.ndarray | None = None) -> np.ndarray:
     """``rgb`` with a fourth channel, 1 where a pixel is imagery and 0 where it is no-data, when the file
-    says which pixels are no-data (an alpha channel, a GDAL_NODATA value); ``rgb`` as it is otherwise."""
-    masks = []
+    says which pixels are no-data (an alpha channel, a GDAL_NODATA value, an internal mask); ``rgb`` as
+    it is otherwise."""
+    masks = [] if mask is None else [mask]
     alpha = _alpha_channel(names)
     if alpha is not None:
         masks.append(pixels[:, :, alpha] > 0)

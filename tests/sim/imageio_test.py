@@ -337,3 +337,46 @@ def test_a_large_photo_is_squared_in_bands_with_the_pixels_of_a_whole_read(tmp_p
     monkeypatch.setattr(imageio, "MAX_WHOLE_PIXELS", 1000)
     banded = read_rgb8_square(path, size)
     assert whole.shape == banded.shape == (size, size, 3) and np.array_equal(whole, banded)
+
+
+def _tiff_with_mask(path, rgb, imagery):
+    """An 8-bit RGB TIFF with GDAL's internal mask: a second IFD, NewSubfileType 4, 1 bit per pixel."""
+    height, width = imagery.shape
+    pixels, bits = rgb.astype(np.uint8).tobytes(), np.packbits(imagery.astype(bool), axis=1).tobytes()
+
+    def ifd(entries, extra_at, next_ifd):
+        out, extra = struct.pack("<H", len(entries)), b""
+        for tag, kind, values in entries:
+            raw = struct.pack(f"<{len(values)}{'H' if kind == 3 else 'I'}", *values)
+            if len(raw) <= 4:
+                out += struct.pack("<HHI", tag, kind, len(values)) + raw.ljust(4, b"\0")
+            else:
+                out += struct.pack("<HHII", tag, kind, len(values), extra_at + len(extra))
+                extra += raw
+        return out + struct.pack("<I", next_ifd) + extra
+
+    first_at, entries = 8, 10
+    second_at = first_at + 2 + 12 * entries + 4 + 6  # + BitsPerSample 8,8,8 stored after the first IFD
+    pixels_at = second_at + 2 + 12 * entries + 4
+    image = [(254, 4, [0]), (256, 3, [width]), (257, 3, [height]), (258, 3, [8, 8, 8]), (259, 3, [1]),
+             (262, 3, [2]), (273, 4, [pixels_at]), (277, 3, [3]), (278, 3, [height]), (279, 4, [len(pixels)])]
+    mask = [(254, 4, [4]), (256, 3, [width]), (257, 3, [height]), (258, 3, [1]), (259, 3, [1]), (262, 3, [4]),
+            (273, 4, [pixels_at + len(pixels)]), (277, 3, [1]), (278, 3, [height]), (279, 4, [len(bits)])]
+    path.write_bytes(b"II*\0" + struct.pack("<I", first_at) + ifd(image, first_at + 2 + 12 * entries + 4, second_at)
+                     + ifd(mask, pixels_at, 0) + pixels + bits)
+    return path
+
+
+def test_a_tiffs_internal_mask_leaves_out_the_tiles_it_hides(tmp_path, monkeypatch):
+    from meta_sim.sim import imageio
+
+    imagery = np.ones((64, 192), bool)
+    imagery[:, 128:] = False  # the right third is masked out
+    rgb = np.full((64, 192, 3), 100, np.uint8)
+    tif = _tiff_with_mask(tmp_path / "masked.tif", rgb, imagery)
+    dropped = []
+    tiles = list(image_tiles(tif, 64, dropped=dropped))
+    assert len(tiles) == 2 and len(dropped) == 1 and np.allclose(tiles[0], 100 / 255)
+    monkeypatch.setattr(imageio, "MAX_WHOLE_PIXELS", 1000)  # read in windows: the same tiles
+    dropped = []
+    assert len(list(image_tiles(tif, 64, dropped=dropped))) == 2 and len(dropped) == 1
