@@ -15,7 +15,7 @@ space:
   give the first three. Alpha is not composited: OpenImageIO is asked not
   to premultiply (``oiio:UnassociatedAlpha``), so RGB is the colour as
   stored; ``image_tiles`` uses alpha (and a TIFF's GDAL_NODATA value) to
-  leave out tiles that are mostly no-data.
+  leave out tiles that hold no-data.
 * NaN becomes 0, +Inf 1, -Inf 0, then everything is clipped to [0, 1]
   (HDR highlights saturate): the result is always finite.
 
@@ -138,8 +138,9 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
     of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one in windows of the source rows that one
     row of tiles needs, so memory stays bounded whatever its size (the tiles are the same).
 
-    No-data pixels (alpha 0, a TIFF's ``GDAL_NODATA`` value or its internal mask) are not imagery: a tile with more
-    than ``NODATA_MAX_SHARE`` of them is left out, and ``dropped`` (when given) gets one entry for it.
+    No-data pixels (alpha 0, a TIFF's ``GDAL_NODATA`` value or its internal mask) are not imagery: a tile
+    that holds any (after resampling, a pixel more than half no-data) is left out, so no-data never
+    reaches the features, and ``dropped`` (when given) gets one entry for it.
     """
     path = Path(path)
     width, height = image_size(path)
@@ -198,8 +199,6 @@ def _windowed_tiles(path: Path, tile_px: int, scale: float, shape: tuple, out_sh
         image.close()
 
 
-# A tile with more than this share of no-data pixels is not imagery enough to describe a place.
-NODATA_MAX_SHARE = 0.05
 _GDAL_NODATA = 42113  # TIFF tag (ASCII) GDAL writes the no-data value into
 
 
@@ -279,10 +278,10 @@ def _alpha_channel(names: tuple) -> int | None:
 
 
 def _imagery(tiles, dropped: list | None) -> Iterator[np.ndarray]:
-    """The RGB of tiles that are imagery; tiles with too much no-data are counted in ``dropped``."""
+    """The RGB of tiles that are all imagery; tiles with no-data in them are counted in ``dropped``."""
     for tile in tiles:
         if tile.shape[2] == 4:
-            if tile[:, :, 3].mean() < 1.0 - NODATA_MAX_SHARE:
+            if tile[:, :, 3].min() < 0.5:
                 if dropped is not None:
                     dropped.append(1)
                 continue
