@@ -227,7 +227,7 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
     if report["skipped"]:
         lines += ["", "Skipped files:", ""] + [f"- {s['path']}: {s['reason']}" for s in report["skipped"]]
     if report["nodata_tiles"]:
-        lines += ["", "Tiles left out for holding no-data:", ""]
+        lines += ["", "Tiles left out as more than 5% no-data:", ""]
         lines += [f"- {p}: {n}" for p, n in report["nodata_tiles"].items()]
     lines += ["", "Population (share of groups per choice):", ""]
     for name, shares in report["population"].items():

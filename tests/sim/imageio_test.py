@@ -380,3 +380,13 @@ def test_a_tiffs_internal_mask_leaves_out_the_tiles_it_hides(tmp_path, monkeypat
     monkeypatch.setattr(imageio, "MAX_WHOLE_PIXELS", 1000)  # read in windows: the same tiles
     dropped = []
     assert len(list(image_tiles(tif, 64, dropped=dropped))) == 2 and len(dropped) == 1
+
+
+def test_specks_of_nodata_take_the_tiles_mean_imagery_colour(tmp_path):
+    rgba = np.zeros((64, 64, 4), np.uint8)
+    rgba[:, :, :3] = 90
+    rgba[:, :, 3] = 255
+    rgba[5:7, 5:7] = (255, 255, 255, 0)  # a 4-pixel hole stored white
+    dropped = []
+    (tile,) = image_tiles(_write(tmp_path / "speck.png", rgba, oiio.UINT8), 64, dropped=dropped)
+    assert dropped == [] and np.allclose(tile, 90 / 255)  # the white never reaches the features
