@@ -188,6 +188,21 @@ def test_load_targets_resamples_by_metadata_and_gsd(tmp_path):
         load_targets([png], tile_px=64, gsd=0.03)
 
 
+def _ifd(entries, extra_at, next_ifd=0):
+    """One TIFF IFD (little-endian): its entries, the next IFD's offset, then the values too long to
+    stand in an entry, which are placed at ``extra_at``."""
+    fmt = {3: "H", 4: "I", 12: "d"}
+    out, extra = struct.pack("<H", len(entries)), b""
+    for tag, kind, values in entries:
+        raw = struct.pack(f"<{len(values)}{fmt[kind]}", *values)
+        if len(raw) <= 4:
+            out += struct.pack("<HHI", tag, kind, len(values)) + raw.ljust(4, b"\0")
+        else:
+            out += struct.pack("<HHII", tag, kind, len(values), extra_at + len(extra))
+            extra += raw
+    return out + struct.pack("<I", next_ifd) + extra
+
+
 def _write_geotiff(path, scale, tiepoint, geokeys):
     """A minimal uncompressed 8-bit RGB GeoTIFF (OpenImageIO cannot write GeoTIFF tags)."""
     height, width = 6, 8
@@ -196,20 +211,10 @@ def _write_geotiff(path, scale, tiepoint, geokeys):
                (273, 4, [0]), (277, 3, [3]), (278, 3, [height]), (279, 4, [len(pixels)]),
                (33550, 12, list(scale)), (33922, 12, list(tiepoint)),
                (34735, 3, [1, 1, 0, len(geokeys)] + [v for key, value in geokeys for v in (key, 0, 1, value)])]
-    fmt = {3: "H", 4: "I", 12: "d"}
     extra_at = 8 + 2 + 12 * len(entries) + 4
-    ifd, extra = struct.pack("<H", len(entries)), b""
-    data_at = extra_at + sum(len(struct.pack(f"<{len(v)}{fmt[t]}", *v)) for _, t, v in entries
-                             if len(v) * struct.calcsize(fmt[t]) > 4)
-    for tag, kind, values in entries:
-        values = [data_at] if tag == 273 else values
-        raw = struct.pack(f"<{len(values)}{fmt[kind]}", *values)
-        if len(raw) <= 4:
-            ifd += struct.pack("<HHI", tag, kind, len(values)) + raw.ljust(4, b"\0")
-        else:
-            ifd += struct.pack("<HHII", tag, kind, len(values), extra_at + len(extra))
-            extra += raw
-    path.write_bytes(b"II*\0" + struct.pack("<I", 8) + ifd + struct.pack("<I", 0) + extra + pixels)
+    data_at = len(b"II*\0" + struct.pack("<I", 8) + _ifd(entries, extra_at))
+    entries = [(273, 4, [data_at]) if tag == 273 else (tag, kind, values) for tag, kind, values in entries]
+    path.write_bytes(b"II*\0" + struct.pack("<I", 8) + _ifd(entries, extra_at) + pixels)
     return path
 
 
@@ -344,17 +349,6 @@ def _tiff_with_mask(path, rgb, imagery):
     height, width = imagery.shape
     pixels, bits = rgb.astype(np.uint8).tobytes(), np.packbits(imagery.astype(bool), axis=1).tobytes()
 
-    def ifd(entries, extra_at, next_ifd):
-        out, extra = struct.pack("<H", len(entries)), b""
-        for tag, kind, values in entries:
-            raw = struct.pack(f"<{len(values)}{'H' if kind == 3 else 'I'}", *values)
-            if len(raw) <= 4:
-                out += struct.pack("<HHI", tag, kind, len(values)) + raw.ljust(4, b"\0")
-            else:
-                out += struct.pack("<HHII", tag, kind, len(values), extra_at + len(extra))
-                extra += raw
-        return out + struct.pack("<I", next_ifd) + extra
-
     first_at, entries = 8, 10
     second_at = first_at + 2 + 12 * entries + 4 + 6  # + BitsPerSample 8,8,8 stored after the first IFD
     pixels_at = second_at + 2 + 12 * entries + 4
@@ -362,8 +356,8 @@ def _tiff_with_mask(path, rgb, imagery):
              (262, 3, [2]), (273, 4, [pixels_at]), (277, 3, [3]), (278, 3, [height]), (279, 4, [len(pixels)])]
     mask = [(254, 4, [4]), (256, 3, [width]), (257, 3, [height]), (258, 3, [1]), (259, 3, [1]), (262, 3, [4]),
             (273, 4, [pixels_at + len(pixels)]), (277, 3, [1]), (278, 3, [height]), (279, 4, [len(bits)])]
-    path.write_bytes(b"II*\0" + struct.pack("<I", first_at) + ifd(image, first_at + 2 + 12 * entries + 4, second_at)
-                     + ifd(mask, pixels_at, 0) + pixels + bits)
+    path.write_bytes(b"II*\0" + struct.pack("<I", first_at) + _ifd(image, first_at + 2 + 12 * entries + 4, second_at)
+                     + _ifd(mask, pixels_at) + pixels + bits)
     return path
 
 
