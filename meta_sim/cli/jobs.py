@@ -15,8 +15,8 @@ def jobs():
     """Render jobs for a farm: plan a manifest, run it locally or on Dask, check it, export it."""
 
 
-_PLAN_FLAGS = ("--design", "--random-designs", "--seed", "--cities", "--tiles", "--preset", "--bank", "--space",
-               "--tile-px", "--gsd")
+_PLAN_FLAGS = ("--design", "--random-designs", "--population", "--images", "-r", "--seed", "--cities", "--tiles",
+               "--preset", "--bank", "--space", "--tile-px", "--gsd")
 
 
 def _plan_options(command):

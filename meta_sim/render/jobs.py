@@ -100,6 +100,20 @@ def sample_designs(space: DesignSpace, n: int, seed: int) -> list[dict]:
     return space.sample(np.random.default_rng([seed, 1]), n)
 
 
+def sample_population(space: DesignSpace, designs: list[dict], counts: list[int], n: int, r: float,
+                      seed: int) -> list[dict]:
+    """``n`` designs drawn from a population (``designs`` with their ``counts``), each replaced by a
+    uniform design with probability ``r`` (the paper's diversify-with-rejection); the first k do not
+    depend on n."""
+    rng = np.random.default_rng([seed, 2])
+    shares = np.asarray(counts, dtype=np.float64) / float(sum(counts))
+    out = []
+    for _ in range(n):
+        uniform, pick = rng.random() < r, int(rng.choice(len(designs), p=shares))
+        out.append(space.sample(rng, 1)[0] if uniform else dict(designs[pick]))
+    return out
+
+
 def write_job_manifest(out_dir: Path, jobs: list[Job], settings: RenderSettings) -> Path:
     """``designs.json`` beside the tiles: every job rendered into the folder, with its design,
     city seed, settings and tile names (jobs already listed by an earlier run are kept)."""

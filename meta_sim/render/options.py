@@ -32,8 +32,13 @@ RENDER_OPTIONS = (
     Option("--design", str, None, "design to render, e.g. flat_roof=3,sloped_roof=sloped-clay-red "
            "(0-based index or texture id; held-out texture ids are accepted)"),
     Option("--random-designs", int, None, "render N uniformly sampled designs (a training set) instead"),
+    Option("--population", Path, None, "render --images designs sampled from a population preset (the "
+           "population.json of `meta-sim infer`) instead"),
+    Option("--images", int, 100, "with --population: designs to sample (each rendered as --tiles tiles)"),
+    Option("-r", float, 0.25, "with --population: diversify with rejection, the probability that a sampled "
+           "design is replaced by a uniform one (the paper uses 0.25 on real imagery)"),
     Option("--seed", int, 1, "city seed (random designs: also the design sampling seed)"),
-    Option("--cities", int, 8, "random designs: design k is rendered in city seed + (k mod CITIES)"),
+    Option("--cities", int, 8, "random or sampled designs: design k is rendered in city seed + (k mod CITIES)"),
     Option("--tiles", int, 9, "tiles per design (a near-square grid of adjacent tiles)"),
     Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),

@@ -6,9 +6,10 @@ from pathlib import Path
 
 from ..core.errors import MetaSimError
 from ..sim.design import DesignSpace
+from ..sim.presets import load_preset
 from ..sim.quality import get_preset
 from ..sim.textures import ensure_default_bank, ensure_heldout_bank, load_bank
-from .jobs import RenderSettings, design_jobs, sample_designs, single_job
+from .jobs import RenderSettings, design_jobs, sample_designs, sample_population, single_job
 
 # Bounds of the whole-number options: a city seed is a numpy seed (not negative); beyond these a render
 # would not fit a machine's memory (tile pixels) or a folder (tiles, designs).
@@ -24,14 +25,21 @@ def plan(options: dict):
     """
     if options.get("out") is None:
         raise MetaSimError("give an output folder with --out")
-    if (options.get("design") is None) == (options.get("random_designs") is None):
-        raise MetaSimError("give exactly one of --design or --random-designs")
+    given = [name for name in ("design", "random_designs", "population") if options.get(name) is not None]
+    if len(given) != 1:
+        raise MetaSimError("give exactly one of --design, --random-designs or --population")
     for name, low, high in LIMITS:
         value = options[name]
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise MetaSimError(f"--{name.replace('_', '-')} must be a whole number from {low} to {high}, not {value!r}")
     if options.get("random_designs") is not None and not 1 <= options["random_designs"] <= MAX_DESIGNS:
         raise MetaSimError(f"--random-designs must be from 1 to {MAX_DESIGNS}")
+    if options.get("population") is not None:
+        images, r = options.get("images", 100), options.get("r", 0.25)
+        if isinstance(images, bool) or not isinstance(images, int) or not 1 <= images <= MAX_DESIGNS:
+            raise MetaSimError(f"--images must be from 1 to {MAX_DESIGNS}, not {images!r}")
+        if not (isinstance(r, (int, float)) and 0.0 <= r <= 1.0):
+            raise MetaSimError(f"-r must be a probability from 0 to 1, not {r!r}")
     if not 0.01 <= options["gsd"] <= 10.0:
         raise MetaSimError("--gsd must be between 0.01 and 10 metres per pixel")
     preset = get_preset(options["preset"])
@@ -47,6 +55,15 @@ def plan(options: dict):
              if getattr(p, "texture_kind", None)}
     if options.get("design") is not None:
         jobs = [single_job(space, space.parse(options["design"], extra), options["seed"])]
+    elif options.get("population") is not None:
+        population = load_preset(options["population"], space, extra)
+        if population.kind != "population" or not population.designs:
+            raise MetaSimError(f"{options['population']}: not a population preset (the population.json that "
+                               "`meta-sim infer` writes)")
+        designs = [space.validate(entry["design"], extra) for entry in population.designs]
+        sampled = sample_population(space, designs, [entry["count"] for entry in population.designs],
+                                    options.get("images", 100), options.get("r", 0.25), options["seed"])
+        jobs = design_jobs(space, sampled, options["seed"], options["cities"])
     else:
         designs = sample_designs(space, options["random_designs"], options["seed"])
         jobs = design_jobs(space, designs, options["seed"], options["cities"])

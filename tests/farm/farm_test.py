@@ -93,7 +93,7 @@ def test_plan_is_a_pure_function_of_content(tmp_path, reference):
                   "--preset", "balanced", *SMALL)
     assert other.tasks[0].name != one.tasks[0].name  # a different preset renders different pixels
     bad = _cli("jobs", "plan", "--tiles", 2, "--out", tmp_path / "bad.json")
-    assert bad.exit_code == 2 and "exactly one of --design or --random-designs" in bad.output
+    assert bad.exit_code == 2 and "exactly one of --design, --random-designs or --population" in bad.output
     missing = _cli("jobs", "status", tmp_path / "nope.json")
     assert missing.exit_code == 2 and "meta-sim jobs plan" in missing.output
 

@@ -1,5 +1,6 @@
 """Real Blender renders (bpy module), at reduced pixel counts so the suite stays fast."""
 
+import json
 import os
 import subprocess
 import sys
@@ -214,7 +215,7 @@ def _cli(*args):
     (["--design", "flat_roof=1,sloped_roof=1", "--preset", "ultra"], "unknown render preset 'ultra'"),
     (["--design", "flat_roof=1,sloped_roof=1", "--tiles", "0"], "--tiles must be a whole number from 1 to"),
     (["--design", "flat_roof=1"], "missing sloped_roof"),
-    ([], "exactly one of --design or --random-designs"),
+    ([], "exactly one of --design, --random-designs or --population"),
 ])
 def test_render_cli_rejects_bad_input_and_writes_nothing(tmp_path, args, message):
     out = tmp_path / "out"
@@ -359,3 +360,45 @@ def test_worker_and_farm_worker_help_format():
     assert "--cities" in build_argparser().format_help()  # argparse %-formats every option's help
     done = subprocess.run([sys.executable, "-m", "meta_sim.farm.worker", "--help"], capture_output=True, text=True)
     assert done.returncode == 0 and "--shard" in done.stdout
+
+
+def _population(path, designs_counts):
+    from meta_sim.sim.presets import DesignPreset, save_preset
+
+    designs = [{"design": d, "count": c} for d, c in designs_counts]
+    return save_preset(path, DesignPreset(kind="population", name="p", design_space="rooftops-v1",
+                                          design=designs[0]["design"], designs=designs))
+
+
+def test_sample_population_follows_the_counts_and_rejects_to_uniform():
+    from meta_sim.render.jobs import sample_population
+
+    space = DesignSpace.load()
+    a = {"flat_roof": space.parameters[0].choices[0], "sloped_roof": space.parameters[1].choices[0]}
+    b = {"flat_roof": space.parameters[0].choices[1], "sloped_roof": space.parameters[1].choices[1]}
+    drawn = sample_population(space, [a, b], [3, 1], 2000, 0.0, seed=4)
+    assert {tuple(d.values()) for d in drawn} == {tuple(a.values()), tuple(b.values())}
+    assert abs(sum(d == a for d in drawn) / 2000 - 0.75) < 0.04
+    assert drawn == sample_population(space, [a, b], [3, 1], 2000, 0.0, seed=4)
+    assert drawn[:10] == sample_population(space, [a, b], [3, 1], 10, 0.0, seed=4)
+    mixed = sample_population(space, [a, b], [3, 1], 2000, 0.25, seed=4)
+    others = [d for d in mixed if d not in (a, b)]
+    assert 0.2 < len(others) / 2000 < 0.3  # a uniform draw is rarely a or b
+
+
+def test_render_from_a_population_records_the_sampled_designs(tmp_path, bank):
+    space = DesignSpace.load()
+    a = {"flat_roof": space.parameters[0].choices[2], "sloped_roof": space.parameters[1].choices[3]}
+    b = {"flat_roof": space.parameters[0].choices[5], "sloped_roof": space.parameters[1].choices[1]}
+    population = _population(tmp_path / "population.json", [(a, 2), (b, 1)])
+    result = _cli("render", "--population", population, "--images", 3, "-r", 0, "--seed", 2, "--cities", 2,
+                  "--tiles", 1, "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    jobs = json.loads((tmp_path / "out" / "designs.json").read_text())["jobs"]
+    assert len(jobs) == 3 and all(job["design"] in (a, b) for job in jobs)
+    assert all((tmp_path / "out" / job["tiles"][0]).is_file() for job in jobs)
+    group = tmp_path / "group.json"
+    group.write_text(population.read_text().replace('"population"', '"group"', 1))
+    bad = _cli("render", "--population", group, "--tiles", 1, "--tile-px", 32, "--out", tmp_path / "bad")
+    assert bad.exit_code == 2 and "not a population preset" in bad.output
+    assert not (tmp_path / "bad").exists()
