@@ -1,0 +1,108 @@
+"""Labelled tiles for a trainer (a building segmenter): PyTorch datasets over rendered tiles and over
+real image/mask folders, with the same keys, so one training loop takes either or both.
+
+Each item is a dict: ``image`` float32 (3, H, W) in display sRGB (or linear light for rendered tiles),
+``mask`` uint8 (H, W), 1 on buildings; ``roof_class`` int64 (H, W), 0 background, 1 flat, 2 sloped;
+``instance`` int64 (H, W), the building id (0: none); ``meta``: the tile's path, pixel size and, for
+rendered tiles, design (JSON), city seed and tile index. Real masks tell buildings only: their
+``roof_class`` and ``instance`` are 0 and ``meta["labels"]`` says "mask". Items are read when asked for,
+so the datasets work with DataLoader worker processes started by spawning (``loader`` does that):
+forked workers, Linux's default, hang at exit once OpenImageIO has run in the parent.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset
+
+from ..core.errors import MetaSimError
+from ..sim.imageio import RENDER_PIXEL_SIZE_M, image_pixel_size_m, linear_to_srgb, read_image, read_rgb8, resample
+from ..sim.tiles import read_tile
+
+COLOURS = ("srgb", "linear")
+
+
+class TileDataset(Dataset):
+    """The rendered tiles (``*.exr``) of ``folder``, in name order; ``colour`` "srgb" (as previews show
+    them, and as real imagery is stored) or "linear" (as rendered)."""
+
+    def __init__(self, folder: str | Path, colour: str = "srgb"):
+        if colour not in COLOURS:
+            raise MetaSimError(f"colour must be one of {', '.join(COLOURS)}, not {colour!r}")
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise MetaSimError(f"{folder} is not a folder of rendered tiles")
+        self.paths = sorted(p for p in folder.glob("*.exr") if not p.name.startswith("."))
+        if not self.paths:
+            raise MetaSimError(f"no rendered tiles (*.exr) in {folder}; render some with `meta-sim render`")
+        self.colour = colour
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def __getitem__(self, index: int) -> dict:
+        path = self.paths[index]
+        tile = read_tile(path)
+        rgb = linear_to_srgb(tile.rgb) if self.colour == "srgb" else np.clip(np.nan_to_num(tile.rgb), 0.0, None)
+        meta = {"path": str(path), "pixel_size_m": float(tile.meta.get("pixel_size_m", RENDER_PIXEL_SIZE_M)),
+                "design": json.dumps(tile.meta.get("design", {}), sort_keys=True),
+                "city_seed": int(tile.meta.get("city_seed", -1)), "tile_index": int(tile.meta.get("tile_index", -1)),
+                "labels": "render"}
+        return _item(rgb, tile.building > 0, tile.roof_class, tile.instance, meta)
+
+
+class RealDataset(Dataset):
+    """Real images with building masks: ``images/NAME`` beside ``masks/NAME`` (any image file; a mask
+    pixel above half its range is a building), brought from their pixel size (``pixel_size_m``, else the
+    file's metadata) to ``working_pixel_size_m``. MetaSimError when a size is known neither way."""
+
+    def __init__(self, images: str | Path, masks: str | Path, pixel_size_m: float | None = None,
+                 working_pixel_size_m: float = RENDER_PIXEL_SIZE_M):
+        images, masks = Path(images), Path(masks)
+        for folder in (images, masks):
+            if not folder.is_dir():
+                raise MetaSimError(f"{folder} is not a folder")
+        for size in (pixel_size_m, working_pixel_size_m):
+            if size is not None and not (isinstance(size, (int, float)) and 0.01 <= size <= 100):
+                raise MetaSimError(f"pixel sizes must be between 0.01 and 100 metres, not {size!r}")
+        by_name = {p.name: p for p in masks.iterdir() if p.is_file() and not p.name.startswith(".")}
+        self.pairs = [(p, by_name[p.name]) for p in sorted(images.iterdir())
+                      if p.is_file() and not p.name.startswith(".") and p.name in by_name]
+        if not self.pairs:
+            raise MetaSimError(f"no image in {images} has a mask of the same name in {masks}")
+        self.pixel_size_m, self.working = pixel_size_m, float(working_pixel_size_m)
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def __getitem__(self, index: int) -> dict:
+        image_path, mask_path = self.pairs[index]
+        size = self.pixel_size_m or image_pixel_size_m(image_path)
+        if size is None:
+            raise MetaSimError(f"{image_path}: its pixel size is unknown; give it (pixel_size_m, --gsd)")
+        rgb = resample(read_image(image_path), size, self.working)
+        building = resample(read_rgb8(mask_path)[:, :, :1].astype(np.float32) / 255.0, size, self.working)[:, :, 0]
+        if building.shape != rgb.shape[:2]:
+            raise MetaSimError(f"{mask_path}: the mask is not the size of {image_path}")
+        zeros = np.zeros(building.shape, np.int64)
+        meta = {"path": str(image_path), "pixel_size_m": self.working, "design": "", "city_seed": -1,
+                "tile_index": -1, "labels": "mask"}
+        return _item(rgb, building > 0.5, zeros, zeros, meta)
+
+
+def _item(rgb: np.ndarray, building: np.ndarray, roof_class: np.ndarray, instance: np.ndarray, meta: dict) -> dict:
+    return {"image": torch.from_numpy(np.ascontiguousarray(rgb.transpose(2, 0, 1), dtype=np.float32)),
+            "mask": torch.from_numpy(building.astype(np.uint8)),
+            "roof_class": torch.from_numpy(np.asarray(roof_class, dtype=np.int64)),
+            "instance": torch.from_numpy(np.asarray(instance, dtype=np.int64)), "meta": meta}
+
+
+def loader(dataset: Dataset, **options) -> DataLoader:
+    """A DataLoader over ``dataset`` whose worker processes (``num_workers``) are spawned, not forked."""
+    if options.get("num_workers", 0) > 0:
+        options.setdefault("multiprocessing_context", "spawn")
+    return DataLoader(dataset, **options)

@@ -1,0 +1,61 @@
+"""Datasets for trainers: rendered tiles and real image/mask folders give the same keys, in DataLoader workers."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.pipeline.trainsets import RealDataset, TileDataset, loader
+from meta_sim.sim import tiles
+from meta_sim.sim.imageio import linear_to_srgb
+
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
+KEYS = {"image", "mask", "roof_class", "instance", "meta"}
+
+
+def _tiles(folder, n=4, px=24):
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(n):
+        instance = np.zeros((px, px), np.uint32)
+        instance[4:12, 4:12] = k + 1
+        roof = (instance > 0).astype(np.uint32) * (1 + k % 2)
+        meta = tiles.tile_metadata(design={"flat_roof": f"f{k}"}, space="toy", city_seed=k, tile_index=0,
+                                   origin_m=(0, 0), size_px=(px, px), pixel_size_m=0.3, preset="fast")
+        tiles.write_tile(folder / f"d{k:05d}_t00.exr", rng.random((px, px, 3)).astype(np.float32), instance, roof,
+                         meta)
+    return folder
+
+
+def test_tile_dataset_items_and_a_dataloader_with_workers(tmp_path):
+    data = TileDataset(_tiles(tmp_path / "tiles"))
+    item = data[1]
+    assert set(item) == KEYS and item["image"].shape == (3, 24, 24) and item["image"].dtype == torch.float32
+    assert item["mask"].dtype == torch.uint8 and int(item["mask"].sum()) == 64
+    assert set(item["roof_class"].unique().tolist()) == {0, 2} and set(item["instance"].unique().tolist()) == {0, 2}
+    assert item["meta"]["design"] == '{"flat_roof": "f1"}' and item["meta"]["city_seed"] == 1
+    linear = TileDataset(tmp_path / "tiles", colour="linear")[1]["image"]
+    assert torch.allclose(item["image"], torch.from_numpy(linear_to_srgb(linear.numpy())).float(), atol=1e-5)
+    batches = list(loader(data, batch_size=2, num_workers=2))
+    assert [b["image"].shape for b in batches] == [(2, 3, 24, 24)] * 2
+    assert batches[1]["meta"]["city_seed"].tolist() == [2, 3]
+    with pytest.raises(MetaSimError, match="colour"):
+        TileDataset(tmp_path / "tiles", colour="hdr")
+    with pytest.raises(MetaSimError, match="no rendered tiles"):
+        TileDataset(tmp_path)
+
+
+@pytest.mark.skipif(not (REALDATA / "banepa").is_dir(), reason="../shared/realdata is not beside the project")
+def test_real_dataset_resamples_images_and_masks_to_the_working_pixel_size():
+    data = RealDataset(REALDATA / "banepa" / "images", REALDATA / "banepa" / "masks", pixel_size_m=0.13)
+    assert len(data) == 48
+    item = data[0]
+    assert set(item) == KEYS and item["image"].shape == (3, 222, 222) and item["mask"].shape == (222, 222)
+    assert set(item["mask"].unique().tolist()) <= {0, 1} and 0 < float(item["mask"].float().mean()) < 1
+    assert item["meta"]["labels"] == "mask" and int(item["roof_class"].abs().sum()) == 0
+    batch = next(iter(loader(data, batch_size=4, num_workers=2)))
+    assert batch["image"].shape == (4, 3, 222, 222)
+    with pytest.raises(MetaSimError, match="pixel size is unknown"):
+        RealDataset(REALDATA / "banepa" / "images", REALDATA / "banepa" / "masks")[0]
