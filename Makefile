@@ -28,7 +28,7 @@ demo: setup
 	$(BIN)/meta-sim render --design $(DEMO_DESIGN) --seed 1 --tiles 9 --preset fast --out $(DEMO)/city --preview
 	$(BIN)/meta-sim eval e1 --out $(DEMO)/e1 --targets $(DEMO_TARGETS) -M $(DEMO_STARTS) --iterations $(DEMO_ITERATIONS)
 	$(BIN)/meta-sim render --design $(DEMO_HIDDEN) --seed 4242 --tiles 9 --preset fast --out $(DEMO)/target
-	$(BIN)/meta-sim infer $(DEMO)/target --model $(DEMO)/e1/nams.pt --out $(DEMO)/infer
+	$(BIN)/meta-sim infer $(DEMO)/target --model $(DEMO)/e1/nams.pt --out $(DEMO)/infer --overwrite
 	@echo "The hidden design was $(DEMO_HIDDEN)"
 	@cat $(DEMO)/e1/results.md
 	@echo "Look at $(DEMO)/city/*_mosaic.png, $(DEMO)/e1/sheet.png and $(DEMO)/infer/report.png"
