@@ -59,11 +59,11 @@ class DatasetConfig:
 
     def check(self) -> "DatasetConfig":
         """This config, or MetaSimError for a field no render would accept (checked before any work)."""
+        from ..render.plan import LIMITS, MAX_DESIGNS
         from ..sim.design import DesignSpace
         from ..sim.quality import get_preset
 
-        for name, low, high in (("designs", 1, 10_000_000), ("tiles", 1, 4096), ("seed", 0, 2**63 - 1),
-                                ("cities", 1, 100_000), ("tile_px", 16, 8192)):
+        for name, low, high in (("designs", 1, MAX_DESIGNS), *LIMITS):  # the render's own bounds
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 option = {"seed": "dataset-seed", "tile_px": "tile-px"}.get(name, name)
