@@ -25,8 +25,8 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=4242, help="city seed")
     args = parser.parse_args()
 
-    import addon_utils
-    import bpy  # first: it puts Blender's script modules (addon_utils) on the path
+    import bpy  # isort: skip (first: it puts Blender's script modules, addon_utils among them, on the path)
+    import addon_utils  # isort: skip
 
     from meta_sim.sim.imageio import read_rgb8
     from meta_sim.sim.textures.pngio import write_png

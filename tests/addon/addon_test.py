@@ -93,8 +93,8 @@ def test_zip_holds_exactly_the_addon_and_the_pure_layers(zip_path):
 
 @pytest.fixture(scope="module")
 def addon(zip_path, tmp_path_factory, bank, heldout_bank):
-    import addon_utils
-    import bpy  # first: it puts Blender's script modules (addon_utils) on the path
+    import bpy  # isort: skip (first: it puts Blender's script modules, addon_utils among them, on the path)
+    import addon_utils  # isort: skip
 
     tmp = tmp_path_factory.mktemp("addon")
     saved = os.environ.get("BLENDER_USER_RESOURCES")
