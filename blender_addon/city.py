@@ -17,10 +17,13 @@ import bpy
 from ..meta_sim.blender.scene import CITY_TAG, CityScene, city_buildings, remove_city, set_roofs
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.core.fileio import write_text_atomic
+from ..meta_sim.render.jobs import RenderSettings, design_jobs, sample_population, write_job_manifest
 from ..meta_sim.render.loop import resolve_textures
 from ..meta_sim.render.options import RENDER_OPTIONS
 from ..meta_sim.sim import meshes
+from ..meta_sim.sim.design import DesignSpace
 from ..meta_sim.sim.layout import LayoutParams, layout_for_tiles
+from ..meta_sim.sim.presets import DesignPreset, save_preset
 from ..meta_sim.sim.preview import label_image, to_srgb8
 from ..meta_sim.sim.quality import get_preset
 from ..meta_sim.sim.textures import write_png
@@ -32,6 +35,7 @@ PARAMS_TAG = "meta_sim_params"  # on the city collection: the knobs it was gener
 PREVIEW_IMAGES = ("Meta-Sim Preview", "Meta-Sim Preview Labels")
 JOB_FORMAT = "meta-sim-render-request"
 JOB_FILE = "render-job.json"
+FARM_JOB_FILE = "farm-job.json"  # where the job's `meta-sim jobs plan` command puts the farm manifest
 
 
 def knobs(settings) -> dict:
@@ -174,42 +178,83 @@ def _show(name: str, path: Path) -> bpy.types.Image:
     return image
 
 
-def export_job(settings, library, job_dir: Path) -> Path:
+def export_job(settings, library, job_dir: Path, population: DesignPreset | None = None) -> Path:
     """Write ``render-job.json`` (and the design space with the city's layout) for the render worker.
 
     The worker has no options for the city knobs, but a design space may fix layout
-    fields: the job's ``design-space.json`` is the bank's space with this city's knobs,
+    fields: the job's ``design-space.json`` is the bank's space with the city's knobs,
     so the farm renders the same city the artist sees.
+
+    Without ``population`` the job renders the current city with the pickers' design. With
+    it, the job renders ``job_images`` designs drawn from the population (copied into the job
+    as ``population.json``) in ``job_cities`` cities of the panel's knobs, seeds ``seed``,
+    ``seed + 1``, ...; the worker draws the same designs from the same seed, and
+    ``tiles/designs.json`` records them already, as `meta-sim render --population` writes it.
     """
-    params = city_knobs(settings)
-    if params is None:
-        raise MetaSimError("generate a city first: the job renders the current city")
-    chosen = design(settings, library)
+    if population is None:
+        params = city_knobs(settings)
+        if params is None:
+            raise MetaSimError("generate a city first: the job renders the current city")
+    else:
+        params = knobs(settings)
     job_dir = Path(job_dir)
-    try:
-        job_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise MetaSimError(f"cannot create job folder {job_dir}: {exc.strerror}; choose another") from None
     space = library.space.to_dict()
     space["name"] = f"{library.space.name}+city-s{params['seed']}"
     space["layout"] = {**{name: params[name] for name in ("building_density", "sloped_share", "tree_density")},
                        **space["layout"]}
-    space_path = job_dir / "design-space.json"
-    options = {"design": library.space.format(chosen), "seed": params["seed"], "tiles": params["tiles"],
-               "preset": settings.render_preset, "out": str(job_dir / "tiles"), "space": str(space_path),
-               "tile_px": params["tile_px"], "gsd": params["gsd"],
+    space_path, out = job_dir / "design-space.json", job_dir / "tiles"
+    options = {"seed": params["seed"], "tiles": params["tiles"], "preset": settings.render_preset, "out": str(out),
+               "space": str(space_path), "tile_px": params["tile_px"], "gsd": params["gsd"],
                "bank": None if settings.bank_source == "DEFAULT" else str(library.bank.root)}
-    argv = [item for opt in RENDER_OPTIONS if options.get(opt.dest) is not None
-            for item in (opt.flag, str(options[opt.dest]))]
-    job = {"format": JOB_FORMAT, "version": 1, "options": options, "argv": argv,
-           "command": shlex.join(["python", "-m", "meta_sim.render.worker", *argv]),
-           "blender_command": shlex.join(["blender", "-b", "--python-exit-code", "1", "--python",
-                                          "jobs/render_tiles.py", "--", *argv]),
-           "design": chosen, "city": params}
+    if population is None:
+        chosen = design(settings, library)
+        options["design"] = library.space.format(chosen)
+        what = {"design": chosen}
+    else:
+        options.update(population=str(job_dir / "population.json"), images=settings.job_images,
+                       r=round(settings.job_rejection, 6), cities=settings.job_cities)
+        jobs, render_settings = _population_jobs(DesignSpace.from_dict(space), population, options)
+        what = {"population": population.name}
+    try:
+        job_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise MetaSimError(f"cannot create job folder {job_dir}: {exc.strerror}; choose another") from None
+    argv = _argv(options)
+    plan_argv = [*_argv({**options, "out": None}), "--out", str(job_dir / FARM_JOB_FILE), "--out-dir", str(out)]
     path = job_dir / JOB_FILE
     try:
         write_text_atomic(space_path, json.dumps(space, indent=1) + "\n")
+        if population is not None:
+            save_preset(options["population"], population)
+            what["designs_file"] = str(write_job_manifest(out, jobs, render_settings))
+        job = {"format": JOB_FORMAT, "version": 1, "options": options, "argv": argv,
+               "command": shlex.join(["python", "-m", "meta_sim.render.worker", *argv]),
+               "blender_command": shlex.join(["blender", "-b", "--python-exit-code", "1", "--python",
+                                              "jobs/render_tiles.py", "--", *argv]),
+               "plan_command": shlex.join(["meta-sim", "jobs", "plan", *plan_argv]),
+               **what, "city": params}
         write_text_atomic(path, json.dumps(job, indent=1) + "\n")
     except OSError as exc:
         raise MetaSimError(f"cannot write the job into {job_dir}: {exc.strerror}; choose another folder") from None
     return path
+
+
+def _argv(options: dict) -> list[str]:
+    """The render worker's command-line arguments for ``options`` (those that are set)."""
+    return [item for opt in RENDER_OPTIONS if options.get(opt.dest) is not None
+            for item in (opt.flag, str(options[opt.dest]))]
+
+
+def _population_jobs(space: DesignSpace, population: DesignPreset, options: dict) -> tuple[list, RenderSettings]:
+    """The jobs and settings ``meta_sim.render.plan`` makes of a population job's options (the same
+    designs from the same seed), without building the texture banks it would check them against."""
+    try:
+        designs = [space.validate(entry["design"]) for entry in population.designs]
+    except MetaSimError as exc:
+        raise MetaSimError(f"population {population.name!r}: {exc}") from None
+    sampled = sample_population(space, designs, [entry["count"] for entry in population.designs],
+                                options["images"], options["r"], options["seed"])
+    settings = RenderSettings(space=space, banks=[], preset=get_preset(options["preset"]),
+                              out_dir=Path(options["out"]), n_tiles=options["tiles"],
+                              tile_px=options["tile_px"], pixel_size_m=options["gsd"])
+    return design_jobs(space, sampled, options["seed"], options["cities"]), settings

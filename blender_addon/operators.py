@@ -108,15 +108,30 @@ class META_SIM_OT_render_preview(_Reporting, bpy.types.Operator):
 
 
 class META_SIM_OT_export_job(_Reporting, bpy.types.Operator):
-    """Write a render job for the farm (python -m meta_sim.render.worker or blender -b) from the city and design"""
+    """Write a render job for the farm: the current city and design, or designs sampled from the loaded population"""
 
     bl_idname = "meta_sim.export_job"
     bl_label = "Export Render Job"
     bl_options = {"REGISTER"}
 
+    @classmethod
+    def poll(cls, context):
+        settings = context.scene.meta_sim
+        if settings.job_designs == "POPULATION" and presets_ui.population_row(settings) is None:
+            cls.poll_message_set("No population loaded: load a `meta-sim infer` folder with a population.json "
+                                 "(Design Presets), or choose Current Design")
+            return False
+        return True
+
     def run(self, context, settings):
-        path = city.export_job(settings, libraries.require(settings), _folder(settings.job_dir, "job"))
-        self.report({"INFO"}, f"render job written to {path}")
+        library = libraries.require(settings)
+        job_dir = _folder(settings.job_dir, "job")
+        population = None
+        if settings.job_designs == "POPULATION":
+            population = presets_ui.load_population(presets_ui.population_row(settings), library)
+        path = city.export_job(settings, library, job_dir, population)
+        what = "" if population is None else f" of {settings.job_images} designs sampled from the population"
+        self.report({"INFO"}, f"render job{what} written to {path}")
         return {"FINISHED"}
 
 

@@ -6,7 +6,7 @@ import json
 
 import bpy
 
-from . import city, previews
+from . import city, presets_ui, previews
 from . import library as libraries
 
 
@@ -87,6 +87,16 @@ class META_SIM_PT_render(_MetaSimPanel, bpy.types.Panel):
                 column.label(text=image.name)
         layout.separator()
         layout.prop(settings, "job_dir")
+        population = presets_ui.population_row(settings)
+        row = layout.row()
+        row.enabled = population is not None or settings.job_designs == "POPULATION"  # never stuck on it
+        row.prop(settings, "job_designs", expand=True)
+        if settings.job_designs == "POPULATION":
+            column = layout.column(align=True)
+            for name in ("job_images", "job_rejection", "job_cities"):
+                column.prop(settings, name)
+            if population is not None:
+                layout.label(text=f"From {population.name}, cities from seed {settings.seed}", icon="COMMUNITY")
         layout.operator("meta_sim.export_job", icon="EXPORT")
 
 

@@ -36,6 +36,22 @@ def load(path: str, library) -> DesignPreset:
     return load_preset(path, library.space)
 
 
+def population_row(settings):
+    """The loaded population preset's row (the selected one if it is a population, else the first
+    loadable population of the folder), or None when no population is loaded."""
+    rows = list(settings.presets)
+    selected = [rows[settings.presets_index]] if 0 <= settings.presets_index < len(rows) else []
+    return next((row for row in selected + rows if row.kind == "population" and not row.error), None)
+
+
+def load_population(row, library) -> DesignPreset:
+    """The population preset of ``row``, read again (the file may have changed since the list was loaded)."""
+    preset = load(row.path, library)
+    if preset.kind != "population" or not preset.designs:
+        raise MetaSimError(f"{row.path} is no longer a population preset; load the preset folder again")
+    return preset
+
+
 def _row(path: Path, library) -> dict:
     row = {"name": path.stem, "path": str(path)}
     try:

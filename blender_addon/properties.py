@@ -5,11 +5,15 @@ from __future__ import annotations
 import bpy
 from bpy.props import CollectionProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
+from ..meta_sim.render.options import RENDER_OPTIONS
+from ..meta_sim.render.plan import LIMITS, MAX_DESIGNS
 from ..meta_sim.sim.layout import LayoutParams
 from ..meta_sim.sim.quality import PRESETS
 from . import library, previews
 
 _DEFAULTS = LayoutParams()
+_RENDER_DEFAULTS = {opt.dest: opt.default for opt in RENDER_OPTIONS}  # a population job's, as the CLI's
+_MAX_CITIES = {name: high for name, _, high in LIMITS}["cities"]
 
 
 def _flat_items(self, context):
@@ -67,6 +71,21 @@ class MetaSimSettings(bpy.types.PropertyGroup):
                               min=0, default=0)
     job_dir: StringProperty(name="Job Folder", description="Where the render job file goes; the farm "
                             "writes tiles into its tiles/ subfolder", subtype="DIR_PATH")
+    job_designs: EnumProperty(name="Designs", description="What the exported render job renders", items=[
+        ("CURRENT", "Current Design", "The roof pickers' design in the current city"),
+        ("POPULATION", "Loaded Population", "Designs sampled from the population preset of the loaded "
+         "preset folder, as `meta-sim render --population` samples them"),
+    ])
+    job_images: IntProperty(name="Images", description="Designs to sample from the population (each rendered "
+                            "as City Size tiles), as --images", min=1, max=MAX_DESIGNS, soft_max=10_000,
+                            default=_RENDER_DEFAULTS["images"])
+    job_rejection: FloatProperty(name="Rejection Rate", description="Diversify with rejection (-r): the "
+                                 "probability that a sampled design is replaced by a uniform one (the paper "
+                                 "uses 0.25 on real imagery)", min=0.0, max=1.0, default=_RENDER_DEFAULTS["r"],
+                                 subtype="FACTOR")
+    job_cities: IntProperty(name="Cities", description="Sampled design k is rendered in the city of seed "
+                            "Seed + (k mod Cities), as --cities", min=1, max=_MAX_CITIES,
+                            default=_RENDER_DEFAULTS["cities"])
 
     presets_folder: StringProperty(name="Presets", description="A folder of design presets written by "
                                    "`meta-sim infer`", subtype="DIR_PATH")

@@ -8,6 +8,7 @@ import ast
 import importlib.util
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tomllib
@@ -123,6 +124,7 @@ def settings(addon):
         setattr(s, name, value)
     s.bank_source = "DEFAULT"
     s.render_preset = "fast"
+    s.job_designs = "CURRENT"
     bpy.ops.meta_sim.load_bank()
     return s
 
@@ -321,6 +323,90 @@ def test_exported_job_runs_on_the_render_worker_and_the_preview_matches_it(setti
     preview = bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath)
     assert (read_rgb8(preview) == read_rgb8(first.with_suffix(".png"))).all()
     settings.sloped_share, settings.tree_density, settings.render_preset = 0.6, 0.4, "fast"
+
+
+def _population_job(settings, job_dir: Path, images: int, r: float, seed: int = 3) -> tuple[dict, list]:
+    """Export a job from the loaded population; its render-job.json and the jobs of its designs.json."""
+    import bpy
+
+    settings.seed, settings.job_images, settings.job_rejection = seed, images, r
+    settings.job_designs, settings.job_dir = "POPULATION", str(job_dir)
+    assert bpy.ops.meta_sim.export_job() == {"FINISHED"}
+    job = json.loads((job_dir / "render-job.json").read_text())
+    return job, json.loads(Path(job["designs_file"]).read_text())["jobs"]
+
+
+def test_export_from_the_loaded_population_samples_its_designs(addon, settings, preset_folder, tmp_path):
+    import bpy
+
+    settings.presets_folder = str(preset_folder)
+    bpy.ops.meta_sim.load_presets()
+    settings.job_cities = 3
+    members = [entry["design"] for entry in load_preset(preset_folder / "population.json").designs]
+    job, jobs = _population_job(settings, tmp_path / "r0", 12, 0.0)
+    assert [j["design"] in members for j in jobs] == [True] * 12  # r = 0: every design is the population's
+    assert len({json.dumps(j["design"]) for j in jobs}) == 2
+    assert [j["city_seed"] for j in jobs] == [3 + k % 3 for k in range(12)]
+    assert job["designs_file"] == str(tmp_path / "r0" / "tiles" / "designs.json")
+    assert load_preset(job["options"]["population"]).designs == load_preset(preset_folder / "population.json").designs
+    assert vars(build_argparser().parse_args(job["argv"]))["population"] == Path(job["options"]["population"])
+
+    _population_job(settings, tmp_path / "again", 12, 0.0)
+    assert (tmp_path / "again" / "tiles" / "designs.json").read_bytes() == Path(job["designs_file"]).read_bytes()
+
+    _, uniform = _population_job(settings, tmp_path / "r1", 40, 1.0)  # r = 1: every design a uniform draw
+    designs = [j["design"] for j in uniform]
+    assert sum(d in members for d in designs) <= 2 and len({json.dumps(d) for d in designs}) > 30
+    space = DesignSpace.load()
+    assert all(space.validate(d) == d for d in designs)
+    _, reseeded = _population_job(settings, tmp_path / "s4", 40, 1.0, seed=4)
+    assert [j["design"] for j in reseeded] != designs
+
+    calls = _draw_all(addon)
+    assert {"job_images", "job_rejection", "job_cities"} <= {args[1] for name, args, _ in calls if name == "prop"}
+
+
+def test_population_job_matches_what_the_cli_plans_and_renders(settings, preset_folder, tmp_path):
+    import bpy
+
+    settings.presets_folder = str(preset_folder)
+    bpy.ops.meta_sim.load_presets()
+    settings.job_cities = 2
+    job, jobs = _population_job(settings, tmp_path / "job", 4, 0.5)
+    # `meta-sim render` with the job's options (its --population, --images, -r, --seed, ...) records the same file
+    argv = job["argv"]
+    argv[argv.index("--out") + 1] = str(tmp_path / "cli")
+    done = subprocess.run([sys.executable, "-m", "meta_sim.cli", "render", *argv], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (tmp_path / "cli" / "designs.json").read_bytes() == Path(job["designs_file"]).read_bytes()
+    # the job's `meta-sim jobs plan` command plans the same designs in the same cities for the farm
+    plan = shlex.split(job["plan_command"])
+    assert plan[:3] == ["meta-sim", "jobs", "plan"]
+    done = subprocess.run([sys.executable, "-m", "meta_sim.cli", *plan[1:]], cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+    farm = json.loads((tmp_path / "job" / "farm-job.json").read_text())
+    pairs = list(dict.fromkeys(json.dumps([j["design"], j["city_seed"]]) for j in jobs))  # farm plans a pair once
+    assert [json.dumps([t["design"], t["city_seed"]]) for t in farm["tasks"]] == pairs
+    assert farm["out_dir"] == "tiles"
+    assert farm["space"] == json.loads((tmp_path / "job" / "design-space.json").read_text())
+
+
+def test_export_is_disabled_while_no_population_is_loaded(settings, preset_folder):
+    import bpy
+
+    settings.presets.clear()
+    settings.job_designs = "POPULATION"
+    assert not bpy.ops.meta_sim.export_job.poll()
+    with pytest.raises(RuntimeError, match="No population loaded"):
+        bpy.ops.meta_sim.export_job()
+    settings.presets_folder = str(preset_folder)
+    bpy.ops.meta_sim.load_presets()
+    assert bpy.ops.meta_sim.export_job.poll()
+    settings.presets.remove(next(k for k, row in enumerate(settings.presets) if row.kind == "population"))
+    assert not bpy.ops.meta_sim.export_job.poll()  # group presets alone are no population
+    settings.job_designs = "CURRENT"
+    assert bpy.ops.meta_sim.export_job.poll()
 
 
 def test_user_errors_are_reported_not_raised_as_tracebacks(settings, tmp_path):
