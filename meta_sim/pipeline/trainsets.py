@@ -28,9 +28,10 @@ COLOURS = ("srgb", "linear")
 
 class TileDataset(Dataset):
     """The rendered tiles (``*.exr``) of ``folder``, in name order; ``colour`` "srgb" (as previews show
-    them, and as real imagery is stored) or "linear" (as rendered)."""
+    them, and as real imagery is stored) or "linear" (as rendered); brought to ``working_pixel_size_m``
+    when given (images area-averaged, the building mask by majority, ids by nearest pixel)."""
 
-    def __init__(self, folder: str | Path, colour: str = "srgb"):
+    def __init__(self, folder: str | Path, colour: str = "srgb", working_pixel_size_m: float | None = None):
         if colour not in COLOURS:
             raise MetaSimError(f"colour must be one of {', '.join(COLOURS)}, not {colour!r}")
         folder = Path(folder)
@@ -39,7 +40,7 @@ class TileDataset(Dataset):
         self.paths = sorted(p for p in folder.glob("*.exr") if not p.name.startswith("."))
         if not self.paths:
             raise MetaSimError(f"no rendered tiles (*.exr) in {folder}; render some with `meta-sim render`")
-        self.colour = colour
+        self.colour, self.working = colour, _pixel_size(working_pixel_size_m)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -48,11 +49,18 @@ class TileDataset(Dataset):
         path = self.paths[index]
         tile = read_tile(path)
         rgb = linear_to_srgb(tile.rgb) if self.colour == "srgb" else np.clip(np.nan_to_num(tile.rgb), 0.0, None)
-        meta = {"path": str(path), "pixel_size_m": float(tile.meta.get("pixel_size_m", RENDER_PIXEL_SIZE_M)),
+        size = float(tile.meta.get("pixel_size_m", RENDER_PIXEL_SIZE_M))
+        building, roof_class, instance = tile.building > 0, tile.roof_class, tile.instance
+        if self.working and self.working != size:
+            rgb = resample(rgb, size, self.working)
+            building = resample(building[:, :, None].astype(np.float32), size, self.working)[:, :, 0] > 0.5
+            roof_class, instance = (_nearest(x, building.shape) for x in (roof_class, instance))
+            size = self.working
+        meta = {"path": str(path), "pixel_size_m": size,
                 "design": json.dumps(tile.meta.get("design", {}), sort_keys=True),
                 "city_seed": int(tile.meta.get("city_seed", -1)), "tile_index": int(tile.meta.get("tile_index", -1)),
                 "labels": "render"}
-        return _item(rgb, tile.building > 0, tile.roof_class, tile.instance, meta)
+        return _item(rgb, building, roof_class, instance, meta)
 
 
 class RealDataset(Dataset):
@@ -66,22 +74,31 @@ class RealDataset(Dataset):
         for folder in (images, masks):
             if not folder.is_dir():
                 raise MetaSimError(f"{folder} is not a folder")
-        for size in (pixel_size_m, working_pixel_size_m):
-            if size is not None and not (isinstance(size, (int, float)) and 0.01 <= size <= 100):
-                raise MetaSimError(f"pixel sizes must be between 0.01 and 100 metres, not {size!r}")
+        pixel_size_m, working_pixel_size_m = _pixel_size(pixel_size_m), _pixel_size(working_pixel_size_m)
         by_name = {p.name: p for p in masks.iterdir() if p.is_file() and not p.name.startswith(".")}
-        self.pairs = [(p, by_name[p.name]) for p in sorted(images.iterdir())
+        self.pairs = [(p, by_name[p.name], pixel_size_m) for p in sorted(images.iterdir())
                       if p.is_file() and not p.name.startswith(".") and p.name in by_name]
         if not self.pairs:
             raise MetaSimError(f"no image in {images} has a mask of the same name in {masks}")
-        self.pixel_size_m, self.working = pixel_size_m, float(working_pixel_size_m)
+        self.working = float(working_pixel_size_m)
+
+    @classmethod
+    def from_pairs(cls, pairs, working_pixel_size_m: float = RENDER_PIXEL_SIZE_M) -> RealDataset:
+        """Over explicit ``(image, mask, pixel size or None)`` triples, for images whose masks are not
+        named alike or whose pixel sizes differ."""
+        data = cls.__new__(cls)
+        data.pairs = [(Path(i), Path(m), _pixel_size(s)) for i, m, s in pairs]
+        if not data.pairs:
+            raise MetaSimError("no image/mask pairs given")
+        data.working = _pixel_size(working_pixel_size_m)
+        return data
 
     def __len__(self) -> int:
         return len(self.pairs)
 
     def __getitem__(self, index: int) -> dict:
-        image_path, mask_path = self.pairs[index]
-        size = self.pixel_size_m or image_pixel_size_m(image_path)
+        image_path, mask_path, size = self.pairs[index]
+        size = size or image_pixel_size_m(image_path)
         if size is None:
             raise MetaSimError(f"{image_path}: its pixel size is unknown; give it (pixel_size_m, --gsd)")
         rgb = resample(read_image(image_path), size, self.working)
@@ -92,6 +109,20 @@ class RealDataset(Dataset):
         meta = {"path": str(image_path), "pixel_size_m": self.working, "design": "", "city_seed": -1,
                 "tile_index": -1, "labels": "mask"}
         return _item(rgb, building > 0.5, zeros, zeros, meta)
+
+
+def _nearest(labels: np.ndarray, shape: tuple) -> np.ndarray:
+    """Labels (ids: never averaged) at the pixel nearest each output pixel's centre."""
+    rows = np.minimum(((np.arange(shape[0]) + 0.5) * labels.shape[0] / shape[0]).astype(int), labels.shape[0] - 1)
+    cols = np.minimum(((np.arange(shape[1]) + 0.5) * labels.shape[1] / shape[1]).astype(int), labels.shape[1] - 1)
+    return labels[np.ix_(rows, cols)]
+
+
+def _pixel_size(size):
+    if size is not None and (isinstance(size, bool) or not isinstance(size, (int, float))
+                             or not 0.01 <= size <= 100):
+        raise MetaSimError(f"pixel sizes must be between 0.01 and 100 metres, not {size!r}")
+    return None if size is None else float(size)
 
 
 def _item(rgb: np.ndarray, building: np.ndarray, roof_class: np.ndarray, instance: np.ndarray, meta: dict) -> dict:

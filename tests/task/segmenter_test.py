@@ -1,0 +1,115 @@
+"""The task model: it learns, is deterministic for a seed, mixes its sources as asked, scores right."""
+
+import numpy as np
+import pytest
+import torch
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.task.data import Pool
+from meta_sim.task.score import all_building, count, predict
+from meta_sim.task.train import TrainSettings, parse_mix, train_segmenter
+from meta_sim.task.unet import UNet, UNetConfig, load_encoder, load_segmenter, save_segmenter
+
+SMALL = dict(steps=40, batch=4, crop=32, mix=(3, 1), width=8, depth=3, lr=5e-3, pixel_size_m=0.6)
+
+
+def _pool(name, n=6, px=48, seed=0, roof=(0.8, 0.3, 0.2), ground=(0.3, 0.5, 0.25)):
+    """Images of coloured rectangles (buildings) on a noisy ground."""
+    rng = np.random.default_rng(seed)
+    images, masks = [], []
+    for _ in range(n):
+        image = np.clip(np.array(ground) + 0.05 * rng.standard_normal((px, px, 3)), 0, 1).astype(np.float32)
+        mask = np.zeros((px, px), bool)
+        for _ in range(3):
+            y, x, h, w = rng.integers(0, px - 12, 2).tolist() + rng.integers(6, 12, 2).tolist()
+            mask[y:y + h, x:x + w] = True
+        image[mask] = roof
+        images.append(image)
+        masks.append(mask)
+    return Pool(name, images, masks, 0.6, [f"{name}{k}" for k in range(n)])
+
+
+def test_training_is_deterministic_learns_and_round_trips(tmp_path):
+    real = _pool("real")
+    first = train_segmenter(real, None, TrainSettings(**SMALL, seed=3))
+    second = train_segmenter(real, None, TrainSettings(**SMALL, seed=3))
+    other = train_segmenter(real, None, TrainSettings(**SMALL, seed=4))
+    for a, b in zip(first.model.state_dict().values(), second.model.state_dict().values()):
+        assert torch.equal(a, b)
+    assert any(not torch.equal(a, b) for a, b in zip(first.model.state_dict().values(),
+                                                       other.model.state_dict().values()))
+    test = _pool("test", seed=9)
+    counts, called = count(first, test.images, test.masks)
+    trivial = all_building(test.masks).iou()
+    assert counts.iou() > trivial + 0.3  # an easy task, learnt well past "all building"
+    assert called[0].shape == test.masks[0].shape and called[0].dtype == bool
+    save_segmenter(tmp_path / "seg.pt", first)
+    back = load_segmenter(tmp_path / "seg.pt")
+    assert back.pixel_size_m == 0.6 and back.training["seed"] == 3 and back.training["real"]["images"] == 6
+    assert np.array_equal(predict(back, test.images[0]), predict(first, test.images[0]))
+
+
+def test_synthetic_crops_follow_the_mix_and_shape_what_is_learnt():
+    """Real roofs are red; synthetic ones blue. A blue-roofed test set is segmented well only by a
+    model that saw synthetic crops."""
+    real, synthetic = _pool("real"), _pool("synthetic", seed=1, roof=(0.2, 0.3, 0.9))
+    blue = _pool("blue", seed=5, roof=(0.2, 0.3, 0.9))
+    alone = train_segmenter(real, None, TrainSettings(**SMALL))
+    mixed = train_segmenter(real, synthetic, TrainSettings(**SMALL))
+    assert mixed.training["crops"] == [3, 1] and alone.training["crops"] == [4, 0]
+    assert count(mixed, blue.images, blue.masks)[0].iou() > count(alone, blue.images, blue.masks)[0].iou() + 0.1
+
+
+def test_predict_in_windows_equals_one_pass(monkeypatch):
+    segmenter = train_segmenter(_pool("real"), None, TrainSettings(**{**SMALL, "steps": 2}))
+    image = np.random.default_rng(0).random((70, 90, 3)).astype(np.float32)
+    whole = predict(segmenter, image)
+    import meta_sim.task.score as score
+
+    monkeypatch.setattr(score, "WINDOW", 32)
+    monkeypatch.setattr(score, "MARGIN", 16)
+    windowed = predict(segmenter, image)
+    assert whole.shape == (70, 90)
+    # away from the image border the margin covers the receptive field's reach that matters
+    assert np.abs(whole - windowed)[16:-16, 16:-16].max() < 0.05
+
+
+def test_counts_and_trivial_answer():
+    masks = [np.array([[1, 1], [0, 0]], bool), np.array([[0, 0], [0, 1]], bool)]
+    trivial = all_building(masks)
+    assert trivial.iou() == pytest.approx(3 / 8) and trivial.metrics()["recall"] == 1.0
+    assert trivial.iou(np.array([1, 1])) == pytest.approx(1 / 4)
+
+
+def test_mix_and_settings_are_checked():
+    assert parse_mix("6:1", 7) == (6, 1) and parse_mix("1:0", 7) == (7, 0) and parse_mix("0:1", 5) == (0, 5)
+    assert parse_mix("100:1", 7) == (6, 1)  # a synthetic share gets a crop
+    for bad in ("6", "a:b", "-1:2", "0:0"):
+        with pytest.raises(MetaSimError, match="--mix"):
+            parse_mix(bad, 7)
+    for bad in (dict(crop=30), dict(steps=0), dict(lr=0.0), dict(mix=(3, 3)), dict(width=2), dict(pixel_size_m=0)):
+        with pytest.raises(MetaSimError):
+            TrainSettings(**{**SMALL, **bad}).check()
+    with pytest.raises(MetaSimError, match="real and/or synthetic"):
+        train_segmenter(None, None, TrainSettings(**SMALL))
+    with pytest.raises(MetaSimError, match="m per pixel"):
+        train_segmenter(Pool("p", *[[np.zeros((8, 8, 3), np.float32)], [np.zeros((8, 8), bool)]], 0.3, ["x"]),
+                        None, TrainSettings(**SMALL))
+
+
+def test_encoder_plug_in_and_bad_checkpoints(tmp_path):
+    trained = train_segmenter(_pool("real"), None, TrainSettings(**{**SMALL, "steps": 3}))
+    save_segmenter(tmp_path / "seg.pt", trained)
+    fresh = UNet(UNetConfig(8, 3))
+    assert load_encoder(fresh, tmp_path / "seg.pt") > 0
+    assert torch.equal(fresh.encoder[0][0].weight, trained.model.encoder[0][0].weight)
+    with pytest.raises(MetaSimError, match="does not fit"):
+        load_encoder(UNet(UNetConfig(16, 3)), tmp_path / "seg.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(MetaSimError, match="not a segmenter checkpoint"):
+        load_segmenter(tmp_path / "junk.pt")
+    torch.save({"format": "something else"}, tmp_path / "other.pt")
+    with pytest.raises(MetaSimError, match="not a segmenter checkpoint"):
+        load_segmenter(tmp_path / "other.pt")
+    with pytest.raises(MetaSimError, match="not a file"):
+        load_segmenter(tmp_path / "missing.pt")
