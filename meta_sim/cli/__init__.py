@@ -3,7 +3,7 @@
 ``base`` holds the command group; each other module adds its commands to it when imported here.
 """
 
-from . import bench, export, jobs, learn, render, textures  # noqa: F401  (each registers its commands)
+from . import bench, export, jobs, learn, render, task, textures  # noqa: F401  (each registers its commands)
 from .base import main
 
 __all__ = ["main"]

@@ -146,3 +146,15 @@ def labelled_pool(folder, working_pixel_size_m: float, pixel_size_m: float | Non
     if any(p.suffix == ".exr" and not p.name.startswith(".") for p in folder.iterdir()):
         return tile_pool(folder, working_pixel_size_m, bars)
     return real_pool(folder, working_pixel_size_m, pixel_size_m, bars)
+
+
+def merge(pools: list[Pool]) -> Pool | None:
+    """One pool of several (None for none); all at one pixel size."""
+    if not pools:
+        return None
+    if len({p.pixel_size_m for p in pools}) > 1:
+        raise MetaSimError("pools at different pixel sizes cannot be merged")
+    if len(pools) == 1:
+        return pools[0]
+    return Pool("+".join(p.name for p in pools), [i for p in pools for i in p.images],
+                [m for p in pools for m in p.masks], pools[0].pixel_size_m, [s for p in pools for s in p.sources])

@@ -1,0 +1,106 @@
+"""`meta-sim task train | eval`: the building segmenter trained on real and rendered images, and scored."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..core.errors import MetaSimError
+from ..core.fileio import writable_dir, write_text_atomic
+from .base import _Bars, _torch_threads, main
+
+SHEET_ROWS = 8
+
+
+@main.group("task")
+def task():
+    """The task model: a building segmenter (U-Net) for the target imagery."""
+
+
+@task.command("train")
+@click.option("--real", type=click.Path(path_type=Path), multiple=True,
+              help="labelled real images: a folder with images/ and masks/ (same names); repeatable")
+@click.option("--synthetic", type=click.Path(path_type=Path), multiple=True,
+              help="rendered tiles (*.exr, e.g. from `meta-sim render --population`); repeatable")
+@click.option("--mix", default="6:1", show_default=True,
+              help="real:synthetic crops per batch when both are given (the paper's 6:1)")
+@click.option("--steps", type=int, default=600, show_default=True, help="training steps (batches)")
+@click.option("--batch", type=int, default=7, show_default=True, help="crops per step")
+@click.option("--crop", type=int, default=96, show_default=True, help="crop side in working pixels")
+@click.option("--lr", type=float, default=2e-3, show_default=True, help="Adam learning rate (dropped 10x at 5/8)")
+@click.option("--gsd", type=float, default=0.6, show_default=True,
+              help="working metres per pixel: every image is brought to it")
+@click.option("--real-gsd", type=float, default=None,
+              help="metres per pixel of real images whose files do not say (GeoTIFF, world file)")
+@click.option("--augment/--no-augment", default=True, show_default=True,
+              help="random rotations, flips and colour balance of the crops")
+@click.option("--width", type=int, default=16, show_default=True, help="U-Net channels at the first level")
+@click.option("--depth", type=int, default=4, show_default=True, help="U-Net levels")
+@click.option("--encoder", type=click.Path(path_type=Path), default=None,
+              help="start from the encoder of this segmenter checkpoint (a local file)")
+@click.option("--seed", type=int, default=0, show_default=True, help="weights and crops")
+@click.option("--out", type=click.Path(path_type=Path), required=True, help="the checkpoint to write (.pt)")
+@_torch_threads
+def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, augment, width, depth, encoder, seed,
+                  out):
+    """Train a building segmenter on real and/or rendered images; deterministic for a seed."""
+    from ..task.data import merge, real_pool, tile_pool
+    from ..task.train import TrainSettings, parse_mix, train_segmenter
+    from ..task.unet import save_segmenter
+
+    if not real and not synthetic:
+        raise MetaSimError("give --real and/or --synthetic training folders")
+    settings = TrainSettings(steps=steps, batch=batch, crop=crop, lr=lr, mix=parse_mix(mix, batch)
+                             if real and synthetic else (batch, 0), pixel_size_m=gsd, augment=augment, seed=seed,
+                             width=width, depth=depth, encoder=str(encoder) if encoder else None).check()
+    writable_dir(out.parent)
+    bars = _Bars()
+    try:
+        real_images = merge([real_pool(f, gsd, real_gsd, bars) for f in real])
+        rendered = merge([tile_pool(f, gsd, bars) for f in synthetic])
+        segmenter = train_segmenter(real_images, rendered, settings, bars("train segmenter", steps))
+    finally:
+        bars.close()
+    save_segmenter(out, segmenter)
+    crops = segmenter.training["crops"]
+    click.echo(f"wrote {out}: {steps} steps of {crops[0]} real + {crops[1]} synthetic crops of {crop} px "
+               f"at {gsd} m per pixel")
+
+
+@task.command("eval")
+@click.argument("model", type=click.Path(path_type=Path))
+@click.argument("labelled", type=click.Path(path_type=Path))
+@click.option("--real-gsd", type=float, default=None,
+              help="metres per pixel of real images whose files do not say")
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="folder for scores.json and predictions.png")
+@_torch_threads
+def eval_command(model, labelled, real_gsd, out):
+    """Score a segmenter on LABELLED (rendered tiles, or images/ and masks/): IoU, precision, recall."""
+    from ..task.data import labelled_pool
+    from ..task.score import all_building, count, overlay, prediction_sheet, truth_picture
+    from ..task.unet import load_segmenter
+
+    segmenter = load_segmenter(model)
+    writable_dir(out)
+    bars = _Bars()
+    try:
+        pool = labelled_pool(labelled, segmenter.pixel_size_m, real_gsd, bars)
+        counts, called = count(segmenter, pool.images, pool.masks)
+    finally:
+        bars.close()
+    metrics = counts.metrics()
+    scores = {**metrics, "all_building_iou": all_building(pool.masks).iou(), "images": len(pool),
+              "pixel_size_m": segmenter.pixel_size_m, "model": str(model), "labelled": str(labelled),
+              "per_image": [{"source": s, "tp": int(tp), "fp": int(fp), "fn": int(fn)}
+                            for s, tp, fp, fn in zip(pool.sources, counts.tp, counts.fp, counts.fn)]}
+    write_text_atomic(out / "scores.json", json.dumps(scores, indent=2) + "\n")
+    rows = [[("LABELS", truth_picture(image, mask)), ("PREDICTED", overlay(image, mask, c))]
+            for image, mask, c in list(zip(pool.images, pool.masks, called))[:SHEET_ROWS]]
+    prediction_sheet(out / "predictions.png", rows)
+    click.echo(f"IoU {metrics['iou']:.3f}  precision {metrics['precision']:.3f}  recall {metrics['recall']:.3f}  "
+               f"(all-building IoU {scores['all_building_iou']:.3f}) on {len(pool)} images")
+    click.echo(f"wrote {out / 'scores.json'} and {out / 'predictions.png'} (green hits, red false alarms, "
+               f"blue misses)")
