@@ -118,10 +118,6 @@ def bench_farm_command(out, docs, designs, tiles):
     _publish(result, out, format_farm_table(result), "farm", docs)
 
 
-if __name__ == "__main__":
-    main()
-
-
 @bench.command("infer")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/infer.json"), show_default=True)
@@ -152,3 +148,37 @@ def bench_infer_command(out, docs, model, sizes, big_px, realdata, cache):
         bars.close()
     result = bench_infer(Path(model), counts, big_px, realdata or REALDATA)
     _publish(result, out, format_infer_table(result), "infer", docs)
+
+
+@bench.command("task")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/task.json"), show_default=True)
+@click.option("--pictures", type=click.Path(path_type=Path), default=Path("benchmarks/task"), show_default=True,
+              help="folder for each experiment's predictions PNG")
+@click.option("--quick", is_flag=True, help="a few-minute smoke run with tiny models (not a measurement; no docs)")
+@click.option("--realdata", type=click.Path(path_type=Path), default=None,
+              help="the shared real domains (default: ../shared/realdata beside the repository)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_torch_threads
+def bench_task_command(out, docs, pictures, quick, realdata, cache):
+    """The task model (building IoU) for E1, E2 and E3 per augmentation strategy, and the sim-only
+    transfer on each real domain, beside the paper's U-Net."""
+    from dataclasses import replace
+
+    from ..experiments.task_eval import TaskEvalSettings, run_task_eval, task_markdown
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.workflow import ModelSettings
+    from .learn import quick_models
+
+    dataset, models, settings = DatasetConfig(), ModelSettings(), TaskEvalSettings()
+    if quick:
+        dataset, models = quick_models(dataset, models)
+        settings = TaskEvalSettings.quick()
+        settings = replace(settings, train=replace(settings.train, pixel_size_m=dataset.pixel_size_m))
+        docs = False
+    bars = _Bars()
+    try:
+        result = run_task_eval(["e1", "e2", "e3"], pictures, dataset, models, settings, cache, realdata, True, bars)
+    finally:
+        bars.close()
+    _publish(result, out, task_markdown(result), "task", docs)

@@ -185,29 +185,89 @@ def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views
     click.echo(f"{report['group_count']} presets in {out / 'presets'}, population in {out / 'population.json'}")
 
 
-@main.command("eval")
-@click.argument("experiment", type=click.Choice(["e1", "e2"]))
-@click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for results and nams.pt")
-@click.option("--targets", type=int, default=20, show_default=True, help="target groups")
-@click.option("--target-tiles", type=int, default=9, show_default=True,
-              help="tiles per target group (the paper's groups have 9)")
-@click.option("--seed", type=int, default=1, show_default=True, help="target seed")
-@click.option("--ms2/--no-ms2", default=True, show_default=True,
-              help="run the MS2 baseline (computes and caches features of every training tile once)")
+@main.group("eval")
+def eval_group():
+    """The paper's experiments: design recovery (e1, e2) and the task model (task e1|e2|e3)."""
+
+
+def _design_eval(experiment: str, summary: str):
+    @click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for results and nams.pt")
+    @click.option("--targets", type=int, default=20, show_default=True, help="target groups")
+    @click.option("--target-tiles", type=int, default=9, show_default=True,
+                  help="tiles per target group (the paper's groups have 9)")
+    @click.option("--seed", type=int, default=1, show_default=True, help="target seed")
+    @click.option("--ms2/--no-ms2", default=True, show_default=True,
+                  help="run the MS2 baseline (computes and caches features of every training tile once)")
+    @_dataset_options
+    @_search_options
+    @_torch_threads
+    def command(out, targets, target_tiles, seed, ms2, M, k, S, iterations, lr, r, **o):
+        from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
+
+        dataset, settings = _configs(o)
+        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
+                                     iterations=iterations, lr=lr, r=r)
+        eval_settings.check()
+        writable_dir(out)
+        bars = _Bars()
+        results = run_eval(experiment, out, dataset, settings, eval_settings, o["cache"], bars)
+        bars.close()
+        click.echo(results_markdown(results))
+        click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}")
+
+    command.__doc__ = summary
+    eval_group.command(experiment)(command)
+
+
+_design_eval("e1", "E1 (bank designs, unseen cities): top-1/top-10 of every method.")
+_design_eval("e2", "E2 (held-out textures, the design gap): top-1/top-10 of every method.")
+
+
+@eval_group.command("task")
+@click.argument("experiments", nargs=-1, required=True, type=click.Choice(["e1", "e2", "e3"]))
+@click.option("--out", type=click.Path(path_type=Path), required=True,
+              help="folder for task.json, task.md and the predictions PNGs")
+@click.option("--sim-only/--no-sim-only", default=False, show_default=True,
+              help="also the sim-only transfer: rendered-only training on each real domain")
+@click.option("--quick", is_flag=True, help="a few-minute smoke run (tiny models and sets; not a measurement)")
+@click.option("--seeds", default="0,1,2", show_default=True, help="segmenter training seeds (at least 3 to report)")
+@click.option("--steps", type=int, default=None, help="segmenter training steps [default: 500]")
+@click.option("--realdata", type=click.Path(path_type=Path), default=None,
+              help="the shared real domains (default: ../shared/realdata beside the repository)")
 @_dataset_options
-@_search_options
 @_torch_threads
-def eval_command(experiment, out, targets, target_tiles, seed, ms2, M, k, S, iterations, lr, r, **o):
-    """E1 (bank designs, unseen cities) or E2 (held-out textures): top-1/top-10 for all methods."""
-    from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
+def eval_task_command(experiments, out, sim_only, quick, seeds, steps, realdata, **o):
+    """The task model per augmentation strategy (none, uniform, DR, MS2, NAMS, GT): IoU on the targets."""
+    from dataclasses import replace
+
+    from ..experiments.task_eval import TaskEvalSettings, run_task_eval, task_markdown
 
     dataset, settings = _configs(o)
-    eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
-                                 iterations=iterations, lr=lr, r=r)
-    eval_settings.check()
+    task_settings = TaskEvalSettings.quick() if quick else TaskEvalSettings()
+    try:
+        task_settings = replace(task_settings, seeds=tuple(int(x) for x in seeds.split(",")))
+    except ValueError:
+        raise MetaSimError(f"--seeds takes comma-separated integers, not {seeds!r}") from None
+    if steps is not None:
+        task_settings = replace(task_settings, train=replace(task_settings.train, steps=steps))
+    if quick:
+        dataset, settings = quick_models(dataset, settings)
+        task_settings = replace(task_settings, train=replace(task_settings.train, pixel_size_m=dataset.pixel_size_m))
+    task_settings.check()
     writable_dir(out)
     bars = _Bars()
-    results = run_eval(experiment, out, dataset, settings, eval_settings, o["cache"], bars)
-    bars.close()
-    click.echo(results_markdown(results))
-    click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}")
+    try:
+        results = run_task_eval(list(dict.fromkeys(experiments)), out, dataset, settings, task_settings, o["cache"],
+                                realdata, sim_only, bars)
+    finally:
+        bars.close()
+    click.echo(task_markdown(results))
+    click.echo(f"task.json, task.md and the predictions PNGs are in {out}")
+
+
+def quick_models(dataset, settings):
+    """The quick run's training set and models: tiny, coarse and fast (a smoke test, not a measurement)."""
+    from dataclasses import replace
+
+    return (replace(dataset, designs=24, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2),
+            replace(settings, nams={"hidden": [64, 128]}, train={"max_epochs": 40}))

@@ -26,7 +26,7 @@ def task():
               help="rendered tiles (*.exr, e.g. from `meta-sim render --population`); repeatable")
 @click.option("--mix", default="6:1", show_default=True,
               help="real:synthetic crops per batch when both are given (the paper's 6:1)")
-@click.option("--steps", type=int, default=600, show_default=True, help="training steps (batches)")
+@click.option("--steps", type=int, default=500, show_default=True, help="training steps (batches)")
 @click.option("--batch", type=int, default=7, show_default=True, help="crops per step")
 @click.option("--crop", type=int, default=96, show_default=True, help="crop side in working pixels")
 @click.option("--lr", type=float, default=2e-3, show_default=True, help="Adam learning rate (dropped 10x at 5/8)")

@@ -214,52 +214,85 @@ class EvalContext:
     training_designs: list = ()  # the training set's designs: E1 also scores the targets it lacks
 
 
-def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
-                 bars: Bars | None = None) -> EvalContext:
-    """Build or reuse the training set and models; render the targets and compute their features.
+@dataclass
+class Methods:
+    """The trained models every method needs: NAMS and DR checkpoints, the feature extractor, and
+    (for MS2) the training set's per-tile features."""
 
-    ``experiment`` is "e1" or "e2"; ``dataset`` a DatasetConfig and ``models_settings`` a
-    ModelSettings (``pipeline.workflow``); training sets, models and targets are cached under
-    ``root``. With ``settings.ms2`` the training set's per-tile features are computed too (MS2's
-    pool). Returns the EvalContext every method is scored with. Raises MetaSimError for an unknown
-    experiment or preset, a missing ``bpy`` while something is left to render, or what
-    ``ensure_models`` raises.
-    """
-    import time
+    models: object  # workflow.Models
+    nams: object  # nams.Checkpoint
+    dr: object
+    extractor: object
+    pool: object = None
 
+
+def load_methods(dataset, models_settings, root: Path, ms2: bool = True, bars: Bars | None = None) -> Methods:
+    """Build or reuse the training set and models (and with ``ms2`` the MS2 pool) under ``root``."""
     from ..nams import load_checkpoint
-    from ..pipeline.dataset import job_tiles
-    from ..pipeline.features import features_for_groups
     from ..pipeline.roofcolour import checkpoint_extractor
     from ..pipeline.workflow import ensure_models
-    from ..render.jobs import sample_designs
-    from ..sim.imageio import read_image
-    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
     models = ensure_models(dataset, models_settings, root, bars)
     nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
-    tiles = settings.tiles
-    jobs, folder = render_targets(experiment, settings.targets, tiles, settings.seed,
-                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bars)
     extractor = checkpoint_extractor(nams, Path(models_settings.weights) if models_settings.weights else None)
-    started = time.perf_counter()
-    # Every tile x view weighs the same in a group's mean, so the mean of the tiles' features is the group's.
-    singles = [[read_image(p)] for job in jobs for p in job_tiles(folder, job.name, tiles)]
-    tile_feats = features_for_groups(singles, extractor, models_settings.views,
-                                     progress=bars(f"{experiment} target features", len(singles)) if bars else None)
-    tile_feats = tile_feats.reshape(len(jobs), tiles, -1)
-    feature_seconds = (time.perf_counter() - started) / len(jobs)
-    ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
     pool = None
-    if settings.ms2:
+    if ms2:
         from ..pipeline.dataset import build_tile_features
         from ..pipeline.workflow import dataset_dir
 
         pool = build_tile_features(dataset_dir(dataset, root), dataset, extractor, models_settings.views,
                                    bars("MS2 pool: training tile features", dataset.designs) if bars else None)
-    training_designs = sample_designs(nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
-    return EvalContext(experiment, models, nams, dr, jobs, folder, tiles, tile_feats.mean(dim=1), tile_feats,
-                       feature_seconds, ranks, pool, training_designs)
+    return Methods(models, nams, dr, extractor, pool)
+
+
+def group_features(groups: list[list[np.ndarray]], extractor, views: int, label: str,
+                   bars: Bars | None = None) -> tuple[object, list]:
+    """Each group's features (the mean over its tiles x views) and each tile's (views averaged)."""
+    import torch
+
+    from ..pipeline.features import features_for_groups
+
+    # Every tile x view weighs the same in a group's mean, so the mean of the tiles' features is the group's.
+    singles = [[tile] for group in groups for tile in group]
+    feats = features_for_groups(singles, extractor, views, progress=bars(label, len(singles)) if bars else None)
+    per_group = list(torch.split(feats, [len(g) for g in groups]))
+    return torch.stack([f.mean(dim=0) for f in per_group]), per_group
+
+
+def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
+                 bars: Bars | None = None, test_tiles: int = 0) -> EvalContext:
+    """Build or reuse the training set and models; render the targets and compute their features.
+
+    ``experiment`` is "e1" or "e2"; ``dataset`` a DatasetConfig and ``models_settings`` a
+    ModelSettings (``pipeline.workflow``); training sets, models and targets are cached under
+    ``root``. With ``settings.ms2`` the training set's per-tile features are computed too (MS2's
+    pool). ``test_tiles`` more tiles of each target are rendered after the ``settings.tiles`` the
+    methods see (labelled test tiles for a task model; the features never use them). Returns the
+    EvalContext every method is scored with. Raises MetaSimError for an unknown experiment or
+    preset, a missing ``bpy`` while something is left to render, or what ``ensure_models`` raises.
+    """
+    import time
+
+    from ..pipeline.dataset import job_tiles
+    from ..render.jobs import sample_designs
+    from ..sim.imageio import read_image
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+
+    methods = load_methods(dataset, models_settings, root, settings.ms2, bars)
+    tiles = settings.tiles
+    jobs, folder = render_targets(experiment, settings.targets, tiles + test_tiles, settings.seed,
+                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bars)
+    started = time.perf_counter()
+    groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job in jobs]
+    features, per_tile = group_features(groups, methods.extractor, models_settings.views,
+                                        f"{experiment} target features", bars)
+    feature_seconds = (time.perf_counter() - started) / len(jobs)
+    ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
+    training_designs = sample_designs(methods.nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
+    import torch
+
+    return EvalContext(experiment, methods.models, methods.nams, methods.dr, jobs, folder, tiles, features,
+                       torch.stack(per_tile), feature_seconds, ranks, methods.pool, training_designs)
 
 
 def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:

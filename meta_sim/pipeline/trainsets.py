@@ -42,6 +42,18 @@ class TileDataset(Dataset):
             raise MetaSimError(f"no rendered tiles (*.exr) in {folder}; render some with `meta-sim render`")
         self.colour, self.working = colour, _pixel_size(working_pixel_size_m)
 
+    @classmethod
+    def from_paths(cls, paths, colour: str = "srgb", working_pixel_size_m: float | None = None) -> TileDataset:
+        """Over the given tile files, in the order given (for example some tiles of each target city)."""
+        if colour not in COLOURS:
+            raise MetaSimError(f"colour must be one of {', '.join(COLOURS)}, not {colour!r}")
+        data = cls.__new__(cls)
+        data.paths = [Path(p) for p in paths]
+        if not data.paths:
+            raise MetaSimError("no rendered tiles given")
+        data.colour, data.working = colour, _pixel_size(working_pixel_size_m)
+        return data
+
     def __len__(self) -> int:
         return len(self.paths)
 

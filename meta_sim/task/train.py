@@ -28,7 +28,7 @@ LR_DROP_AT = 5 / 8
 
 @dataclass(frozen=True)
 class TrainSettings:
-    steps: int = 600
+    steps: int = 500
     batch: int = 7  # crops per step
     crop: int = 96  # pixels at the working pixel size
     lr: float = 2e-3
