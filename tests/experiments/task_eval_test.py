@@ -1,0 +1,96 @@
+"""The task-model experiments: paired intervals, the strategies' synthetic sets, the real splits, and
+(slow) the quick benchmark end to end."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.experiments import realdomains
+from meta_sim.experiments.task_eval import TaskEvalSettings, paired_difference, summarise, task_markdown
+from meta_sim.task.score import Counts
+
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
+
+
+def _counts(iou_per_tile, n=40, seed=0):
+    """Counts whose tiles have about the given IoU (tp / (tp + fp + fn)), with noise."""
+    rng = np.random.default_rng(seed)
+    tp = rng.integers(50, 150, n)
+    wrong = np.round(tp * (1 / np.clip(iou_per_tile + 0.05 * rng.standard_normal(n), 0.05, 1) - 1)).astype(int)
+    return Counts(tp, wrong // 2, wrong - wrong // 2)
+
+
+def test_paired_difference_finds_a_real_gap_and_not_a_null_one():
+    better = [_counts(0.7, seed=s) for s in range(3)]
+    worse = [_counts(0.6, seed=s + 10) for s in range(3)]
+    gap = paired_difference(better, worse, resamples=500)
+    assert 0.05 < gap["difference"] < 0.15 and gap["low"] > 0 and gap["high"] > gap["low"]
+    same = paired_difference(better, better, resamples=200)
+    assert same["difference"] == 0 and same["low"] == 0 == same["high"]
+    noisy = paired_difference([_counts(0.6, seed=1)], [_counts(0.6, seed=2)], resamples=500)
+    assert noisy["low"] < 0 < noisy["high"]
+
+
+def test_summary_and_table_have_every_strategy_and_the_paper():
+    counts = {"none": [_counts(0.3, seed=s) for s in range(3)], "uniform": [_counts(0.6, seed=s) for s in range(3)],
+              "nams": [_counts(0.65, seed=s) for s in range(3)]}
+    summary = summarise(counts)
+    assert set(summary) == {"none", "uniform", "nams"} and "vs_uniform" not in summary["uniform"]
+    assert summary["nams"]["vs_uniform"]["difference"] > 0 and len(summary["none"]["iou_per_seed"]) == 3
+    results = {"settings": {"seeds": [0, 1, 2]}, "experiments": {"e1": {"strategies": summary, "test_tiles": 40}},
+               "sim_only": {"domains": {"rio": {"rendered_only": {"iou": 0.1, "iou_std": 0.01},
+                                                "other_real": {"iou": 0.3, "iou_std": 0.02},
+                                                "other_domains": ["banepa"], "all_building": 0.1}}}}
+    table = task_markdown(results)
+    assert "| E1 paper | 47.8 | 77.6 | 83.4 | 79.1 | 81.8 | 84.3 | +4.2 |" in table
+    assert "| rio | 10.0 +- 1.0 | 30.0 +- 2.0 (banepa) | 10.0 |" in table
+
+
+def test_settings_are_checked():
+    TaskEvalSettings().check()
+    TaskEvalSettings.quick().check()
+    for bad in (dict(groups=0), dict(seeds=()), dict(seeds=(1, 1)), dict(r_real=1.5), dict(test_tiles=True)):
+        with pytest.raises(MetaSimError):
+            TaskEvalSettings(**bad).check()
+
+
+@pytest.mark.skipif(not (REALDATA / "banepa").is_dir(), reason="../shared/realdata is not beside the project")
+def test_real_domains_split_into_disjoint_adapt_and_test_scenes():
+    for domain in realdomains.DOMAINS:
+        scenes = realdomains.scenes(domain, REALDATA)
+        adapt, test = realdomains.split(scenes)
+        assert adapt and test and not {s.name for s in adapt} & {s.name for s in test}
+        assert len(adapt) + len(test) == len(scenes)
+        image, mask = realdomains.at_pixel_size(test[0], 0.6)
+        assert image.shape[:2] == mask.shape and mask.dtype == bool
+    kampala = realdomains.scenes("kampala", REALDATA)
+    assert len(kampala) == 7 and all(s.image.shape[0] <= 256 for s in kampala)
+    with pytest.raises(MetaSimError, match="pass --realdata"):
+        realdomains.scenes("banepa", REALDATA / "nowhere")
+    with pytest.raises(MetaSimError, match="unknown real domain"):
+        realdomains.scenes("paris", REALDATA)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (REALDATA / "banepa").is_dir(), reason="../shared/realdata is not beside the project")
+def test_quick_task_benchmark_end_to_end(tmp_path):
+    """`meta-sim bench task --quick` from an empty cache: every experiment, strategy and domain."""
+    from meta_sim.cli import main
+
+    out = tmp_path / "task.json"
+    result = CliRunner().invoke(main, ["bench", "task", "--quick", "--out", str(out), "--pictures",
+                                       str(tmp_path / "pictures"), "--cache", str(tmp_path / "cache")])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    for e in ("e1", "e2", "e3"):
+        strategies = data["experiments"][e]["strategies"]
+        assert set(strategies) == {"none", "uniform", "dr", "ms2", "nams", "gt"}
+        assert all(0 <= s["iou"] <= 1 and len(s["iou_per_seed"]) == 2 for s in strategies.values())
+        assert "vs_uniform" in strategies["nams"]
+        assert (tmp_path / "pictures" / f"{e}-predictions.png").is_file()
+    assert set(data["sim_only"]["domains"]) == set(realdomains.DOMAINS)
+    assert "| E3 paper |" in result.output
