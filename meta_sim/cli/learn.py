@@ -254,6 +254,9 @@ def eval_task_command(experiments, out, sim_only, quick, seeds, steps, realdata,
         dataset, settings = quick_models(dataset, settings)
         task_settings = replace(task_settings, train=replace(task_settings.train, pixel_size_m=dataset.pixel_size_m))
     task_settings.check()
+    from ..experiments.realdomains import REALDATA, require
+
+    realdata = require(realdata or REALDATA)
     writable_dir(out)
     bars = _Bars()
     try:

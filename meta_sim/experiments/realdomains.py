@@ -51,16 +51,24 @@ def _pairs(realdata: Path, domain: str) -> list[tuple[Path, Path, float]]:
     raise MetaSimError(f"unknown real domain {domain!r}; choose from {', '.join(DOMAINS)}")
 
 
+def require(realdata: Path = REALDATA, domains=DOMAINS) -> Path:
+    """``realdata`` when every file of ``domains`` is there; MetaSimError naming the first one missing."""
+    realdata = Path(realdata)
+    for domain in domains:
+        pairs = _pairs(realdata, domain)
+        missing = [str(p) for pair in pairs for p in pair[:2] if not p.is_file()]
+        if not pairs or missing:
+            raise MetaSimError(f"the shared real domain {domain!r} is not in {realdata} "
+                               f"({missing[0] if missing else 'no images'}); pass --realdata")
+    return realdata
+
+
 def scenes(domain: str, realdata: Path = REALDATA) -> list[Scene]:
     """A domain's labelled scenes at their own pixel size; MetaSimError when the files are missing."""
     from ..sim.imageio import cut_tiles, read_image, read_rgb8
 
-    realdata = Path(realdata)
+    realdata = require(realdata, (domain,))
     pairs = _pairs(realdata, domain)
-    missing = [str(p) for pair in pairs for p in pair[:2] if not p.is_file()]
-    if not pairs or missing:
-        raise MetaSimError(f"the shared real domain {domain!r} is not in {realdata} "
-                           f"({missing[0] if missing else 'no images'}); pass --realdata")
     out = []
     for image_path, mask_path, size in pairs:
         image = read_image(image_path)

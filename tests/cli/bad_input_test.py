@@ -46,6 +46,13 @@ BAD = [
     ("jobs", "plan", *DESIGN, "--tiles", "0", "--out", "{tmp}/job.json"),
     ("jobs", "status", "{tmp}/missing.json"),
     ("jobs", "run", "{tmp}/missing.json"),
+    ("eval", "task", "e1", "--out", "{tmp}/out", "--seeds", "x", "--cache", "{tmp}/cache"),
+    ("eval", "task", "e1", "--out", "{tmp}/out", "--steps", "0", "--cache", "{tmp}/cache"),
+    ("eval", "task", "e3", "--out", "{tmp}/out", "--realdata", "{tmp}/nowhere", "--cache", "{tmp}/cache"),
+    ("task", "train", "--real", "{tmp}/nowhere", "--out", "{tmp}/seg.pt"),
+    ("task", "train", "--real", "{tmp}", "--steps", "0", "--out", "{tmp}/seg.pt"),
+    ("task", "eval", "{tmp}/seg.pt", "{tmp}", "--out", "{tmp}/scores"),
+    ("export", "{tmp}/no-tiles", "--out", "{tmp}/exported"),
 ]
 
 
