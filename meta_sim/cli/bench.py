@@ -178,7 +178,8 @@ def bench_task_command(out, docs, pictures, quick, realdata, cache):
         docs = False
     bars = _Bars()
     try:
-        result = run_task_eval(["e1", "e2", "e3"], pictures, dataset, models, settings, cache, realdata, True, bars)
+        result = run_task_eval(["e1", "e2", "e3"], pictures, dataset, models, settings, cache, realdata, True, bars,
+                               write=False)
     finally:
         bars.close()
     _publish(result, out, task_markdown(result), "task", docs)
