@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -71,6 +71,11 @@ bench-infer: setup
 # default model is cached; both CPUs train).
 bench-task: setup
 	META_SIM_THREADS=2 $(BIN)/meta-sim bench task --out benchmarks/task.json --pictures benchmarks/task
+
+# How close renders are to each real domain (sim-only building IoU and a real-vs-rendered classifier);
+# shares bench-task's cache of trained segmenters.
+bench-realism: setup
+	META_SIM_THREADS=2 $(BIN)/meta-sim bench realism --out benchmarks/realism.json --pictures benchmarks/realism
 
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json

@@ -183,3 +183,37 @@ def bench_task_command(out, docs, pictures, quick, realdata, cache):
     finally:
         bars.close()
     _publish(result, out, task_markdown(result), "task", docs)
+
+
+@bench.command("realism")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/realism.json"), show_default=True)
+@click.option("--pictures", type=click.Path(path_type=Path), default=Path("benchmarks/realism"), show_default=True,
+              help="folder for realism.png (real scenes beside renders of their inferred designs)")
+@click.option("--quick", is_flag=True, help="a smoke run with tiny models (not a measurement; no docs)")
+@click.option("--realdata", type=click.Path(path_type=Path), default=None,
+              help="the shared real domains (default: ../shared/realdata beside the repository)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_torch_threads
+def bench_realism_command(out, docs, pictures, quick, realdata, cache):
+    """How close renders are to each real domain: sim-only building IoU against the other real domains
+    and the all-building answer, and a real-versus-rendered classifier's accuracy."""
+    from dataclasses import replace
+
+    from ..experiments.task_eval import TaskEvalSettings, realism_markdown, run_realism
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.workflow import ModelSettings
+    from .learn import quick_models
+
+    dataset, models, settings = DatasetConfig(), ModelSettings(), TaskEvalSettings()
+    if quick:
+        dataset, models = quick_models(dataset, models)
+        settings = TaskEvalSettings.quick()
+        settings = replace(settings, train=replace(settings.train, pixel_size_m=dataset.pixel_size_m))
+        docs = False
+    bars = _Bars()
+    try:
+        result = run_realism(dataset, models, settings, pictures, cache, realdata, bars)
+    finally:
+        bars.close()
+    _publish(result, out, realism_markdown(result), "realism", docs, pictures / "realism.png")

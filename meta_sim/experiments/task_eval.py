@@ -325,14 +325,16 @@ def run_real(h: Harness, out: Path) -> dict:
     return result
 
 
-def run_sim_only(h: Harness, out: Path) -> dict:
+def run_sim_only(h: Harness, out: Path, realness: bool = False) -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
-    domains vs all-building, scored on the domain's test scenes."""
+    domains vs all-building, scored on the domain's test scenes. With ``realness`` also the accuracy
+    of a real-versus-rendered classifier (``task.realness``; held-out real scenes against renders in
+    held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them."""
     from ..task.data import merge
     from ..task.score import all_building, count
 
     s = h.settings
-    rows = {}
+    rows, picture = {}, []
     for domain in realdomains.DOMAINS:
         adapt, test = realdomains.split(realdomains.scenes(domain, h.realdata))
         designs = _infer_real(h, adapt, s.target_seed, domain)["nams"]
@@ -347,7 +349,41 @@ def run_sim_only(h: Harness, out: Path) -> dict:
         rows[domain] = {"rendered_only": _mean_iou(sim), "other_real": _mean_iou(real), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
                         "test_tiles": len(test_pool)}
+        if realness:
+            adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
+            rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
+            picture.append([(f"REAL {domain}", _srgb8(i)) for i in adapt_pool.images[:3]] +
+                           [("RENDERED", _srgb8(i)) for i in rendered.images[:3]])
+    if picture:
+        from ..task.score import prediction_sheet
+
+        prediction_sheet(out / "realism.png", picture)
     return {"domains": rows}
+
+
+def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, rendered: Pool) -> dict:
+    """The real-versus-rendered accuracy per seed: renders of the first half of the cities train,
+    the second half score."""
+    from ..task.realness import RealnessSettings, realness_accuracy
+
+    half = len(rendered) // 2
+    train = Pool(rendered.name, rendered.images[:half], rendered.masks[:half], rendered.pixel_size_m,
+                 rendered.sources[:half])
+    test = Pool(rendered.name, rendered.images[half:], rendered.masks[half:], rendered.pixel_size_m,
+                rendered.sources[half:])
+    settings = RealnessSettings(crop=min(64, *(min(m.shape) for m in real_train.masks + real_test.masks)))
+    accuracy = []
+    for seed in h.settings.seeds:
+        progress = h.bars(f"{domain} real-vs-rendered seed {seed}", settings.steps) if h.bars else None
+        accuracy.append(realness_accuracy(real_train, train, real_test, test, replace(settings, seed=seed),
+                                          progress))
+    return {"accuracy": float(np.mean(accuracy)),
+            "accuracy_std": float(np.std(accuracy, ddof=1)) if len(accuracy) > 1 else 0.0,
+            "per_seed": accuracy, "crop": settings.crop}
+
+
+def _srgb8(image: np.ndarray) -> np.ndarray:
+    return (np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
 def _mean_iou(per_seed: list[Counts]) -> dict:
@@ -427,4 +463,41 @@ def task_markdown(results: dict) -> str:
                          f"{100 * row['rendered_only']['iou_std']:.1f} | {100 * row['other_real']['iou']:.1f} +- "
                          f"{100 * row['other_real']['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | "
                          f"{100 * row['all_building']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
+                realdata: Path | None = None, bars: Bars | None = None) -> dict:
+    """How far renders are from each real domain: the sim-only transfer with the real-versus-rendered
+    classifier, and ``realism.png`` in ``out`` (see ``run_sim_only``)."""
+    import time
+
+    started = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    h = make_harness(dataset, models_settings, settings, root, realdata, bars)
+    result = run_sim_only(h, out, realness=True)
+    result.update(settings={**asdict(settings), "train": asdict(settings.train)}, nams_model=h.methods.nams.model_id,
+                  render_preset=dataset.preset, seconds=time.perf_counter() - started)
+    return result
+
+
+def realism_markdown(result: dict) -> str:
+    """``run_realism``'s result as a Markdown table."""
+    seeds = len(result["settings"]["seeds"])
+    lines = [f"Per real domain, scored on its test scenes (mean +- standard deviation over {seeds} seeds): "
+             "building IoU (%) of a segmenter trained on rendered tiles alone (the design NAMS inferred for "
+             "the domain), of one trained on the other real domains, and of calling everything a building; "
+             "and the accuracy of a small CNN telling held-out real crops from crops of renders in held-out "
+             "cities (0.5: indistinguishable).", "",
+             "| domain | rendered only | other real domains | all building | rendered only - all building "
+             "| real-vs-rendered accuracy |", "|---|---|---|---|---|---|"]
+    for domain, row in result["domains"].items():
+        r, o = row["rendered_only"], row["other_real"]
+        acc = row.get("realness")
+        lines.append(f"| {domain} | {100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | {100 * o['iou']:.1f} +- "
+                     f"{100 * o['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | {100 * row['all_building']:.1f} "
+                     f"| {100 * (r['iou'] - row['all_building']):+.1f} | "
+                     + (f"{acc['accuracy']:.2f} +- {acc['accuracy_std']:.2f} |" if acc else "- |"))
+    lines += ["", f"Renders: the `{result['render_preset']}` preset; {result['seconds'] / 60:.0f} min of wall time."]
     return "\n".join(lines) + "\n"

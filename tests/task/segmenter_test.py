@@ -113,3 +113,16 @@ def test_encoder_plug_in_and_bad_checkpoints(tmp_path):
         load_segmenter(tmp_path / "other.pt")
     with pytest.raises(MetaSimError, match="not a file"):
         load_segmenter(tmp_path / "missing.pt")
+
+
+def test_real_versus_rendered_accuracy_is_high_for_unlike_images_and_chance_for_alike():
+    from meta_sim.task.realness import RealnessSettings, realness_accuracy
+
+    settings = RealnessSettings(steps=60, batch=8, crop=32, width=8, test_crops=64)
+    red, blue = _pool("red", seed=1), _pool("blue", seed=2, ground=(0.2, 0.3, 0.7))
+    red_test, blue_test = _pool("red", seed=3), _pool("blue", seed=4, ground=(0.2, 0.3, 0.7))
+    assert realness_accuracy(red, blue, red_test, blue_test, settings) > 0.95
+    alike = realness_accuracy(red, _pool("red2", seed=5), red_test, _pool("red2", seed=6), settings)
+    assert 0.3 < alike < 0.7
+    first = realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(steps=5, crop=32, width=8))
+    assert first == realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(steps=5, crop=32, width=8))
