@@ -16,6 +16,7 @@ from ..core.names import safe_name
 from ..sim import tiles
 from ..sim.design import DesignSpace
 from ..sim.quality import RenderPreset
+from ..sim.sensor import Sensor
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,7 @@ class RenderSettings:
     tile_px: int = 384
     pixel_size_m: float = 0.3
     preview: bool = False
+    sensor: Sensor = Sensor()  # "none" by default: the render as it is
 
     @property
     def tile_m(self) -> float:
@@ -81,7 +83,8 @@ def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
     return {"design": job.design, "design_space": settings.space.name, "city_seed": job.city_seed,
             "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
             "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
-            "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields()}
+            "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields(),
+            **({"sensor": settings.sensor.to_dict()} if settings.sensor.active else {})}
 
 
 def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int) -> list[Job]:

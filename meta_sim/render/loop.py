@@ -145,10 +145,12 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             design=job.design, space=settings.space.name, city_seed=job.city_seed,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
-                            software=software)
-                        tiles.write_tile(path, rgb[cut], instance[cut], roof_class[cut], meta)
+                            software=software, sensor=settings.sensor.to_dict() if settings.sensor.active else None)
+                        # the sensor sees each tile alone (its noise seeded by the tile), labels untouched
+                        image = settings.sensor.apply(rgb[cut], [job.city_seed, j])
+                        tiles.write_tile(path, image, instance[cut], roof_class[cut], meta)
                         if settings.preview:
-                            write_previews(path, rgb[cut], instance[cut], roof_class[cut])
+                            write_previews(path, image, instance[cut], roof_class[cut])
                         summary.written += 1
                         summary.paths.append(path)
                         if progress:

@@ -41,6 +41,8 @@ RENDER_OPTIONS = (
     Option("--cities", int, 8, "random or sampled designs: design k is rendered in city seed + (k mod CITIES)"),
     Option("--tiles", int, 9, "tiles per design (a near-square grid of adjacent tiles)"),
     Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
+    Option("--sensor", str, "none", "camera after the render: none, drone or satellite (colour balance, haze, "
+           "blur, a tone curve that does not clip, noise, JPEG; see meta_sim/sim/sensor.py)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),
     Option("--bank", Path, None, "texture bank folder (default: the built-in bank, built on first use)"),
     Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1, "

@@ -8,6 +8,7 @@ from ..core.errors import MetaSimError
 from ..sim.design import DesignSpace
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
+from ..sim.sensor import get_sensor
 from ..sim.textures import ensure_default_bank, ensure_heldout_bank, load_bank
 from .jobs import RenderSettings, design_jobs, sample_designs, sample_population, single_job
 
@@ -43,6 +44,7 @@ def plan(options: dict):
     if not 0.01 <= options["gsd"] <= 10.0:
         raise MetaSimError("--gsd must be between 0.01 and 10 metres per pixel")
     preset = get_preset(options["preset"])
+    sensor = get_sensor(options.get("sensor"))
     banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
     if options.get("space"):
         space = DesignSpace.load(options["space"])
@@ -70,5 +72,5 @@ def plan(options: dict):
     settings = RenderSettings(space=space, banks=banks + [heldout], preset=preset,
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
-                              preview=bool(options.get("preview")))
+                              preview=bool(options.get("preview")), sensor=sensor)
     return jobs, settings

@@ -402,3 +402,29 @@ def test_render_from_a_population_records_the_sampled_designs(tmp_path, bank):
     bad = _cli("render", "--population", group, "--tiles", 1, "--tile-px", 32, "--out", tmp_path / "bad")
     assert bad.exit_code == 2 and "not a population preset" in bad.output
     assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize("preset", ["fast", "balanced"])
+def test_a_sensor_keeps_a_white_roof_from_clipping_and_leaves_the_labels(space, bank, tmp_path, preset):
+    from meta_sim.sim.imageio import linear_to_srgb
+    from meta_sim.sim.sensor import get_sensor
+
+    design = {"flat_roof": "flat-membrane-white-tpo", "sloped_roof": 0}
+    _, plain = _render(space, [bank], tmp_path / "plain", design, preset, n_tiles=1)
+    summary, sensed = _render(space, [bank], tmp_path / "sensed", design, preset, n_tiles=1,
+                              sensor=get_sensor("satellite"))
+
+    def clipped(tile):
+        roof = tile.roof_class == 1
+        assert roof.sum() > 100
+        return float((linear_to_srgb(tile.rgb)[roof].max(axis=1) >= 254.5 / 255).mean())
+
+    if preset == "fast":
+        assert clipped(plain[0]) > 0.5  # the bare render clips a white roof flat
+    assert clipped(sensed[0]) <= 0.01
+    for name in ("building", "roof_class", "instance"):
+        assert np.array_equal(getattr(plain[0], name), getattr(sensed[0], name))
+    assert sensed[0].meta["sensor"]["name"] == "satellite" and "sensor" not in plain[0].meta
+    # a tile rendered without the sensor is not taken for one with it
+    again, _ = _render(space, [bank], tmp_path / "plain", design, preset, n_tiles=1, sensor=get_sensor("drone"))
+    assert again.written == 1 and again.skipped == 0
