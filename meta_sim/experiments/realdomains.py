@@ -28,6 +28,8 @@ DOMAINS = ("rio", "banepa", "kampala")
 SOURCE = "rio"
 TARGETS = ("banepa", "kampala")
 KAMPALA_SCENE_PX = 256
+# The named sensor (``sim.sensor``) of each domain's kind of imagery, from its README: satellite or drone.
+SENSOR_OF = {"rio": "satellite", "banepa": "drone", "kampala": "drone"}
 
 
 @dataclass
