@@ -53,6 +53,7 @@ class RenderSettings:
     pixel_size_m: float = 0.3
     preview: bool = False
     sensor: Sensor = Sensor()  # "none" by default: the render as it is
+    roof_jitter: float = 0.0  # per-building roof variation (sim.jitter); 0: none
 
     @property
     def tile_m(self) -> float:
@@ -84,7 +85,8 @@ def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
             "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
             "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
             "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields(),
-            **({"sensor": settings.sensor.to_dict()} if settings.sensor.active else {})}
+            **({"sensor": settings.sensor.to_dict()} if settings.sensor.active else {}),
+            **({"roof_jitter": settings.roof_jitter} if settings.roof_jitter else {})}
 
 
 def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int) -> list[Job]:

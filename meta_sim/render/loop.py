@@ -23,6 +23,7 @@ from ..core.extras import require
 from ..core.fileio import writable_dir
 from ..sim import meshes, tiles
 from ..sim.design import DesignSpace
+from ..sim.jitter import roof_jitter
 from ..sim.layout import LayoutParams, layout_for_tiles
 from ..sim.preview import write_mosaic, write_previews
 from .jobs import Job, RenderSettings, RenderSummary, expected_meta, tile_path, write_job_manifest
@@ -145,9 +146,13 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             design=job.design, space=settings.space.name, city_seed=job.city_seed,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
-                            software=software, sensor=settings.sensor.to_dict() if settings.sensor.active else None)
-                        # the sensor sees each tile alone (its noise seeded by the tile), labels untouched
-                        image = settings.sensor.apply(rgb[cut], [job.city_seed, j])
+                            software=software, sensor=settings.sensor.to_dict() if settings.sensor.active else None,
+                            roof_jitter=settings.roof_jitter)
+                        # roofs varied per building, then the sensor sees each tile alone (its noise seeded
+                        # by the tile); the labels are untouched
+                        image = roof_jitter(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
+                                            settings.roof_jitter)
+                        image = settings.sensor.apply(image, [job.city_seed, j])
                         tiles.write_tile(path, image, instance[cut], roof_class[cut], meta)
                         if settings.preview:
                             write_previews(path, image, instance[cut], roof_class[cut])

@@ -43,6 +43,8 @@ RENDER_OPTIONS = (
     Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
     Option("--sensor", str, "none", "camera after the render: none, drone or satellite (colour balance, haze, "
            "blur, a tone curve that does not clip, noise, JPEG; see meta_sim/sim/sensor.py)"),
+    Option("--roof-jitter", float, 0.0, "per-building roof variation, 0 (none) to 1: brightness, tint and "
+           "weathering drawn per building (see meta_sim/sim/jitter.py)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),
     Option("--bank", Path, None, "texture bank folder (default: the built-in bank, built on first use)"),
     Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1, "

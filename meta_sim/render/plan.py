@@ -6,6 +6,7 @@ from pathlib import Path
 
 from ..core.errors import MetaSimError
 from ..sim.design import DesignSpace
+from ..sim.jitter import check_strength
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
 from ..sim.sensor import get_sensor
@@ -45,6 +46,7 @@ def plan(options: dict):
         raise MetaSimError("--gsd must be between 0.01 and 10 metres per pixel")
     preset = get_preset(options["preset"])
     sensor = get_sensor(options.get("sensor"))
+    roof_jitter = check_strength(options.get("roof_jitter", 0.0))
     banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
     if options.get("space"):
         space = DesignSpace.load(options["space"])
@@ -72,5 +74,5 @@ def plan(options: dict):
     settings = RenderSettings(space=space, banks=banks + [heldout], preset=preset,
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
-                              preview=bool(options.get("preview")), sensor=sensor)
+                              preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter)
     return jobs, settings

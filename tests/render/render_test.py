@@ -425,6 +425,12 @@ def test_a_sensor_keeps_a_white_roof_from_clipping_and_leaves_the_labels(space, 
     for name in ("building", "roof_class", "instance"):
         assert np.array_equal(getattr(plain[0], name), getattr(sensed[0], name))
     assert sensed[0].meta["sensor"]["name"] == "satellite" and "sensor" not in plain[0].meta
+    jittered_summary, jittered = _render(space, [bank], tmp_path / "jittered", design, preset, n_tiles=1,
+                                         roof_jitter=0.8)
+    assert jittered[0].meta["roof_jitter"] == 0.8 and np.array_equal(jittered[0].instance, plain[0].instance)
+    ground = plain[0].building == 0
+    assert np.array_equal(jittered[0].rgb[ground], plain[0].rgb[ground])
+    assert not np.array_equal(jittered[0].rgb[~ground], plain[0].rgb[~ground])
     # a tile rendered without the sensor is not taken for one with it
     again, _ = _render(space, [bank], tmp_path / "plain", design, preset, n_tiles=1, sensor=get_sensor("drone"))
     assert again.written == 1 and again.skipped == 0
