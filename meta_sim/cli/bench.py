@@ -216,5 +216,4 @@ def bench_realism_command(out, docs, pictures, quick, realdata, cache):
         result = run_realism(dataset, models, settings, pictures, cache, realdata, bars)
     finally:
         bars.close()
-    _publish(result, out, realism_markdown(result), "realism", docs, pictures / "realism.png",
-             pictures / "realism-auto.png")
+    _publish(result, out, realism_markdown(result), "realism", docs, *sorted(Path(pictures).glob("realism*.png")))
