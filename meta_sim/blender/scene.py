@@ -243,8 +243,9 @@ class CityScene:
     """
 
     def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0,
-                 collection: bpy.types.Collection | None = None, key: str | None = None):
+                 collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None):
         self.layout = layout
+        self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
         self.pixel_size_m = pixel_size_m
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
         if collection is None:
@@ -286,7 +287,10 @@ class CityScene:
             meshes.SLOPED_ROOF: _image_material(
                 "sloped-roof-unset", _noise_image("unset-s", (0.5, 0.5, 0.5), 0.0, 0, key), key),
         }
-        ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1, key), key)
+        if self.ground_mix:
+            ground = _image_material("ground", self._ground_image(region, seed + 1), key)
+        else:
+            ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1, key), key)
         road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
         tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
@@ -297,13 +301,26 @@ class CityScene:
                 [grey, self._placeholder[meshes.FLAT_ROOF], self._placeholder[meshes.SLOPED_ROOF]],
                 self.collection, key)
             self.buildings_obj[ROLE_TAG] = "buildings"
-        _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1), [ground],
-                         self.collection, key)
+        _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(self.ground_mix)),
+                         [ground], self.collection, key)
         if roads:
             _new_mesh_object(meshes.road_mesh(roads), [road], self.collection, key)
         if trees:
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
+
+    def _ground_image(self, region: Rect, seed: int) -> bpy.types.Image:
+        """The region's ground cover (``sim.ground``) as one image spanning the ground quad."""
+        from ..sim.ground import ground_image
+
+        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix)
+        h, w = rgb.shape[:2]
+        rgba = np.ones((h, w, 4), dtype=np.float32)
+        rgba[..., :3] = rgb  # row 0 at the quad's south edge (v = 0), as Blender stores images
+        image = _tagged(bpy.data.images.new("ground-cover", w, h, float_buffer=True), self.key)
+        image.pixels.foreach_set(rgba.ravel())
+        image.pack()
+        return image
 
     def _add_camera_and_sun(self) -> None:
         camera = _tagged(bpy.data.cameras.new("nadir"), self.key)

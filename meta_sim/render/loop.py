@@ -23,6 +23,7 @@ from ..core.extras import require
 from ..core.fileio import writable_dir
 from ..sim import meshes, tiles
 from ..sim.design import DesignSpace
+from ..sim.ground import get_mix
 from ..sim.jitter import roof_jitter
 from ..sim.layout import LayoutParams, layout_for_tiles
 from ..sim.preview import write_mosaic, write_previews
@@ -121,7 +122,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         clock = time.perf_counter()
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
-        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m)
+        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(settings.ground))
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:
@@ -147,7 +148,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
                             software=software, sensor=settings.sensor.to_dict() if settings.sensor.active else None,
-                            roof_jitter=settings.roof_jitter)
+                            roof_jitter=settings.roof_jitter, ground=settings.ground)
                         # roofs varied per building, then the sensor sees each tile alone (its noise seeded
                         # by the tile); the labels are untouched
                         image = roof_jitter(rgb[cut], instance[cut], roof_class[cut], job.city_seed,

@@ -43,6 +43,8 @@ RENDER_OPTIONS = (
     Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
     Option("--sensor", str, "none", "camera after the render: none, drone or satellite (colour balance, haze, "
            "blur, a tone curve that does not clip, noise, JPEG; see meta_sim/sim/sensor.py)"),
+    Option("--ground", str, "plain", "ground cover: plain (one lawn), suburban, mixed or arid (patches of lawn, "
+           "dry grass, soil, sand, gravel, pavement; see meta_sim/sim/ground.py)"),
     Option("--roof-jitter", float, 0.0, "per-building roof variation, 0 (none) to 1: brightness, tint and "
            "weathering drawn per building (see meta_sim/sim/jitter.py)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from ..core.errors import MetaSimError
 from ..sim.design import DesignSpace
+from ..sim.ground import get_mix
 from ..sim.jitter import check_strength
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
@@ -47,6 +48,8 @@ def plan(options: dict):
     preset = get_preset(options["preset"])
     sensor = get_sensor(options.get("sensor"))
     roof_jitter = check_strength(options.get("roof_jitter", 0.0))
+    ground = options.get("ground") or "plain"
+    get_mix(ground)
     banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
     if options.get("space"):
         space = DesignSpace.load(options["space"])
@@ -74,5 +77,6 @@ def plan(options: dict):
     settings = RenderSettings(space=space, banks=banks + [heldout], preset=preset,
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
-                              preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter)
+                              preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter,
+                              ground=ground)
     return jobs, settings

@@ -160,10 +160,12 @@ def road_mesh(roads, z: float = 0.03) -> MeshArrays:
     return mesh
 
 
-def ground_mesh(x0: float, y0: float, x1: float, y1: float) -> MeshArrays:
+def ground_mesh(x0: float, y0: float, x1: float, y1: float, whole_image: bool = False) -> MeshArrays:
+    """One quad; UVs in metres (a small texture repeated), or with ``whole_image`` one image spanning it."""
     mesh = MeshArrays("ground")
     pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-    mesh.add([(x, y, 0.0) for x, y in pts], 0, pts, label_color(0, 0))
+    uv = [((x - x0) / (x1 - x0), (y - y0) / (y1 - y0)) for x, y in pts] if whole_image else pts
+    mesh.add([(x, y, 0.0) for x, y in pts], 0, uv, label_color(0, 0))
     return mesh
 
 

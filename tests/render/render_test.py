@@ -431,6 +431,11 @@ def test_a_sensor_keeps_a_white_roof_from_clipping_and_leaves_the_labels(space, 
     ground = plain[0].building == 0
     assert np.array_equal(jittered[0].rgb[ground], plain[0].rgb[ground])
     assert not np.array_equal(jittered[0].rgb[~ground], plain[0].rgb[~ground])
+    _, covered = _render(space, [bank], tmp_path / "covered", design, preset, n_tiles=1, ground="mixed")
+    assert covered[0].meta["ground"] == "mixed" and np.array_equal(covered[0].instance, plain[0].instance)
+    assert np.array_equal(covered[0].roof_class, plain[0].roof_class)
+    assert np.abs(covered[0].rgb[ground] - plain[0].rgb[ground]).mean() > 0.01
+    assert covered[0].rgb[ground].std(axis=0).mean() > plain[0].rgb[ground].std(axis=0).mean()
     # a tile rendered without the sensor is not taken for one with it
     again, _ = _render(space, [bank], tmp_path / "plain", design, preset, n_tiles=1, sensor=get_sensor("drone"))
     assert again.written == 1 and again.skipped == 0

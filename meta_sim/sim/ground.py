@@ -1,0 +1,75 @@
+"""Ground cover with spatial variation: patches of lawn, dry grass, bare soil, sand, gravel and pavement.
+
+Today's city lies on one lawn colour; real ground is a patchwork. ``ground_image`` paints the city's
+ground as patches of covers in the proportions a mix declares: a smooth random field (value noise at
+scales of about 15 to 60 m) is ranked, and its quantiles are cut at the mix's cumulative shares, so
+each cover takes its share of the ground in contiguous patches; a second field shifts the cuts, so
+covers do not always border in the same order. Each cover's colour varies within a patch (fine
+noise and a slow brightness drift). Deterministic for a seed; pure numpy, so testable without
+Blender. Colours are linear RGB (albedo-like, as the renderer's materials take them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.errors import MetaSimError
+from .imageio import resize
+
+COVERS = {  # linear RGB
+    "lawn": (0.20, 0.26, 0.12),
+    "dry_grass": (0.34, 0.31, 0.18),
+    "soil": (0.36, 0.25, 0.16),
+    "sand": (0.52, 0.45, 0.34),
+    "gravel": (0.33, 0.32, 0.30),
+    "pavement": (0.40, 0.40, 0.39),
+}
+MIXES = {
+    "plain": None,  # the lawn of today's cities
+    "suburban": {"lawn": 0.6, "dry_grass": 0.2, "soil": 0.1, "pavement": 0.1},
+    "mixed": {"lawn": 0.35, "dry_grass": 0.2, "soil": 0.2, "gravel": 0.1, "pavement": 0.15},
+    "arid": {"dry_grass": 0.25, "soil": 0.35, "sand": 0.25, "gravel": 0.15},
+}
+PIXEL_M = 0.5  # ground image resolution
+
+
+def get_mix(name: str | None) -> dict | None:
+    """The named ground mix (None for "plain": the lawn); MetaSimError listing the names for another."""
+    if name is None:
+        return None
+    try:
+        return MIXES[name]
+    except KeyError:
+        raise MetaSimError(f"unknown ground {name!r}; choose one of {', '.join(MIXES)}") from None
+
+
+def _field(rng: np.random.Generator, h: int, w: int, scales_px) -> np.ndarray:
+    """Smooth noise: bilinearly upsampled random grids, one per scale, summed."""
+    total = np.zeros((h, w), np.float32)
+    for scale in scales_px:
+        gh, gw = max(2, int(np.ceil(h / scale)) + 1), max(2, int(np.ceil(w / scale)) + 1)
+        grid = rng.standard_normal((gh, gw, 1)).astype(np.float32)
+        total += resize(grid, h, w)[:, :, 0]
+    return total
+
+
+def ground_image(width_m: float, height_m: float, seed: int, mix: dict) -> np.ndarray:
+    """Linear RGB (H, W, 3) of the ground of a ``width_m`` x ``height_m`` region at ``PIXEL_M``."""
+    unknown = [c for c in mix if c not in COVERS]
+    if unknown or not mix or any(not 0 <= v for v in mix.values()) or sum(mix.values()) <= 0:
+        raise MetaSimError(f"a ground mix gives shares (at least one positive) of {', '.join(COVERS)}; "
+                           f"not {mix!r}")
+    h, w = max(2, int(round(height_m / PIXEL_M))), max(2, int(round(width_m / PIXEL_M)))
+    rng = np.random.default_rng([int(seed), 11])
+    patches = _field(rng, h, w, (120, 60, 30))
+    shift = _field(rng, h, w, (160,))
+    ranks = np.argsort(np.argsort(patches.ravel())).reshape(h, w) / float(h * w)
+    ranks = np.clip(ranks + 0.08 * shift / (np.abs(shift).max() + 1e-6), 0.0, 0.999999)
+    names = list(mix)
+    edges = np.cumsum([mix[n] for n in names]) / sum(mix.values())
+    cover = np.searchsorted(edges, ranks, side="right")
+    palette = np.array([COVERS[n] for n in names], np.float32)
+    image = palette[np.minimum(cover, len(names) - 1)]
+    drift = 1.0 + 0.12 * _field(rng, h, w, (80,))[:, :, None] / 2.0
+    speckle = 1.0 + 0.15 * rng.standard_normal((h, w, 1)).astype(np.float32)
+    return np.clip(image * drift * speckle, 0.0, 1.0).astype(np.float32)
