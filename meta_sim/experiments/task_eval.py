@@ -153,9 +153,11 @@ def synthetic_jobs(h: Harness, designs: list[dict] | None, r: float, seed: int) 
     return [Job(design, TASK_CITY_SEED + seed * 1000 + k, f"c{k:04d}") for k, design in enumerate(drawn)]
 
 
-def render_set(h: Harness, name: str, jobs: list[Job], sensor: str = "none", roof_jitter: float = 0.0) -> Pool:
-    """Render (or reuse) a synthetic set, with ``roof_jitter`` (``sim.jitter``) and seen through
-    ``sensor`` (``sim.sensor``), and read it as a pool at the working pixel size."""
+def render_set(h: Harness, name: str, jobs: list[Job], sensor: str = "none", roof_jitter: float = 0.0,
+               ground: str = "plain") -> Pool:
+    """Render (or reuse) a synthetic set, with ``roof_jitter`` (``sim.jitter``) and ``ground``
+    (``sim.ground``), seen through ``sensor`` (``sim.sensor``), and read it as a pool at the working
+    pixel size."""
     from ..pipeline.trainsets import TileDataset
     from ..render.jobs import RenderSettings
     from ..render.loop import render_jobs
@@ -167,11 +169,13 @@ def render_set(h: Harness, name: str, jobs: list[Job], sensor: str = "none", roo
     digest = hashlib.sha256(json.dumps([[j.design, j.city_seed] for j in jobs], sort_keys=True).encode())
     key = f"{digest.hexdigest()[:12]}-t{h.settings.synthetic_tiles}-{h.dataset.preset}-{h.dataset.tile_px}px"
     key += ("" if sensor == "none" else f"-{sensor}") + (f"-j{roof_jitter:g}" if roof_jitter else "")
+    key += "" if ground == "plain" else f"-{ground}"
     folder = h.root / "task" / "sets" / key
     settings = RenderSettings(space=DesignSpace.load(), banks=[ensure_default_bank(), ensure_heldout_bank()],
                               preset=get_preset(h.dataset.preset), out_dir=folder,
                               n_tiles=h.settings.synthetic_tiles, tile_px=h.dataset.tile_px,
-                              pixel_size_m=h.dataset.pixel_size_m, sensor=get_sensor(sensor), roof_jitter=roof_jitter)
+                              pixel_size_m=h.dataset.pixel_size_m, sensor=get_sensor(sensor), roof_jitter=roof_jitter,
+                              ground=ground)
     bars = h.bars
     render_jobs(jobs, settings, bars(f"render {name} set", len(jobs) * settings.n_tiles) if bars else None)
     return Pool.from_dataset(name, TileDataset(folder, "srgb", h.gsd))
@@ -329,13 +333,14 @@ def run_real(h: Harness, out: Path) -> dict:
 
 
 def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "none",
-                 roof_jitter: float = 0.0) -> dict:
+                 roof_jitter: float = 0.0, ground: str = "plain") -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
     domains vs all-building, scored on the domain's test scenes. With ``realness`` also the accuracy
     of a real-versus-rendered classifier (``task.realness``; held-out real scenes against renders in
     held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them.
     ``sensor`` is a sensor name for every domain's renders, or "auto" for the one matching the domain's
-    imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation."""
+    imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation, ``ground``
+    the ground cover mix."""
     from ..task.data import merge
     from ..task.score import all_building, count
 
@@ -346,7 +351,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         designs = _infer_real(h, adapt, s.target_seed, domain)["nams"]
         seen_by = realdomains.SENSOR_OF[domain] if sensor == "auto" else sensor
         rendered = render_set(h, f"{domain} nams", synthetic_jobs(h, designs, s.r_real, s.target_seed), seen_by,
-                              roof_jitter)
+                              roof_jitter, ground)
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
         test_pool = _real_pool(f"{domain} test", test, s.train)
@@ -356,7 +361,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                       test_pool.masks)[0] for seed in s.seeds]
         rows[domain] = {"rendered_only": _mean_iou(sim), "other_real": _mean_iou(real), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
-                        "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter}
+                        "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
+                        "ground": ground}
         if realness:
             adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
@@ -366,6 +372,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         from ..task.score import prediction_sheet
 
         tag = ("" if sensor == "none" else f"-{sensor}") + (f"-jitter{roof_jitter:g}" if roof_jitter else "")
+        tag += "" if ground == "plain" else f"-{ground}"
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 
@@ -475,9 +482,9 @@ def task_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-# The variants bench-realism compares: the bare render, each domain's sensor, and that with roof jitter
-# (0.6: a middle strength set before measuring, not chosen on these domains).
-REALISM_VARIANTS = (("none", 0.0), ("auto", 0.0), ("auto", 0.6))
+# The variants bench-realism compares: the bare render, each domain's sensor, that with roof jitter, and
+# that on varied ground (jitter 0.6 and the "mixed" ground: set before measuring, not chosen on these domains).
+REALISM_VARIANTS = (("none", 0.0, "plain"), ("auto", 0.0, "plain"), ("auto", 0.6, "plain"), ("auto", 0.6, "mixed"))
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -491,8 +498,9 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     h = make_harness(dataset, models_settings, settings, root, realdata, bars)
-    result = {"runs": {f"{sensor}+jitter{jitter:g}": run_sim_only(h, out, True, sensor, jitter)["domains"]
-                       for sensor, jitter in variants}}
+    result = {"runs": {f"{sensor}+jitter{jitter:g}+{ground}":
+                       run_sim_only(h, out, True, sensor, jitter, ground)["domains"]
+                       for sensor, jitter, ground in variants}}
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, nams_model=h.methods.nams.model_id,
                   render_preset=dataset.preset, seconds=time.perf_counter() - started)
     return result
@@ -506,14 +514,14 @@ def realism_markdown(result: dict) -> str:
              "the domain), of one trained on the other real domains, and of calling everything a building; "
              "and the accuracy of a small CNN telling held-out real crops from crops of renders in held-out "
              "cities (0.5: indistinguishable).", "",
-             "| domain | sensor | roof jitter | rendered only | other real domains | all building "
-             "| rendered only - all building | real-vs-rendered accuracy |", "|---|---|---|---|---|---|---|---|"]
+             "| domain | sensor | roof jitter | ground | rendered only | other real domains | all building "
+             "| rendered only - all building | real-vs-rendered accuracy |", "|---|---|---|---|---|---|---|---|---|"]
     rows = sorted(((domain, row) for run in result["runs"].values() for domain, row in run.items()),
                   key=lambda item: realdomains.DOMAINS.index(item[0]))
     for domain, row in rows:
         r, o = row["rendered_only"], row["other_real"]
         acc = row.get("realness")
-        lines.append(f"| {domain} | {row['sensor']} | {row.get('roof_jitter', 0):g} | "
+        lines.append(f"| {domain} | {row['sensor']} | {row.get('roof_jitter', 0):g} | {row.get('ground', 'plain')} | "
                      f"{100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | "
                      f"{100 * o['iou']:.1f} +- "
                      f"{100 * o['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | {100 * row['all_building']:.1f} "
