@@ -404,7 +404,9 @@ def _srgb8(image: np.ndarray) -> np.ndarray:
 
 def _mean_iou(per_seed: list[Counts]) -> dict:
     ious = [c.iou() for c in per_seed]
-    return {"iou": float(np.mean(ious)), "iou_std": float(np.std(ious, ddof=1)) if len(ious) > 1 else 0.0}
+    return {"iou": float(np.mean(ious)), "iou_std": float(np.std(ious, ddof=1)) if len(ious) > 1 else 0.0,
+            "precision": float(np.mean([c.metrics()["precision"] for c in per_seed])),
+            "recall": float(np.mean([c.metrics()["recall"] for c in per_seed]))}
 
 
 def _sheet(path: Path, test: Pool, pictures: dict, rows: int = 4) -> None:
@@ -515,7 +517,8 @@ def realism_markdown(result: dict) -> str:
              "and the accuracy of a small CNN telling held-out real crops from crops of renders in held-out "
              "cities (0.5: indistinguishable).", "",
              "| domain | sensor | roof jitter | ground | rendered only | other real domains | all building "
-             "| rendered only - all building | real-vs-rendered accuracy |", "|---|---|---|---|---|---|---|---|---|"]
+             "| rendered only - all building | rendered only: precision / recall | real-vs-rendered accuracy |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     rows = sorted(((domain, row) for run in result["runs"].values() for domain, row in run.items()),
                   key=lambda item: realdomains.DOMAINS.index(item[0]))
     for domain, row in rows:
@@ -526,6 +529,7 @@ def realism_markdown(result: dict) -> str:
                      f"{100 * o['iou']:.1f} +- "
                      f"{100 * o['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | {100 * row['all_building']:.1f} "
                      f"| {100 * (r['iou'] - row['all_building']):+.1f} | "
+                     + (f"{100 * r['precision']:.1f} / {100 * r['recall']:.1f} | " if "recall" in r else "- | ")
                      + (f"{acc['accuracy']:.2f} +- {acc['accuracy_std']:.2f} |" if acc else "- |"))
     lines += ["", f"Renders: the `{result['render_preset']}` preset; {result['seconds'] / 60:.0f} min of wall time."]
     return "\n".join(lines) + "\n"
