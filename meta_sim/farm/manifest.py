@@ -78,6 +78,8 @@ class Manifest:
     pixel_size_m: float
     out_dir: Path  # absolute in memory
     tasks: tuple = field(default_factory=tuple)
+    # What the renders look like beyond the preset (sim.sensor, sim.jitter, sim.ground); defaults: as rendered.
+    appearance: dict = field(default_factory=lambda: dict(DEFAULT_APPEARANCE))
 
     @property
     def n_outputs(self) -> int:
@@ -91,7 +93,7 @@ class Manifest:
             out_dir = out_dir.relative_to(relative_to)
         return {"format": FORMAT, "version": VERSION, "space": self.space, "bank": self.bank,
                 "preset": self.preset, "n_tiles": self.n_tiles, "tile_px": self.tile_px,
-                "pixel_size_m": self.pixel_size_m, "out_dir": str(out_dir),
+                "pixel_size_m": self.pixel_size_m, "out_dir": str(out_dir), "appearance": dict(self.appearance),
                 "tasks": [t.to_dict() for t in self.tasks]}
 
     @classmethod
@@ -108,7 +110,8 @@ class Manifest:
             manifest = cls(space=dict(data["space"]), bank=data["bank"], preset=str(data["preset"]),
                            n_tiles=int(data["n_tiles"]), tile_px=int(data["tile_px"]),
                            pixel_size_m=float(data["pixel_size_m"]), out_dir=Path(base) / data["out_dir"],
-                           tasks=tuple(Task.from_dict(t) for t in data["tasks"]))
+                           tasks=tuple(Task.from_dict(t) for t in data["tasks"]),
+                           appearance=check_appearance(data.get("appearance", DEFAULT_APPEARANCE)))
         except (KeyError, TypeError, ValueError) as exc:
             raise MetaSimError(f"damaged job manifest ({exc!r}); plan the job again") from None
         manifest.check_tasks()
@@ -130,8 +133,8 @@ class Manifest:
 
     def shared_settings(self) -> dict:
         """What every task's pixels depend on besides its design and city (part of each task's name)."""
-        return {"space": self.space.get("name"), "preset": self.preset, "n_tiles": self.n_tiles,
-                "tile_px": self.tile_px, "pixel_size_m": self.pixel_size_m}
+        return shared_settings(self.space.get("name"), self.preset, self.n_tiles, self.tile_px, self.pixel_size_m,
+                               self.appearance)
 
     def subset(self, tasks) -> "Manifest":
         """The same job with only ``tasks``."""
@@ -142,6 +145,33 @@ class Manifest:
         if not (count >= 1 and 0 <= index < count):
             raise MetaSimError(f"shard {index}/{count}: write i/n with 0 <= i < n, e.g. 0/4")
         return self.subset(self.tasks[index::count])
+
+
+DEFAULT_APPEARANCE = {"sensor": "none", "roof_jitter": 0.0, "ground": "plain"}
+
+
+def check_appearance(appearance) -> dict:
+    """A manifest's appearance settings, each checked; MetaSimError for an unknown key or value."""
+    from ..sim.ground import get_mix
+    from ..sim.jitter import check_strength
+    from ..sim.sensor import get_sensor
+
+    if not isinstance(appearance, dict) or set(appearance) - set(DEFAULT_APPEARANCE):
+        raise MetaSimError(f"manifest appearance must hold only {', '.join(DEFAULT_APPEARANCE)}; plan the job again")
+    out = {**DEFAULT_APPEARANCE, **appearance}
+    get_sensor(out["sensor"])
+    get_mix(out["ground"])
+    out["roof_jitter"] = check_strength(out["roof_jitter"])
+    return out
+
+
+def shared_settings(space: str, preset: str, n_tiles: int, tile_px: int, pixel_size_m: float,
+                    appearance: dict) -> dict:
+    """What every task's pixels depend on besides its design and city (part of each task's name); the
+    appearance only where it differs from the default, so jobs planned before it keep their names."""
+    changed = {k: v for k, v in appearance.items() if v != DEFAULT_APPEARANCE[k]}
+    return {"space": space, "preset": preset, "n_tiles": n_tiles, "tile_px": tile_px, "pixel_size_m": pixel_size_m,
+            **changed}
 
 
 def parse_shard(text: str) -> tuple[int, int]:
@@ -172,8 +202,9 @@ def plan(options: dict, out_dir: Path) -> Manifest:
     from ..render.plan import plan as plan_render
 
     jobs, settings = plan_render({**options, "out": out_dir, "preview": False})
-    shared = {"space": settings.space.name, "preset": settings.preset.name, "n_tiles": settings.n_tiles,
-              "tile_px": settings.tile_px, "pixel_size_m": settings.pixel_size_m}  # Manifest.shared_settings
+    appearance = {"sensor": settings.sensor.name, "roof_jitter": settings.roof_jitter, "ground": settings.ground}
+    shared = shared_settings(settings.space.name, settings.preset.name, settings.n_tiles, settings.tile_px,
+                             settings.pixel_size_m, appearance)
     tasks = {}
     for job in jobs:
         name = task_name(job.design, job.city_seed, shared)
@@ -184,7 +215,7 @@ def plan(options: dict, out_dir: Path) -> Manifest:
     return Manifest(space=settings.space.to_dict(), bank=str(Path(bank).resolve()) if bank else None,
                     preset=settings.preset.name, n_tiles=settings.n_tiles, tile_px=settings.tile_px,
                     pixel_size_m=settings.pixel_size_m, out_dir=Path(out_dir).resolve(),
-                    tasks=tuple(tasks.values()))
+                    tasks=tuple(tasks.values()), appearance=appearance)
 
 
 def default_out_dir(manifest_path: Path) -> Path:
@@ -224,6 +255,7 @@ def render_setup(manifest: Manifest, with_banks: bool = True):
     from ..render.jobs import Job, RenderSettings
     from ..sim.design import DesignSpace
     from ..sim.quality import get_preset
+    from ..sim.sensor import get_sensor
 
     banks = []
     if with_banks:
@@ -233,7 +265,8 @@ def render_setup(manifest: Manifest, with_banks: bool = True):
     settings = RenderSettings(space=DesignSpace.from_dict(manifest.space), banks=banks,
                               preset=get_preset(manifest.preset), out_dir=Path(manifest.out_dir),
                               n_tiles=manifest.n_tiles, tile_px=manifest.tile_px,
-                              pixel_size_m=manifest.pixel_size_m)
+                              pixel_size_m=manifest.pixel_size_m, sensor=get_sensor(manifest.appearance["sensor"]),
+                              roof_jitter=manifest.appearance["roof_jitter"], ground=manifest.appearance["ground"])
     jobs = [Job(t.design, t.city_seed, t.name, t.tiles) for t in manifest.tasks]
     return jobs, settings
 

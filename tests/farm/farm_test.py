@@ -18,6 +18,7 @@ from click.testing import CliRunner
 
 from meta_sim.cli import main as cli
 from meta_sim.core import fileio
+from meta_sim.core.errors import MetaSimError
 from meta_sim.farm import executors
 from meta_sim.farm import manifest as farm
 from meta_sim.sim import tiles
@@ -273,3 +274,21 @@ def test_flamenco_export_of_a_hostile_path_runs_no_code(tmp_path, reference):
     assert "<script>" not in script.read_text() and "\u2028" not in script.read_text()
     assert compiled["pwned"] is False
     assert compiled["tasks"][0]["commands"][0]["params"]["args"][6] == str(manifest_path.resolve())
+
+
+def test_a_job_carries_its_sensor_ground_and_roof_jitter_to_the_workers(tmp_path, reference):
+    args = ["--design", "flat_roof=6,sloped_roof=11", "--seed", "21", "--tiles", "2", *SMALL]
+    plain = _plan(tmp_path / "plain.json", *args)
+    dressed = _plan(tmp_path / "dressed.json", *args, "--sensor", "drone", "--ground", "mixed", "--roof-jitter", "0.5")
+    assert plain.appearance == farm.DEFAULT_APPEARANCE
+    assert dressed.appearance == {"sensor": "drone", "roof_jitter": 0.5, "ground": "mixed"}
+    assert dressed.tasks[0].name != plain.tasks[0].name  # other pixels, another task
+    summary = executors.run(dressed, executors.RunOptions(workers=1, **QUIET))
+    assert not summary.failed and _counts(dressed) == (2, 0, 0)
+    meta = tiles.read_meta(dressed.out_dir / dressed.tasks[0].outputs[0])
+    assert meta["sensor"]["name"] == "drone" and meta["ground"] == "mixed" and meta["roof_jitter"] == 0.5
+    data = json.loads((tmp_path / "dressed.json").read_text())
+    data["appearance"]["sensor"] = "xray"
+    (tmp_path / "bad.json").write_text(json.dumps(data))
+    with pytest.raises(MetaSimError, match="unknown sensor"):
+        farm.load(tmp_path / "bad.json")
