@@ -340,6 +340,12 @@ class CityScene:
         self.collection.objects.link(sun_obj)
 
     @property
+    def sun(self) -> dict:
+        """The sun of this city (drawn from its seed), in degrees: recorded in each tile's header."""
+        return {"elevation_deg": round(math.degrees(self._elevation), 4),
+                "azimuth_deg": round(math.degrees(self._azimuth), 4)}
+
+    @property
     def scene(self) -> bpy.types.Scene:
         """The scene renders go through: the worker's own, or the add-on's private one, set up on first use."""
         if self._scene is None:

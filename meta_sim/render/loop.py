@@ -148,7 +148,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
                             software=software, sensor=settings.sensor.to_dict() if settings.sensor.active else None,
-                            roof_jitter=settings.roof_jitter, ground=settings.ground)
+                            roof_jitter=settings.roof_jitter, ground=settings.ground, sun=scene.sun)
                         # roofs varied per building, then the sensor sees each tile alone (its noise seeded
                         # by the tile); the labels are untouched
                         image = roof_jitter(rgb[cut], instance[cut], roof_class[cut], job.city_seed,

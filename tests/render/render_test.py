@@ -425,6 +425,8 @@ def test_a_sensor_keeps_a_white_roof_from_clipping_and_leaves_the_labels(space, 
     for name in ("building", "roof_class", "instance"):
         assert np.array_equal(getattr(plain[0], name), getattr(sensed[0], name))
     assert sensed[0].meta["sensor"]["name"] == "satellite" and "sensor" not in plain[0].meta
+    sun = plain[0].meta["sun"]  # drawn per city: elevation 30-60 degrees, any azimuth
+    assert 30 <= sun["elevation_deg"] <= 60 and 0 <= sun["azimuth_deg"] < 360 and sensed[0].meta["sun"] == sun
     jittered_summary, jittered = _render(space, [bank], tmp_path / "jittered", design, preset, n_tiles=1,
                                          roof_jitter=0.8)
     assert jittered[0].meta["roof_jitter"] == 0.8 and np.array_equal(jittered[0].instance, plain[0].instance)
