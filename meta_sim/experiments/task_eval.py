@@ -366,6 +366,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         if realness:
             adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
+            rows[domain]["colour"] = {"real": colour_stats(adapt_pool), "rendered": colour_stats(rendered)}
             picture.append([(f"REAL {domain}", _srgb8(i)) for i in adapt_pool.images[:3]] +
                            [("RENDERED", _srgb8(i)) for i in rendered.images[:3]])
     if picture:
@@ -396,6 +397,20 @@ def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, render
     return {"accuracy": float(np.mean(accuracy)),
             "accuracy_std": float(np.std(accuracy, ddof=1)) if len(accuracy) > 1 else 0.0,
             "per_seed": accuracy, "crop": settings.crop}
+
+
+def colour_stats(pool: Pool) -> dict:
+    """Mean display brightness (0-1) and saturation of building and of other pixels over a pool: where
+    renders and real imagery differ in plain colour, before any shape or texture."""
+    out = {}
+    for part, pick in (("building", True), ("ground", False)):
+        pixels = np.concatenate([i[m == pick] for i, m in zip(pool.images, pool.masks)])
+        if not len(pixels):
+            continue
+        high, low = pixels.max(axis=1), pixels.min(axis=1)
+        out[part] = {"brightness": float(pixels.mean()),
+                     "saturation": float(np.mean(np.where(high > 0, (high - low) / np.maximum(high, 1e-6), 0.0)))}
+    return out
 
 
 def _srgb8(image: np.ndarray) -> np.ndarray:
@@ -531,5 +546,17 @@ def realism_markdown(result: dict) -> str:
                      f"| {100 * (r['iou'] - row['all_building']):+.1f} | "
                      + (f"{100 * r['precision']:.1f} / {100 * r['recall']:.1f} | " if "recall" in r else "- | ")
                      + (f"{acc['accuracy']:.2f} +- {acc['accuracy_std']:.2f} |" if acc else "- |"))
+    coloured = [(domain, row) for domain, row in rows if "colour" in row]
+    if coloured:
+        lines += ["", "Plain colour, real (`adapt` scenes) against rendered: mean display brightness (0-1) and "
+                  "saturation of building pixels and of the other pixels.", "",
+                  "| domain | sensor | roof jitter | ground | buildings: brightness real / rendered | saturation "
+                  "| other pixels: brightness real / rendered | saturation |", "|---|---|---|---|---|---|---|---|"]
+        for domain, row in coloured:
+            real, rendered = row["colour"]["real"], row["colour"]["rendered"]
+            cells = [f"{real[part][key]:.2f} / {rendered[part][key]:.2f}" if part in real and part in rendered
+                     else "-" for part in ("building", "ground") for key in ("brightness", "saturation")]
+            lines.append(f"| {domain} | {row['sensor']} | {row.get('roof_jitter', 0):g} | "
+                         f"{row.get('ground', 'plain')} | " + " | ".join(cells) + " |")
     lines += ["", f"Renders: the `{result['render_preset']}` preset; {result['seconds'] / 60:.0f} min of wall time."]
     return "\n".join(lines) + "\n"
