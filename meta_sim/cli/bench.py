@@ -150,70 +150,69 @@ def bench_infer_command(out, docs, model, sizes, big_px, realdata, cache):
     _publish(result, out, format_infer_table(result), "infer", docs)
 
 
+def _task_bench_options(pictures: str, pictures_help: str):
+    """The options `bench task` and `bench realism` share."""
+
+    def decorate(command):
+        for decorator in reversed([
+            _docs_option,
+            click.option("--out", type=click.Path(path_type=Path), default=Path(f"benchmarks/{pictures}.json"),
+                         show_default=True),
+            click.option("--pictures", type=click.Path(path_type=Path), default=Path(f"benchmarks/{pictures}"),
+                         show_default=True, help=pictures_help),
+            click.option("--quick", is_flag=True,
+                         help="a few-minute smoke run with tiny models (not a measurement; no docs)"),
+            click.option("--realdata", type=click.Path(path_type=Path), default=None,
+                         help="the shared real domains (default: ../shared/realdata beside the repository)"),
+            click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder"),
+            _torch_threads,
+        ]):
+            command = decorator(command)
+        return command
+
+    return decorate
+
+
+def _task_configs(quick: bool):
+    """(dataset, models, task settings) of a task benchmark: the defaults, or the quick run's."""
+    from ..experiments.task_eval import TaskEvalSettings, quick_models
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.workflow import ModelSettings
+
+    if quick:
+        return (*quick_models(DatasetConfig(), ModelSettings()), TaskEvalSettings.quick())
+    return DatasetConfig(), ModelSettings(), TaskEvalSettings()
+
+
 @bench.command("task")
-@_docs_option
-@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/task.json"), show_default=True)
-@click.option("--pictures", type=click.Path(path_type=Path), default=Path("benchmarks/task"), show_default=True,
-              help="folder for each experiment's predictions PNG")
-@click.option("--quick", is_flag=True, help="a few-minute smoke run with tiny models (not a measurement; no docs)")
-@click.option("--realdata", type=click.Path(path_type=Path), default=None,
-              help="the shared real domains (default: ../shared/realdata beside the repository)")
-@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
-@_torch_threads
+@_task_bench_options("task", "folder for each experiment's predictions PNG")
 def bench_task_command(out, docs, pictures, quick, realdata, cache):
     """The task model (building IoU) for E1, E2 and E3 per augmentation strategy, and the sim-only
     transfer on each real domain, beside the paper's U-Net."""
-    from dataclasses import replace
+    from ..experiments.task_eval import run_task_eval, task_markdown
 
-    from ..experiments.task_eval import TaskEvalSettings, run_task_eval, task_markdown
-    from ..pipeline.dataset import DatasetConfig
-    from ..pipeline.workflow import ModelSettings
-    from .learn import quick_models
-
-    dataset, models, settings = DatasetConfig(), ModelSettings(), TaskEvalSettings()
-    if quick:
-        dataset, models = quick_models(dataset, models)
-        settings = TaskEvalSettings.quick()
-        settings = replace(settings, train=replace(settings.train, pixel_size_m=dataset.pixel_size_m))
-        docs = False
+    dataset, models, settings = _task_configs(quick)
     bars = _Bars()
     try:
         result = run_task_eval(["e1", "e2", "e3"], pictures, dataset, models, settings, cache, realdata, True, bars,
                                write=False)
     finally:
         bars.close()
-    _publish(result, out, task_markdown(result), "task", docs)
+    _publish(result, out, task_markdown(result), "task", docs and not quick)
 
 
 @bench.command("realism")
-@_docs_option
-@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/realism.json"), show_default=True)
-@click.option("--pictures", type=click.Path(path_type=Path), default=Path("benchmarks/realism"), show_default=True,
-              help="folder for realism.png (real scenes beside renders of their inferred designs)")
-@click.option("--quick", is_flag=True, help="a smoke run with tiny models (not a measurement; no docs)")
-@click.option("--realdata", type=click.Path(path_type=Path), default=None,
-              help="the shared real domains (default: ../shared/realdata beside the repository)")
-@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
-@_torch_threads
+@_task_bench_options("realism", "folder for realism*.png (real scenes beside renders of their inferred designs)")
 def bench_realism_command(out, docs, pictures, quick, realdata, cache):
     """How close renders are to each real domain: sim-only building IoU against the other real domains
     and the all-building answer, and a real-versus-rendered classifier's accuracy."""
-    from dataclasses import replace
+    from ..experiments.task_eval import realism_markdown, run_realism
 
-    from ..experiments.task_eval import TaskEvalSettings, realism_markdown, run_realism
-    from ..pipeline.dataset import DatasetConfig
-    from ..pipeline.workflow import ModelSettings
-    from .learn import quick_models
-
-    dataset, models, settings = DatasetConfig(), ModelSettings(), TaskEvalSettings()
-    if quick:
-        dataset, models = quick_models(dataset, models)
-        settings = TaskEvalSettings.quick()
-        settings = replace(settings, train=replace(settings.train, pixel_size_m=dataset.pixel_size_m))
-        docs = False
+    dataset, models, settings = _task_configs(quick)
     bars = _Bars()
     try:
         result = run_realism(dataset, models, settings, pictures, cache, realdata, bars)
     finally:
         bars.close()
-    _publish(result, out, realism_markdown(result), "realism", docs, *sorted(Path(pictures).glob("realism*.png")))
+    _publish(result, out, realism_markdown(result), "realism", docs and not quick,
+             *sorted(Path(pictures).glob("realism*.png")))

@@ -240,7 +240,7 @@ def eval_task_command(experiments, out, sim_only, quick, seeds, steps, realdata,
     """The task model per augmentation strategy (none, uniform, DR, MS2, NAMS, GT): IoU on the targets."""
     from dataclasses import replace
 
-    from ..experiments.task_eval import TaskEvalSettings, run_task_eval, task_markdown
+    from ..experiments.task_eval import TaskEvalSettings, quick_models, run_task_eval, task_markdown
 
     dataset, settings = _configs(o)
     task_settings = TaskEvalSettings.quick() if quick else TaskEvalSettings()
@@ -252,7 +252,6 @@ def eval_task_command(experiments, out, sim_only, quick, seeds, steps, realdata,
         task_settings = replace(task_settings, train=replace(task_settings.train, steps=steps))
     if quick:
         dataset, settings = quick_models(dataset, settings)
-        task_settings = replace(task_settings, train=replace(task_settings.train, pixel_size_m=dataset.pixel_size_m))
     task_settings.check()
     from ..experiments.realdomains import REALDATA, require
 
@@ -267,10 +266,3 @@ def eval_task_command(experiments, out, sim_only, quick, seeds, steps, realdata,
     click.echo(task_markdown(results))
     click.echo(f"task.json, task.md and the predictions PNGs are in {out}")
 
-
-def quick_models(dataset, settings):
-    """The quick run's training set and models: tiny, coarse and fast (a smoke test, not a measurement)."""
-    from dataclasses import replace
-
-    return (replace(dataset, designs=24, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2),
-            replace(settings, nams={"hidden": [64, 128]}, train={"max_epochs": 40}))

@@ -52,6 +52,15 @@ PAPER_UNET = {"e1": (47.8, 77.6, 83.4, 79.1, 81.8, 84.3), "e2": (47.0, 76.0, 77.
               "e3": (51.7, 53.4, 53.3, 52.7, 54.0, 58.8)}
 
 
+QUICK_PIXEL_SIZE_M = 1.2  # the quick run renders and trains on coarse tiles
+
+
+def quick_models(dataset, models_settings):
+    """The quick run's training set and NAMS models: tiny, coarse and fast (a smoke test, not a measurement)."""
+    return (replace(dataset, designs=24, tiles=1, cities=2, tile_px=96, pixel_size_m=QUICK_PIXEL_SIZE_M),
+            replace(models_settings, nams={"hidden": [64, 128]}, train={"max_epochs": 40}))
+
+
 @dataclass(frozen=True)
 class TaskEvalSettings:
     """How the task experiments run (``quick()`` for a smoke run of a few minutes)."""
@@ -70,7 +79,7 @@ class TaskEvalSettings:
     @classmethod
     def quick(cls) -> TaskEvalSettings:
         return cls(groups=2, tiles=3, test_tiles=2, synthetic_jobs=4, synthetic_tiles=2, seeds=(0, 1),
-                   train=TrainSettings(steps=40, crop=64, width=8, depth=3))
+                   train=TrainSettings(steps=40, crop=64, width=8, depth=3, pixel_size_m=QUICK_PIXEL_SIZE_M))
 
     def check(self) -> TaskEvalSettings:
         self.train.check()

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import MetaSimError
+from .imageio import linear_to_srgb
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,7 @@ class Sensor:
             light = (1.0 - self.haze) * light + self.haze * np.asarray(self.airlight, np.float32)
         if self.blur_px:
             light = gaussian_blur(light, self.blur_px)
-        display = _encode(tone_curve(light, self.knee, self.ceiling))
+        display = linear_to_srgb(tone_curve(light, self.knee, self.ceiling)).astype(np.float32)
         if self.read_noise or self.shot_noise:
             rng = np.random.default_rng(seed)
             sigma = np.sqrt(self.read_noise ** 2 + self.shot_noise * display)
@@ -96,11 +97,6 @@ def tone_curve(light: np.ndarray, knee: float, ceiling: float = 1.0) -> np.ndarr
     span = ceiling - knee
     shoulder = knee + span * (1.0 - np.exp(-(x - knee) / span))
     return np.where(x <= knee, x, shoulder).astype(np.float32)
-
-
-def _encode(linear: np.ndarray) -> np.ndarray:
-    x = np.clip(linear, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
 
 
 def _decode(display: np.ndarray) -> np.ndarray:

@@ -75,8 +75,10 @@ class Pool:
     def building_share(self) -> float:
         return float(sum(m.sum() for m in self.masks) / sum(m.size for m in self.masks))
 
-    def crops(self, n: int, size: int, generator: torch.Generator, augment: bool = True) -> Batch:
-        """``n`` random crops of ``size`` pixels (see the module's docstring)."""
+    def crops(self, n: int, size: int, generator: torch.Generator, augment: bool = True,
+              colour: bool = True) -> Batch:
+        """``n`` random crops of ``size`` pixels (see the module's docstring); ``colour`` False keeps
+        the augmentation to rotations and flips."""
         picks = torch.multinomial(self.weights, n, replacement=True, generator=generator).tolist()
         images = torch.zeros(n, 3, size, size)
         masks = torch.zeros(n, 1, size, size)
@@ -92,6 +94,7 @@ class Pool:
             valid[row, 0, :ch, :cw] = 1.0
         if augment:
             images, masks, valid = _dihedral(images, masks, valid, generator)
+        if augment and colour:
             gain = 1.0 + GAIN * (2 * torch.rand(n, 3, 1, 1, generator=generator) - 1)
             offset = OFFSET * (2 * torch.rand(n, 1, 1, 1, generator=generator) - 1)
             images = (images * gain + offset).clamp(0.0, 1.0) * valid

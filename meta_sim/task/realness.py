@@ -50,6 +50,7 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     pools = (real_train, rendered_train, real_test, rendered_test)
     if len({p.pixel_size_m for p in pools}) != 1:
         raise MetaSimError("real and rendered images must be at one pixel size")
+    real_train, rendered_train, real_test, rendered_test = (_whole_crops_only(p, settings.crop) for p in pools)
     torch.manual_seed(settings.seed)
     net = _Net(settings.width)
     crops = torch.Generator().manual_seed(settings.seed)
@@ -58,8 +59,8 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     labels = torch.cat([torch.ones(half), torch.zeros(half)])
     net.train()
     for _ in range(settings.steps):
-        images = torch.cat([_crops(real_train, half, settings.crop, crops, True),
-                            _crops(rendered_train, half, settings.crop, crops, True)])
+        images = torch.cat([real_train.crops(half, settings.crop, crops, colour=False).image,
+                            rendered_train.crops(half, settings.crop, crops, colour=False).image])
         loss = nn.functional.binary_cross_entropy_with_logits(net(images), labels)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
@@ -69,21 +70,15 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     net.eval()
     scoring = torch.Generator().manual_seed(settings.seed + 1)
     with torch.no_grad():
-        real = net(_crops(real_test, settings.test_crops, settings.crop, scoring, False)) > 0
-        rendered = net(_crops(rendered_test, settings.test_crops, settings.crop, scoring, False)) <= 0
+        real = net(real_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image) > 0
+        rendered = net(rendered_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image) <= 0
     return float(torch.cat([real, rendered]).float().mean())
 
 
-def _crops(pool: Pool, n: int, size: int, generator: torch.Generator, augment: bool) -> torch.Tensor:
-    """Crops that lie wholly inside their images (images smaller than a crop are left out)."""
+def _whole_crops_only(pool: Pool, size: int) -> Pool:
+    """The images of ``pool`` at least ``size`` pixels on a side, so every crop lies wholly inside one."""
     usable = [k for k, m in enumerate(pool.masks) if min(m.shape) >= size]
     if not usable:
         raise MetaSimError(f"{pool.name}: no image is {size} pixels on a side")
-    batch = Pool(pool.name, [pool.images[k] for k in usable], [pool.masks[k] for k in usable], pool.pixel_size_m,
-                 [pool.sources[k] for k in usable]).crops(n, size, generator, augment=False)
-    images = batch.image
-    if augment:
-        views = torch.randint(8, (n,), generator=generator).tolist()
-        images = torch.stack([torch.flip(torch.rot90(x, v % 4, dims=(-2, -1)), dims=(-1,)) if v >= 4
-                              else torch.rot90(x, v % 4, dims=(-2, -1)) for x, v in zip(images, views)])
-    return images
+    return Pool(pool.name, [pool.images[k] for k in usable], [pool.masks[k] for k in usable], pool.pixel_size_m,
+                [pool.sources[k] for k in usable])
