@@ -38,6 +38,8 @@ import OpenImageIO as oiio
 
 from ..core.errors import MetaSimError
 from ..sim import meshes
+from ..sim.appearance import vegetation_colour
+from ..sim.ground import COVERS, ground_image
 from ..sim.quality import RenderPreset
 
 LABEL_ATTRIBUTE = "label"
@@ -243,9 +245,12 @@ class CityScene:
     """
 
     def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0,
-                 collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None):
+                 collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None,
+                 greenness: float | None = None, sun_elevation_deg: float | None = None):
         self.layout = layout
         self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
+        self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
+        self.sun_elevation_deg = sun_elevation_deg  # None: drawn from the city seed
         self.pixel_size_m = pixel_size_m
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
         if collection is None:
@@ -287,12 +292,14 @@ class CityScene:
             meshes.SLOPED_ROOF: _image_material(
                 "sloped-roof-unset", _noise_image("unset-s", (0.5, 0.5, 0.5), 0.0, 0, key), key),
         }
+        lawn = vegetation_colour("lawn", self.greenness, COVERS["lawn"])
         if self.ground_mix:
-            ground = _image_material("ground", self._ground_image(region, seed + 1), key)
+            ground = _image_material("ground", self._ground_image(region, seed + 1, lawn), key)
         else:
-            ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1, key), key)
+            ground = _image_material("ground", _noise_image("ground", lawn, 0.25, seed + 1, key), key)
         road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
-        tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3, key), key)
+        leaves = vegetation_colour("tree", self.greenness, (0.05, 0.13, 0.035))
+        tree = _image_material("tree", _noise_image("tree", leaves, 0.35, seed + 3, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
         self.buildings_obj = None
         if building_arrays.n_polygons:
@@ -309,11 +316,10 @@ class CityScene:
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
 
-    def _ground_image(self, region: Rect, seed: int) -> bpy.types.Image:
-        """The region's ground cover (``sim.ground``) as one image spanning the ground quad."""
-        from ..sim.ground import ground_image
-
-        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix)
+    def _ground_image(self, region: Rect, seed: int, lawn) -> bpy.types.Image:
+        """The region's ground cover (``sim.ground``, its lawn in colour ``lawn``) as one image spanning
+        the ground quad."""
+        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix, {"lawn": lawn})
         h, w = rgb.shape[:2]
         rgba = np.ones((h, w, 4), dtype=np.float32)
         rgba[..., :3] = rgb  # row 0 at the quad's south edge (v = 0), as Blender stores images
@@ -332,6 +338,8 @@ class CityScene:
         rng = np.random.default_rng([int(self.layout.seed), 7])
         self._elevation = math.radians(float(rng.uniform(30.0, 60.0)))
         self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
+        if self.sun_elevation_deg is not None:  # a design's sun; the azimuth stays the city's
+            self._elevation = math.radians(float(self.sun_elevation_deg))
         sun = _tagged(bpy.data.lights.new("sun", "SUN"), self.key)
         sun.energy = 4.0
         sun.angle = math.radians(0.5)

@@ -14,6 +14,7 @@ from ..core.fileio import write_text_atomic
 from ..core.locks import locked
 from ..core.names import safe_name
 from ..sim import tiles
+from ..sim.appearance import Appearance
 from ..sim.design import DesignSpace
 from ..sim.quality import RenderPreset
 from ..sim.sensor import Sensor
@@ -56,6 +57,11 @@ class RenderSettings:
     roof_jitter: float = 0.0  # per-building roof variation (sim.jitter); 0: none
     ground: str = "plain"  # ground cover mix (sim.ground); plain: one lawn
 
+    def appearance(self, job: "Job") -> Appearance:
+        """How ``job``'s tiles look: this render's sensor, roof jitter and ground, with whatever the
+        job's design sets through the space's appearance parameters."""
+        return Appearance(self.sensor, self.roof_jitter, self.ground).with_design(self.space, job.design)
+
     @property
     def tile_m(self) -> float:
         """A tile's side on the ground, in metres."""
@@ -86,9 +92,7 @@ def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
             "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
             "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
             "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields(),
-            **({"sensor": settings.sensor.to_dict()} if settings.sensor.active else {}),
-            **({"roof_jitter": settings.roof_jitter} if settings.roof_jitter else {}),
-            **({"ground": settings.ground} if settings.ground != "plain" else {})}
+            **settings.appearance(job).header()}
 
 
 def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int) -> list[Job]:

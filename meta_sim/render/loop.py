@@ -108,21 +108,24 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         if progress and len(wanted) - len(pending):
             progress(len(wanted) - len(pending))
         if pending:
-            by_city[(job.city_seed, params)].append((job, textures, pending))
+            look = settings.appearance(job)
+            by_city[(job.city_seed, params, look.scene_key())].append((job, textures, pending, look))
     if record:
         write_job_manifest(out_dir, jobs, settings)
 
-    for (city_seed, params), work in by_city.items():
+    for (city_seed, params, _), work in by_city.items():
         clock = time.perf_counter()
         layout, rects = layout_for_tiles(city_seed, settings.n_tiles, settings.tile_m, params)
         summary.seconds["layout"] += time.perf_counter() - clock
         cols = _grid_columns(rects)
-        needed = sorted({j for _, _, pending in work for j in pending})
+        needed = sorted({j for _, _, pending, _ in work for j in pending})
         blocks = [b for b in blocks_of(settings.n_tiles, cols) if set(b) & set(needed)]
         clock = time.perf_counter()
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
-        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(settings.ground))
+        look = work[0][3]  # the jobs of one scene share ground, greenness and sun
+        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
+                          greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg)
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:
@@ -130,7 +133,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
             clock = time.perf_counter()
             labels = [scene.render_labels(rect) for rect in block_rects]
             summary.seconds["labels"] += time.perf_counter() - clock
-            for job, textures, pending in work:
+            for job, textures, pending, look in work:
                 scene.set_roofs(textures)
                 for block, rect, (instance, roof_class) in zip(blocks, block_rects, labels):
                     todo = [j for j in block if j in pending]
@@ -147,13 +150,12 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             design=job.design, space=settings.space.name, city_seed=job.city_seed,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
-                            software=software, sensor=settings.sensor.to_dict() if settings.sensor.active else None,
-                            roof_jitter=settings.roof_jitter, ground=settings.ground, sun=scene.sun)
+                            software=software, appearance=look.header(), sun=scene.sun)
                         # roofs varied per building, then the sensor sees each tile alone (its noise seeded
                         # by the tile); the labels are untouched
                         image = roof_jitter(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
-                                            settings.roof_jitter)
-                        image = settings.sensor.apply(image, [job.city_seed, j])
+                                            look.roof_jitter)
+                        image = look.sensor.apply(image, [job.city_seed, j])
                         tiles.write_tile(path, image, instance[cut], roof_class[cut], meta)
                         if settings.preview:
                             write_previews(path, image, instance[cut], roof_class[cut])

@@ -11,9 +11,11 @@ A design space is declared in a versioned JSON file (see ``meta_sim/sim/spaces``
      "layout": {"sloped_share": 0.0}}
 
 A categorical parameter with ``texture_kind`` sets the material of every roof
-of that kind; a continuous parameter with ``layout_field`` sets that field of
-the city layout. ``layout`` holds fixed layout overrides the scene needs (a
-space without sloped roofs builds none).
+of that kind; a parameter with ``layout_field`` sets that field of the city
+layout (a number, or a categorical choice such as a city style); a parameter
+with ``appearance`` sets a field of ``sim.appearance`` (ground cover, sensor,
+greenness, sun elevation, roof jitter). ``layout`` holds fixed layout
+overrides the scene needs (a space without sloped roofs builds none).
 
 A design is a plain ``dict``: parameter name -> choice id (categorical) or
 float (continuous). Encoding concatenates a one-hot block per categorical
@@ -35,6 +37,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from ..core.names import MAX_NAME, safe_name
+from .appearance import check_field
 
 FORMAT = "meta-sim-design-space"
 VERSION = 1
@@ -47,6 +50,8 @@ class Categorical:
     name: str
     choices: tuple[str, ...]
     texture_kind: str | None = None
+    layout_field: str | None = None  # the layout field set to the choice (a city style)
+    appearance: str | None = None  # the appearance field set to the choice (sim.appearance)
 
     @property
     def width(self) -> int:
@@ -73,8 +78,9 @@ class Categorical:
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "type": "categorical", "choices": list(self.choices)}
-        if self.texture_kind:
-            out["texture_kind"] = self.texture_kind
+        for key in ("texture_kind", "layout_field", "appearance"):
+            if getattr(self, key):
+                out[key] = getattr(self, key)
         return out
 
 
@@ -84,6 +90,7 @@ class Continuous:
     low: float
     high: float
     layout_field: str | None = None
+    appearance: str | None = None  # the appearance field set to the value (sim.appearance)
 
     @property
     def width(self) -> int:
@@ -101,8 +108,9 @@ class Continuous:
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "type": "continuous", "low": self.low, "high": self.high}
-        if self.layout_field:
-            out["layout_field"] = self.layout_field
+        for key in ("layout_field", "appearance"):
+            if getattr(self, key):
+                out[key] = getattr(self, key)
         return out
 
 
@@ -113,6 +121,17 @@ def _finite(value, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise MetaSimError(f"{what} must be a finite number, not {value!r}")
     return float(value)
+
+
+def _bindings(raw: Mapping, name: str) -> tuple[str | None, str | None]:
+    """A parameter's layout_field and appearance field names (None when absent), checked to be identifiers."""
+    out = []
+    for key in ("layout_field", "appearance"):
+        value = raw.get(key)
+        if value is not None and (not isinstance(value, str) or not value.isidentifier()):
+            raise MetaSimError(f"{name}: {key} must be a field name, not {value!r}")
+        out.append(value)
+    return out[0], out[1]
 
 
 def _preview(choices: tuple[str, ...], n: int = 3) -> str:
@@ -154,15 +173,22 @@ class DesignSpace:
                 texture_kind = raw.get("texture_kind")
                 if texture_kind not in (None, "flat", "sloped"):
                     raise MetaSimError(f"{name}: texture_kind must be \"flat\" or \"sloped\", not {texture_kind!r}")
-                params.append(Categorical(name, choices, texture_kind))
+                field, look = _bindings(raw, name)
+                if look is not None:
+                    check_field(look, True, name, choices)
+                if sum(x is not None for x in (texture_kind, field, look)) > 1:
+                    raise MetaSimError(f"{name}: set at most one of texture_kind, layout_field and appearance")
+                params.append(Categorical(name, choices, texture_kind, field, look))
             elif kind == "continuous":
                 low, high = (_finite(raw.get(key), f"{name}: {key}") for key in ("low", "high"))
                 if not low < high:
                     raise MetaSimError(f"{name}: low ({low}) must be below high ({high})")
-                field = raw.get("layout_field")
-                if field is not None and (not isinstance(field, str) or not field.isidentifier()):
-                    raise MetaSimError(f"{name}: layout_field must be a layout parameter's name, not {field!r}")
-                params.append(Continuous(name, low, high, field))
+                field, look = _bindings(raw, name)
+                if look is not None:
+                    check_field(look, False, name, low=low, high=high)
+                if field is not None and look is not None:
+                    raise MetaSimError(f"{name}: set layout_field or appearance, not both")
+                params.append(Continuous(name, low, high, field, look))
             else:
                 raise MetaSimError(f"{name}: type must be 'categorical' or 'continuous', not {kind!r}")
         if not params:
@@ -172,6 +198,10 @@ class DesignSpace:
         kinds = [p.texture_kind for p in params if isinstance(p, Categorical) and p.texture_kind]
         if len(set(kinds)) != len(kinds):
             raise MetaSimError("at most one parameter may set each roof kind's material")
+        for what in ("layout_field", "appearance"):
+            bound = [getattr(p, what) for p in params if getattr(p, what)]
+            if len(set(bound)) != len(bound):
+                raise MetaSimError(f"at most one parameter may set each {what.replace('_', ' ')}")
         space_name, layout = data.get("name", "unnamed"), data.get("layout", {})
         if not isinstance(space_name, str) or not space_name or len(space_name) > MAX_NAME:
             raise MetaSimError(f"design-space name must be a short non-empty string, not {space_name!r}")
@@ -317,6 +347,6 @@ class DesignSpace:
         """Fixed layout overrides plus the design's layout-bound values."""
         out = dict(self.layout)
         for p in self.parameters:
-            if isinstance(p, Continuous) and p.layout_field:
-                out[p.layout_field] = float(design[p.name])
+            if p.layout_field:
+                out[p.layout_field] = float(design[p.name]) if isinstance(p, Continuous) else design[p.name]
         return out

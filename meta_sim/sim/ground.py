@@ -53,8 +53,9 @@ def _field(rng: np.random.Generator, h: int, w: int, scales_px) -> np.ndarray:
     return total
 
 
-def ground_image(width_m: float, height_m: float, seed: int, mix: dict) -> np.ndarray:
-    """Linear RGB (H, W, 3) of the ground of a ``width_m`` x ``height_m`` region at ``PIXEL_M``."""
+def ground_image(width_m: float, height_m: float, seed: int, mix: dict, colours: dict | None = None) -> np.ndarray:
+    """Linear RGB (H, W, 3) of the ground of a ``width_m`` x ``height_m`` region at ``PIXEL_M``;
+    ``colours`` replaces the colours of some covers (a greener or drier lawn)."""
     unknown = [c for c in mix if c not in COVERS]
     if unknown or not mix or any(not 0 <= v for v in mix.values()) or sum(mix.values()) <= 0:
         raise MetaSimError(f"a ground mix gives shares (at least one positive) of {', '.join(COVERS)}; "
@@ -68,7 +69,7 @@ def ground_image(width_m: float, height_m: float, seed: int, mix: dict) -> np.nd
     names = list(mix)
     edges = np.cumsum([mix[n] for n in names]) / sum(mix.values())
     cover = np.searchsorted(edges, ranks, side="right")
-    palette = np.array([COVERS[n] for n in names], np.float32)
+    palette = np.array([{**COVERS, **(colours or {})}[n] for n in names], np.float32)
     image = palette[np.minimum(cover, len(names) - 1)]
     drift = 1.0 + 0.12 * _field(rng, h, w, (80,))[:, :, None] / 2.0
     speckle = 1.0 + 0.15 * rng.standard_normal((h, w, 1)).astype(np.float32)

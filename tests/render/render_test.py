@@ -441,3 +441,42 @@ def test_a_sensor_keeps_a_white_roof_from_clipping_and_leaves_the_labels(space, 
     # a tile rendered without the sensor is not taken for one with it
     again, _ = _render(space, [bank], tmp_path / "plain", design, preset, n_tiles=1, sensor=get_sensor("drone"))
     assert again.written == 1 and again.skipped == 0
+
+
+def test_a_space_declaring_appearance_renders_each_design_with_its_look(space, bank, tmp_path):
+    from meta_sim.sim.appearance import Appearance
+
+    look_space = DesignSpace.from_dict({**space.to_dict(), "name": "look", "parameters": [
+        *space.to_dict()["parameters"],
+        {"name": "ground", "type": "categorical", "appearance": "ground", "choices": ["plain", "arid"]},
+        {"name": "greenness", "type": "continuous", "appearance": "greenness", "low": 0.0, "high": 1.0},
+        {"name": "sun", "type": "continuous", "appearance": "sun_elevation_deg", "low": 30, "high": 80},
+        {"name": "sensor", "type": "categorical", "appearance": "sensor", "choices": ["none", "drone"]}]})
+    base = {"flat_roof": 5, "sloped_roof": 9}
+    lush = {**base, "ground": "plain", "greenness": 1.0, "sun": 80.0, "sensor": "none"}
+    dry = {**base, "ground": "arid", "greenness": 0.0, "sun": 30.0, "sensor": "drone"}
+    settings = RenderSettings(space=look_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path,
+                              n_tiles=1, **SMALL)
+    jobs = [single_job(look_space, look_space.validate(d), SEED) for d in (lush, dry)]
+    summary = render_jobs(jobs, settings)
+    assert summary.written == 2 and summary.cities == 2  # the ground and the sun belong to the scene
+    wet, arid = (tiles.read_tile(tmp_path / f"{job.name}_t00.exr") for job in jobs)
+    assert wet.meta["sun"]["elevation_deg"] == 80.0 and arid.meta["sun"]["elevation_deg"] == 30.0
+    assert wet.meta["sun"]["azimuth_deg"] == arid.meta["sun"]["azimuth_deg"]  # the city's own
+    assert "sensor" not in wet.meta and arid.meta["sensor"]["name"] == "drone"
+    assert arid.meta["ground"] == "arid" and wet.meta["greenness"] == 1.0 and arid.meta["greenness"] == 0.0
+    assert np.array_equal(wet.instance, arid.instance) and np.array_equal(wet.roof_class, arid.roof_class)
+    ground = (wet.building == 0)
+    green = wet.rgb[ground].mean(axis=0)
+    brown = arid.rgb[ground].mean(axis=0)
+    assert green[1] > green[0] and brown[0] > brown[1]  # green lawn against dry soil
+    # a longer shadow at a low sun: darker ground pixels next to buildings
+    assert (linear_luma(arid.rgb)[ground] < 0.5 * np.median(linear_luma(arid.rgb)[ground])).mean() > \
+        (linear_luma(wet.rgb)[ground] < 0.5 * np.median(linear_luma(wet.rgb)[ground])).mean()
+    # rendering again skips both; a header is what the design's appearance asks for
+    assert render_jobs(jobs, settings).skipped == 2
+    assert Appearance().with_design(look_space, jobs[1].design).header()["ground"] == "arid"
+
+
+def linear_luma(rgb):
+    return rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)

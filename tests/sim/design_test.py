@@ -84,6 +84,52 @@ def test_continuous_parameter_encodes_in_unit_range_and_validates(tmp_path):
     assert DesignSpace.from_dict(space.to_dict()) == space
 
 
+def _appearance_space(*extra):
+    return DesignSpace.from_dict({"format": "meta-sim-design-space", "version": 1, "name": "look", "parameters": [
+        {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "choices": ["a", "b"]},
+        {"name": "ground", "type": "categorical", "appearance": "ground", "choices": ["plain", "arid"]},
+        {"name": "sensor", "type": "categorical", "appearance": "sensor", "choices": ["drone", "satellite"]},
+        {"name": "greenness", "type": "continuous", "appearance": "greenness", "low": 0.0, "high": 1.0},
+        {"name": "sun", "type": "continuous", "appearance": "sun_elevation_deg", "low": 30, "high": 70},
+        {"name": "style", "type": "categorical", "layout_field": "style", "choices": ["suburban", "dense"]},
+        *extra]})
+
+
+def test_appearance_parameters_set_the_look_of_a_design_and_round_trip():
+    from meta_sim.sim.appearance import Appearance
+    from meta_sim.sim.sensor import get_sensor
+
+    space = _appearance_space()
+    design = space.parse("flat_roof=a,ground=arid,sensor=satellite,greenness=0.25,sun=40,style=dense")
+    assert space.dim == 2 + 2 + 2 + 1 + 1 + 2
+    look = Appearance(roof_jitter=0.3).with_design(space, design)
+    assert look == Appearance(get_sensor("satellite"), 0.3, "arid", 0.25, 40.0)
+    assert look.header() == {"sensor": get_sensor("satellite").to_dict(), "roof_jitter": 0.3, "ground": "arid",
+                             "greenness": 0.25, "sun_elevation_deg": 40.0}
+    assert Appearance().header() == {}
+    assert space.layout_overrides(design) == {"style": "dense"}
+    assert DesignSpace.from_dict(space.to_dict()) == space
+    assert space.decode(space.encode(design)) == design
+
+
+@pytest.mark.parametrize("extra, message", [
+    ({"name": "x", "type": "categorical", "appearance": "ground", "choices": ["plain", "jungle"]},
+     "no choice 'jungle'"),
+    ({"name": "x", "type": "categorical", "appearance": "weather", "choices": ["a"]}, "categorical appearance field"),
+    ({"name": "x", "type": "continuous", "appearance": "ground", "low": 0, "high": 1}, "continuous appearance field"),
+    ({"name": "x", "type": "continuous", "appearance": "roof_jitter", "low": 0, "high": 2}, r"within \[0, 1\]"),
+    ({"name": "x", "type": "continuous", "appearance": "greenness", "layout_field": "tree_density", "low": 0,
+      "high": 1}, "not both"),
+    ({"name": "x", "type": "categorical", "appearance": "sensor", "texture_kind": "flat", "choices": ["drone"]},
+     "at most one of"),
+    ({"name": "x", "type": "categorical", "appearance": "sensor", "choices": ["drone"]}, "each appearance"),
+    ({"name": "x", "type": "continuous", "appearance": "sun elevation", "low": 0, "high": 1}, "must be a field name"),
+])
+def test_bad_appearance_parameters_raise(extra, message):
+    with pytest.raises(MetaSimError, match=message):
+        _appearance_space(extra)
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),

@@ -1,0 +1,106 @@
+"""How a city looks beyond its roofs: ground cover, vegetation colour, sun, roof variation and sensor.
+
+Each of these can be set for a whole render (``meta-sim render --ground mixed --sensor drone ...``)
+or declared as a parameter of a design space, so NAMS infers it for a target like a roof material::
+
+    {"name": "ground", "type": "categorical", "appearance": "ground", "choices": ["plain", "arid"]}
+    {"name": "greenness", "type": "continuous", "appearance": "greenness", "low": 0.0, "high": 1.0}
+
+A design's value overrides the render's setting for that design only. ``FIELDS`` lists what a space
+may declare: categorical fields with their allowed choices, continuous ones with the range their
+values must stay inside. Pure Python and numpy: the add-on, the renderer and the torch side import it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Mapping
+
+import numpy as np
+
+from ..core.errors import MetaSimError
+from .ground import MIXES
+from .sensor import SENSORS, Sensor, get_sensor
+
+# categorical field -> the choices it allows; continuous field -> (lowest, highest) value
+CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
+CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0)}
+FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
+
+# Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
+LUSH = {"lawn": (0.11, 0.20, 0.06), "tree": (0.04, 0.12, 0.03)}
+DRY = {"lawn": (0.34, 0.29, 0.17), "tree": (0.12, 0.13, 0.06)}
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """Everything of a render's look that is not a roof texture or the layout.
+
+    ``greenness`` and ``sun_elevation_deg`` are None when not set: today's lawn and tree colours,
+    and a sun elevation drawn from the city seed.
+    """
+
+    sensor: Sensor = Sensor()
+    roof_jitter: float = 0.0
+    ground: str = "plain"
+    greenness: float | None = None
+    sun_elevation_deg: float | None = None
+
+    def with_design(self, space, design: Mapping) -> "Appearance":
+        """This appearance with the values ``design`` gives to the space's appearance parameters."""
+        changes = {}
+        for param in space.parameters:
+            target = getattr(param, "appearance", None)
+            if target == "sensor":
+                changes["sensor"] = get_sensor(str(design[param.name]))
+            elif target is not None:
+                changes[target] = design[param.name] if target == "ground" else float(design[param.name])
+        return replace(self, **changes) if changes else self
+
+    def scene_key(self) -> tuple:
+        """What the Blender scene of a city depends on (the rest is applied to finished renders)."""
+        return (self.ground, self.greenness, self.sun_elevation_deg)
+
+    def header(self) -> dict:
+        """The fields that differ from a plain render, for a tile's header (empty for a plain one)."""
+        out = {}
+        if self.sensor.active:
+            out["sensor"] = self.sensor.to_dict()
+        if self.roof_jitter:
+            out["roof_jitter"] = self.roof_jitter
+        if self.ground != "plain":
+            out["ground"] = self.ground
+        if self.greenness is not None:
+            out["greenness"] = self.greenness
+        if self.sun_elevation_deg is not None:
+            out["sun_elevation_deg"] = self.sun_elevation_deg
+        return out
+
+
+def check_field(target, categorical: bool, where: str, choices=(), low: float = 0.0, high: float = 1.0) -> str:
+    """Validate a design-space parameter bound to appearance field ``target``: a known field of the
+    parameter's type whose choices (or range) the field allows. Returns the field's name."""
+    fields = CATEGORICAL_FIELDS if categorical else CONTINUOUS_FIELDS
+    if target not in fields:
+        kind = "categorical" if categorical else "continuous"
+        raise MetaSimError(f"{where}: appearance must name a {kind} appearance field ({', '.join(fields)}), "
+                           f"not {target!r}")
+    if categorical:
+        unknown = [c for c in choices if c not in fields[target]]
+        if unknown:
+            raise MetaSimError(f"{where}: {target} has no choice {unknown[0]!r}; "
+                               f"choose from {', '.join(fields[target])}")
+    else:
+        lo, hi = fields[target]
+        if low < lo or high > hi:
+            raise MetaSimError(f"{where}: {target} must stay within [{lo:g}, {hi:g}], not [{low:g}, {high:g}]")
+    return target
+
+
+def vegetation_colour(kind: str, greenness: float | None, default) -> tuple:
+    """The linear colour of ``kind`` ("lawn" or "tree") at ``greenness``; ``default`` when None."""
+    if greenness is None:
+        return tuple(default)
+    g = float(np.clip(greenness, 0.0, 1.0))
+    return tuple(float(d + g * (lush - d)) for d, lush in zip(DRY[kind], LUSH[kind]))
+
