@@ -21,6 +21,9 @@ def _dataset_options(command):
         click.option("--dataset-seed", type=int, default=1, show_default=True, help="design sampling and city seed"),
         click.option("--cities", type=int, default=8, show_default=True, help="cities the designs are spread over"),
         click.option("--preset", default="fast", show_default=True, help="render preset of the training tiles"),
+        click.option("--space", default="rooftops-v1", show_default=True,
+                     help="design space: a built-in name (rooftops-v1; overhead-v1 adds ground, vegetation, sun, "
+                          "sensor and city style for real targets) or a JSON file"),
         click.option("--tile-px", type=int, default=384, show_default=True, help="training tile size in pixels"),
         click.option("--gsd", type=float, default=0.3, show_default=True, help="training tiles' metres per pixel"),
         click.option("--extractor", default="colour-texture", show_default=True,
@@ -69,7 +72,8 @@ def _configs(o):
         base = DatasetConfig.paper() if o["paper_scale"] else DatasetConfig()
     overrides = {k: v for k, v in (("designs", o["designs"]), ("tiles", o["tiles"])) if v is not None}
     dataset = DatasetConfig(**{**base.__dict__, **overrides, "seed": o["dataset_seed"], "cities": o["cities"],
-                               "preset": o["preset"], "tile_px": o["tile_px"], "pixel_size_m": o["gsd"]})
+                               "preset": o["preset"], "tile_px": o["tile_px"], "pixel_size_m": o["gsd"],
+                               "space": o["space"]})
     nams = {}
     if o["hidden"]:
         try:

@@ -35,7 +35,7 @@ from ..core.fileio import write_text_atomic
 from ..core.progress import Bars
 from ..nams.search import SearchOptions
 from ..render.jobs import Job
-from ..sim.design import DesignSpace
+from ..sim.design import Continuous, DesignSpace
 
 TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
 # Designs are drawn from np.random.default_rng([seed, stream]). Training sets use stream 1
@@ -54,13 +54,18 @@ def target_jobs(experiment: str, space: DesignSpace, heldout, n: int, seed: int)
     rng = np.random.default_rng([seed, TARGET_DESIGN_STREAM[experiment]])
     if experiment == "e1":
         designs = space.sample(rng, n)
-    else:
+    else:  # held-out textures for the roofs; any other parameter drawn as in E1
         designs = []
         for _ in range(n):
             design = {}
             for param in space.parameters:
-                ids = heldout.ids(param.texture_kind)
-                design[param.name] = ids[int(rng.integers(len(ids)))]
+                if getattr(param, "texture_kind", None):
+                    ids = heldout.ids(param.texture_kind)
+                    design[param.name] = ids[int(rng.integers(len(ids)))]
+            other = [p for p in space.parameters if p.name not in design]
+            if other:
+                sampled = replace(space, parameters=tuple(other)).sample(rng, 1)[0]
+                design = {name: {**design, **sampled}[name] for name in space.names}
             designs.append(design)
     return [Job(design, TARGET_CITY_SEED + seed * 1000 + k, f"{experiment}-{k:04d}")
             for k, design in enumerate(designs)]
@@ -106,8 +111,12 @@ def rankings(experiment: str, bank, heldout) -> dict:
     return {kind: {t: ranking(t, kind) for t in truth_bank.ids(kind)} for kind in ("flat", "sloped")}
 
 
-def score(predicted: dict, truth: dict, ranks: dict) -> dict:
-    """top-1 / top-10 hits (tie-aware, see ``Ranking.credit``) for each roof parameter the space has."""
+def score(predicted: dict, truth: dict, ranks: dict, space: DesignSpace | None = None) -> dict:
+    """top-1 / top-10 hits (tie-aware, see ``Ranking.credit``) for each roof parameter the space has.
+
+    With ``space``, its other parameters too: ``{name}_hit`` (1 for the true choice) for a categorical
+    one, ``{name}_error`` (the absolute error as a fraction of the parameter's range) for a continuous one.
+    """
     out = {}
     for param, kind in KIND_OF.items():
         if param not in truth:
@@ -115,6 +124,14 @@ def score(predicted: dict, truth: dict, ranks: dict) -> dict:
         ranking = ranks[kind][truth[param]]
         out[f"{kind}_top1"] = ranking.credit(predicted[param], 1)
         out[f"{kind}_top10"] = ranking.credit(predicted[param], 10)
+    for param in (space.parameters if space else ()):
+        if param.name in KIND_OF:
+            continue
+        if isinstance(param, Continuous):
+            out[f"{param.name}_error"] = abs(float(predicted[param.name]) - float(truth[param.name])) / (
+                param.high - param.low)
+        else:
+            out[f"{param.name}_hit"] = float(predicted[param.name] == truth[param.name])
     return out
 
 
@@ -146,6 +163,14 @@ def results_markdown(results: dict) -> str:
                   "| method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 |", "|---|---|---|---|---|"]
         for name, m in unseen.items():
             lines.append(f"| {name} | " + " | ".join(f"{m['unseen'][k]:.3f}" for k in METRICS) + " |")
+    others = [k for k in next(iter(results["methods"].values())) if k.endswith(("_hit", "_error"))]
+    if others:
+        lines += ["", "The space's other parameters: rate of inferring the true choice (categorical), and the mean "
+                  "absolute error as a fraction of the parameter's range (continuous; uniform guessing: 1/3):", "",
+                  "| method | " + " | ".join(k.replace("_hit", " hit").replace("_error", " error") for k in others)
+                  + " |", "|---|" + "---|" * len(others)]
+        for name, m in results["methods"].items():
+            lines.append(f"| {name} | " + " | ".join(f"{m[k]:.3f}" if k in m else "-" for k in others) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -156,17 +181,21 @@ def write_results(out: Path, results: dict) -> None:
 
 
 def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, root: Path,
-                   tile_px: int = 384, pixel_size_m: float = 0.3, bars: Bars | None = None) -> tuple[list[Job], Path]:
-    """Render (or reuse) the target groups of an experiment; returns the jobs and their tile folder."""
+                   tile_px: int = 384, pixel_size_m: float = 0.3, bars: Bars | None = None,
+                   space: str = "rooftops-v1") -> tuple[list[Job], Path]:
+    """Render (or reuse) the target groups of an experiment in design space ``space``; returns the jobs
+    and their tile folder."""
     from ..render.jobs import RenderSettings
     from ..render.loop import render_jobs
     from ..sim.quality import get_preset
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
-    space = DesignSpace.load()
+    space_name, space = space, DesignSpace.load(space)
     bank, heldout = ensure_default_bank(), ensure_heldout_bank()
     jobs = target_jobs(experiment, space, heldout, n, seed)
     name = f"{experiment}-v{TARGETS_VERSION}-n{n}-t{tiles}-s{seed}-{preset}-{tile_px}px-{pixel_size_m}m"
+    if space_name != "rooftops-v1":  # the default space's targets keep the folders they had
+        name += f"-{space.name}"
     folder = Path(root) / "targets" / name
     settings = RenderSettings(space=space, banks=[bank, heldout], preset=get_preset(preset), out_dir=folder,
                               n_tiles=tiles, tile_px=tile_px, pixel_size_m=pixel_size_m)
@@ -281,7 +310,8 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     methods = load_methods(dataset, models_settings, root, settings.ms2, bars)
     tiles = settings.tiles
     jobs, folder = render_targets(experiment, settings.targets, tiles + test_tiles, settings.seed,
-                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bars)
+                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bars,
+                                  dataset.space)
     started = time.perf_counter()
     groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job in jobs]
     features, per_tile = group_features(groups, methods.extractor, models_settings.views,
@@ -309,7 +339,7 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
         "uniform": lambda: uniform_predict(space, n, generator),
         "dr": lambda: [r.design for r in dr_predict(ctx.dr.model, ctx.dr.feature_norm.apply(feats), space)],
     }
-    if ctx.pool is not None:
+    if ctx.pool is not None and discrete(space):
         # MS2 compares distributions of single tiles, in the space NAMS searches in (see nams/ms2.py).
         pool = norm.apply(ctx.pool.features.reshape(-1, ctx.pool.features.shape[-1]))
         pool_designs = ctx.pool.encoded.repeat_interleave(ctx.pool.features.shape[1], dim=0)
@@ -317,8 +347,19 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
             pool, pool_designs, [norm.apply(t) for t in ctx.tile_features], space, generator=generator)]
     runs["nams_adjoint"] = lambda: [r.design for r in adjoint_search(
         ctx.nams.model, normed, space, generator=generator, **adjoint_settings)]
-    runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)]
+    if discrete(space):  # the exhaustive search enumerates every design
+        runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)]
     return runs
+
+
+def discrete(space: DesignSpace) -> bool:
+    """Whether every parameter is categorical (what the exhaustive search and MS2 need)."""
+    return not any(isinstance(p, Continuous) for p in space.parameters)
+
+
+def best_nams(predictions: dict) -> list:
+    """NAMS's designs: the exhaustive search's where it ran (a discrete space), else the adjoint's."""
+    return predictions.get("nams_exhaustive") or predictions["nams_adjoint"]
 
 
 def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> dict:
@@ -351,7 +392,7 @@ def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
     started = time.perf_counter()
     designs = run()
     seconds = (time.perf_counter() - started) / len(ctx.jobs)
-    rows = [score(p, job.design, ctx.ranks) for p, job in zip(designs, ctx.jobs)]
+    rows = [score(p, job.design, ctx.ranks, ctx.nams.space) for p, job in zip(designs, ctx.jobs)]
     metrics = {**mean_scores(rows), "seconds_per_target": seconds}
     if ctx.training_designs:
         unseen = unseen_rows(rows, ctx.jobs, ctx.training_designs)
@@ -396,8 +437,8 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     shutil.copy2(ctx.models.nams_path, out / "nams.pt")
     shutil.copy2(ctx.models.dr_path, out / "dr.pt")
     banks = _banks()
-    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, predictions["nams_exhaustive"],
-                     RenderSettings(space=DesignSpace.load(), banks=banks,
+    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, best_nams(predictions),
+                     RenderSettings(space=ctx.nams.space, banks=banks,
                                     preset=get_preset(settings.preset or dataset.preset),
                                     out_dir=root / "targets" / "inferred", n_tiles=ctx.tiles,
                                     tile_px=dataset.tile_px, pixel_size_m=dataset.pixel_size_m))
@@ -434,7 +475,7 @@ def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted
     for job, guess in zip(jobs, inferred):
         row = [("TARGET", srgb8(job_tiles(target_folder, job.name, tiles)[0])),
                ("INFERRED", srgb8(job_tiles(folder, guess.name, tiles)[0]))]
-        for param in space.names:
+        for param in [n for n in space.names if n in KIND_OF]:
             kind = KIND_OF[param][0].upper()
             row += [(f"{kind} TRUE", swatch(job.design[param])), (f"{kind} NAMS", swatch(guess.design[param]))]
         rows.append(row)

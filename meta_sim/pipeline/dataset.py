@@ -77,9 +77,13 @@ class DatasetConfig:
     def identity(self) -> dict:
         """Every input of the training set: the fields and what of the render preset's settings
         sets its tiles apart (``RenderPreset.cache_fields``)."""
+        from ..sim.design import DesignSpace
         from ..sim.quality import get_preset
 
-        return {**asdict(self), **get_preset(self.preset).cache_fields()}
+        identity = {**asdict(self), **get_preset(self.preset).cache_fields()}
+        if Path(self.space).suffix:  # a space from a file: what it declares, not where it lies
+            identity["space"] = DesignSpace.load(self.space).to_dict()
+        return identity
 
     def key(self) -> str:
         """A short hash of ``identity()``: the training set's folder name in the cache."""

@@ -64,10 +64,37 @@ def test_e1_scores_the_targets_the_training_set_lacks_apart():
     unseen = {"flat_roof": flat[1], "sloped_roof": sloped[1]}
     wrong = {"flat_roof": flat[2], "sloped_roof": sloped[2]}
     ctx = SimpleNamespace(jobs=[Job(seen, 1, "a"), Job(unseen, 2, "b")],
-                          ranks=rankings("e1", bank, ensure_heldout_bank()), training_designs=[seen])
+                          ranks=rankings("e1", bank, ensure_heldout_bank()), training_designs=[seen],
+                          nams=SimpleNamespace(space=None))
     metrics, _ = score_method(ctx, lambda: [seen, wrong])  # recalls the seen design, misses the other
     assert metrics["flat_top1"] == metrics["sloped_top1"] == 0.5
     assert metrics["unseen_targets"] == 1
     assert metrics["unseen"]["flat_top1"] == metrics["unseen"]["sloped_top1"] == 0.0
     ctx.training_designs = []  # E2: no such split
     assert "unseen" not in score_method(ctx, lambda: [seen, wrong])[0]
+
+
+def test_appearance_parameters_are_scored_and_e2_draws_them_as_e1_does():
+    from meta_sim.experiments.evaluate import discrete, results_markdown, target_jobs
+    from meta_sim.sim.design import DesignSpace
+
+    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    base = DesignSpace.load()
+    space = DesignSpace.from_dict({**base.to_dict(), "name": "look", "parameters": [
+        *base.to_dict()["parameters"],
+        {"name": "ground", "type": "categorical", "appearance": "ground", "choices": ["plain", "arid"]},
+        {"name": "greenness", "type": "continuous", "appearance": "greenness", "low": 0.0, "high": 1.0}]})
+    assert discrete(base) and not discrete(space)
+    truth = {"flat_roof": bank.ids("flat")[0], "sloped_roof": bank.ids("sloped")[0], "ground": "arid",
+             "greenness": 0.2}
+    guess = {**truth, "ground": "plain", "greenness": 0.7}
+    scores = score(guess, truth, rankings("e1", bank, heldout), space)
+    assert scores["ground_hit"] == 0.0 and scores["greenness_error"] == pytest.approx(0.5)
+    assert scores["flat_top1"] == 1.0
+    e2 = [job.design for job in target_jobs("e2", space, heldout, 40, 1)]
+    assert all(d["flat_roof"] in heldout.ids("flat") and d["sloped_roof"] in heldout.ids("sloped") for d in e2)
+    assert {d["ground"] for d in e2} == {"plain", "arid"} and len({d["greenness"] for d in e2}) == 40
+    assert list(e2[0]) == list(space.names)
+    table = results_markdown({"experiment": "e1", "targets": 1, "tiles_per_target": 9, "methods": {
+        "nams_adjoint": {**scores, "seconds_per_target": 0.01}}})
+    assert "ground hit" in table and "greenness error" in table and "| 0.000 | 0.500 |" in table
