@@ -24,7 +24,6 @@ from ..core.fileio import writable_dir
 from ..sim import meshes, tiles
 from ..sim.design import DesignSpace
 from ..sim.ground import get_mix
-from ..sim.jitter import roof_jitter
 from ..sim.layout import LayoutParams, layout_for_tiles
 from ..sim.preview import write_mosaic, write_previews
 from .jobs import Job, RenderSettings, RenderSummary, expected_meta, tile_path, write_job_manifest
@@ -151,11 +150,9 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
                             software=software, appearance=look.header(), sun=scene.sun)
-                        # roofs varied per building, then the sensor sees each tile alone (its noise seeded
-                        # by the tile); the labels are untouched
-                        image = roof_jitter(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
-                                            look.roof_jitter)
-                        image = look.sensor.apply(image, [job.city_seed, j])
+                        # the sensor sees each tile alone (its noise seeded by the tile); labels untouched
+                        image = look.apply(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
+                                           [job.city_seed, j])
                         tiles.write_tile(path, image, instance[cut], roof_class[cut], meta)
                         if settings.preview:
                             write_previews(path, image, instance[cut], roof_class[cut])

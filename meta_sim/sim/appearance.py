@@ -1,4 +1,5 @@
-"""How a city looks beyond its roofs: ground cover, vegetation colour, sun, roof variation and sensor.
+"""How a city looks beyond its roofs: ground cover, vegetation colour, sun, brightness, roof variation
+and sensor.
 
 Each of these can be set for a whole render (``meta-sim render --ground mixed --sensor drone ...``)
 or declared as a parameter of a design space, so NAMS infers it for a target like a roof material::
@@ -20,11 +21,13 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from .ground import MIXES
+from .jitter import roof_jitter
 from .sensor import SENSORS, Sensor, get_sensor
 
 # categorical field -> the choices it allows; continuous field -> (lowest, highest) value
 CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
-CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0)}
+CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
+                     "brightness": (0.25, 4.0)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
@@ -37,7 +40,8 @@ class Appearance:
     """Everything of a render's look that is not a roof texture or the layout.
 
     ``greenness`` and ``sun_elevation_deg`` are None when not set: today's lawn and tree colours,
-    and a sun elevation drawn from the city seed.
+    and a sun elevation drawn from the city seed. ``brightness`` scales the rendered light before the
+    sensor sees it (real images of one place differ in brightness by camera settings and haze).
     """
 
     sensor: Sensor = Sensor()
@@ -45,6 +49,7 @@ class Appearance:
     ground: str = "plain"
     greenness: float | None = None
     sun_elevation_deg: float | None = None
+    brightness: float = 1.0
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -74,7 +79,18 @@ class Appearance:
             out["greenness"] = self.greenness
         if self.sun_elevation_deg is not None:
             out["sun_elevation_deg"] = self.sun_elevation_deg
+        if self.brightness != 1.0:
+            out["brightness"] = self.brightness
         return out
+
+    def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
+              seed) -> np.ndarray:
+        """A finished linear render as this appearance shows it: roofs varied per building, the light
+        scaled by the brightness, then seen through the sensor (its noise seeded by ``seed``)."""
+        image = roof_jitter(rgb, instance, roof_class, city_seed, self.roof_jitter)
+        if self.brightness != 1.0:
+            image = image * np.float32(self.brightness)
+        return self.sensor.apply(image, seed)
 
 
 def check_field(target, categorical: bool, where: str, choices=(), low: float = 0.0, high: float = 1.0) -> str:

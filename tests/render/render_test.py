@@ -451,10 +451,11 @@ def test_a_space_declaring_appearance_renders_each_design_with_its_look(space, b
         {"name": "ground", "type": "categorical", "appearance": "ground", "choices": ["plain", "arid"]},
         {"name": "greenness", "type": "continuous", "appearance": "greenness", "low": 0.0, "high": 1.0},
         {"name": "sun", "type": "continuous", "appearance": "sun_elevation_deg", "low": 30, "high": 80},
-        {"name": "sensor", "type": "categorical", "appearance": "sensor", "choices": ["none", "drone"]}]})
+        {"name": "sensor", "type": "categorical", "appearance": "sensor", "choices": ["none", "drone"]},
+        {"name": "light", "type": "continuous", "appearance": "brightness", "low": 0.5, "high": 1.0}]})
     base = {"flat_roof": 5, "sloped_roof": 9}
-    lush = {**base, "ground": "plain", "greenness": 1.0, "sun": 80.0, "sensor": "none"}
-    dry = {**base, "ground": "arid", "greenness": 0.0, "sun": 30.0, "sensor": "drone"}
+    lush = {**base, "ground": "plain", "greenness": 1.0, "sun": 80.0, "sensor": "none", "light": 1.0}
+    dry = {**base, "ground": "arid", "greenness": 0.0, "sun": 30.0, "sensor": "drone", "light": 1.0}
     settings = RenderSettings(space=look_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path,
                               n_tiles=1, **SMALL)
     jobs = [single_job(look_space, look_space.validate(d), SEED) for d in (lush, dry)]
@@ -476,6 +477,12 @@ def test_a_space_declaring_appearance_renders_each_design_with_its_look(space, b
     # rendering again skips both; a header is what the design's appearance asks for
     assert render_jobs(jobs, settings).skipped == 2
     assert Appearance().with_design(look_space, jobs[1].design).header()["ground"] == "arid"
+    # brightness scales the light of the render only (same scene, so the one city is reused)
+    dim = single_job(look_space, look_space.validate({**lush, "light": 0.5}), SEED)
+    assert render_jobs([dim], settings).written == 1
+    darker = tiles.read_tile(tmp_path / f"{dim.name}_t00.exr")
+    assert darker.meta["brightness"] == 0.5 and "brightness" not in wet.meta
+    assert np.allclose(darker.rgb, wet.rgb * 0.5, atol=2e-3)
 
 
 def linear_luma(rgb):
