@@ -141,7 +141,8 @@ def _predictions(h: Harness, ctx, seed: int) -> dict:
     from .evaluate import method_runs
 
     runs = method_runs(ctx, seed, {}, 50)
-    return {strategy: runs[method]() for strategy, method in METHOD_OF.items()}
+    runs.setdefault("nams_exhaustive", runs["nams_adjoint"])  # a space with continuous parameters
+    return {strategy: runs[method]() for strategy, method in METHOD_OF.items() if method in runs}
 
 
 def synthetic_jobs(h: Harness, designs: list[dict] | None, r: float, seed: int) -> list[Job]:
@@ -170,17 +171,18 @@ def render_set(h: Harness, name: str, jobs: list[Job], sensor: str = "none", roo
     from ..pipeline.trainsets import TileDataset
     from ..render.jobs import RenderSettings
     from ..render.loop import render_jobs
-    from ..sim.design import DesignSpace
     from ..sim.quality import get_preset
     from ..sim.sensor import get_sensor
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
+    space = h.methods.nams.space
     digest = hashlib.sha256(json.dumps([[j.design, j.city_seed] for j in jobs], sort_keys=True).encode())
     key = f"{digest.hexdigest()[:12]}-t{h.settings.synthetic_tiles}-{h.dataset.preset}-{h.dataset.tile_px}px"
     key += ("" if sensor == "none" else f"-{sensor}") + (f"-j{roof_jitter:g}" if roof_jitter else "")
     key += "" if ground == "plain" else f"-{ground}"
+    key += "" if space.name == "rooftops-v1" else f"-{space.name}"
     folder = h.root / "task" / "sets" / key
-    settings = RenderSettings(space=DesignSpace.load(), banks=[ensure_default_bank(), ensure_heldout_bank()],
+    settings = RenderSettings(space=space, banks=[ensure_default_bank(), ensure_heldout_bank()],
                               preset=get_preset(h.dataset.preset), out_dir=folder,
                               n_tiles=h.settings.synthetic_tiles, tile_px=h.dataset.tile_px,
                               pixel_size_m=h.dataset.pixel_size_m, sensor=get_sensor(sensor), roof_jitter=roof_jitter,
@@ -279,7 +281,7 @@ def run_synthetic(h: Harness, experiment: str, out: Path) -> dict:
     predicted = _predictions(h, ctx, s.target_seed)
     predicted["gt"] = [job.design for job in ctx.jobs]
     pools = {"none": None, "uniform": render_set(h, "uniform", synthetic_jobs(h, None, 0.0, s.target_seed))}
-    for strategy in ("dr", "ms2", "nams", "gt"):
+    for strategy in [k for k in ("dr", "ms2", "nams", "gt") if k in predicted]:
         pools[strategy] = render_set(h, strategy, synthetic_jobs(h, predicted[strategy], 0.0, s.target_seed))
     test_paths = [p for job in ctx.jobs for p in job_tiles(ctx.folder, job.name, s.tiles + s.test_tiles)[s.tiles:]]
     test = _tile_test_pool(h, test_paths)
@@ -328,7 +330,7 @@ def run_real(h: Harness, out: Path) -> dict:
         for strategy, designs in _infer_real(h, a, s.target_seed, domain).items():
             predicted[strategy] += designs
     pools = {"none": None, "uniform": render_set(h, "uniform", synthetic_jobs(h, None, s.r_real, s.target_seed))}
-    for strategy in METHOD_OF:
+    for strategy in [k for k in METHOD_OF if predicted[k]]:
         jobs = synthetic_jobs(h, predicted[strategy], s.r_real, s.target_seed)
         pools[strategy] = render_set(h, strategy, jobs)
     pools["gt"] = _real_pool("target adapt", adapt, s.train)
@@ -368,10 +370,14 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                      test_pool.masks)[0] for seed in s.seeds]
         real = [count(trained(h, other, None, seed, f"{'+'.join(others)}"), test_pool.images,
                       test_pool.masks)[0] for seed in s.seeds]
+        space = h.methods.nams.space
         rows[domain] = {"rendered_only": _mean_iou(sim), "other_real": _mean_iou(real), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
-                        "ground": ground}
+                        "ground": ground, "space": space.name}
+        for param in space.parameters:  # what the inferred designs set replaces the run's setting
+            if getattr(param, "appearance", None) in ("sensor", "roof_jitter", "ground"):
+                rows[domain][param.appearance] = "inferred"
         if realness:
             adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
@@ -383,6 +389,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
 
         tag = ("" if sensor == "none" else f"-{sensor}") + (f"-jitter{roof_jitter:g}" if roof_jitter else "")
         tag += "" if ground == "plain" else f"-{ground}"
+        tag += "" if h.methods.nams.space.name == "rooftops-v1" else f"-{h.methods.nams.space.name}"
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 
@@ -513,11 +520,18 @@ def task_markdown(results: dict) -> str:
 REALISM_VARIANTS = (("none", 0.0, "plain"), ("auto", 0.0, "plain"), ("auto", 0.6, "plain"), ("auto", 0.6, "mixed"))
 
 
+# Design spaces whose NAMS model infers each domain's look as well as its roofs (trained like the default
+# model, on a training set of that space twice the default's size: more parameters to learn).
+REALISM_SPACES = ("overhead-v1",)
+
+
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
-                realdata: Path | None = None, bars: Bars | None = None, variants=REALISM_VARIANTS) -> dict:
+                realdata: Path | None = None, bars: Bars | None = None, variants=REALISM_VARIANTS,
+                spaces=REALISM_SPACES) -> dict:
     """How far renders are from each real domain: the sim-only transfer with the real-versus-rendered
-    classifier and a picture in ``out``, once per ``(sensor, roof jitter)`` of ``variants`` (see
-    ``run_sim_only``)."""
+    classifier and a picture in ``out``, once per ``(sensor, roof jitter, ground)`` of ``variants`` with
+    the default model, and once per design space of ``spaces`` with a model trained in that space
+    (whose inferred designs set the look they declare; see ``run_sim_only``)."""
     import time
 
     started = time.perf_counter()
@@ -527,9 +541,18 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     result = {"runs": {f"{sensor}+jitter{jitter:g}+{ground}":
                        run_sim_only(h, out, True, sensor, jitter, ground)["domains"]
                        for sensor, jitter, ground in variants}}
+    for space in spaces:
+        wider = replace(dataset, space=space, designs=2 * dataset.designs)
+        other = make_harness(wider, models_settings, settings, root, realdata, bars)
+        result["runs"][space] = run_sim_only(other, out, True)["domains"]
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, nams_model=h.methods.nams.model_id,
                   render_preset=dataset.preset, seconds=time.perf_counter() - started)
     return result
+
+
+def _g(value) -> str:
+    """A number in short form; text ("inferred") as it is."""
+    return f"{value:g}" if isinstance(value, (int, float)) else str(value)
 
 
 def realism_markdown(result: dict) -> str:
@@ -540,15 +563,16 @@ def realism_markdown(result: dict) -> str:
              "the domain), of one trained on the other real domains, and of calling everything a building; "
              "and the accuracy of a small CNN telling held-out real crops from crops of renders in held-out "
              "cities (0.5: indistinguishable).", "",
-             "| domain | sensor | roof jitter | ground | rendered only | other real domains | all building "
+             "| domain | space | sensor | roof jitter | ground | rendered only | other real domains | all building "
              "| rendered only - all building | rendered only: precision / recall | real-vs-rendered accuracy |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     rows = sorted(((domain, row) for run in result["runs"].values() for domain, row in run.items()),
                   key=lambda item: realdomains.DOMAINS.index(item[0]))
     for domain, row in rows:
         r, o = row["rendered_only"], row["other_real"]
         acc = row.get("realness")
-        lines.append(f"| {domain} | {row['sensor']} | {row.get('roof_jitter', 0):g} | {row.get('ground', 'plain')} | "
+        lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
+                     f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                      f"{100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | "
                      f"{100 * o['iou']:.1f} +- "
                      f"{100 * o['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | {100 * row['all_building']:.1f} "
@@ -559,13 +583,15 @@ def realism_markdown(result: dict) -> str:
     if coloured:
         lines += ["", "Plain colour, real (`adapt` scenes) against rendered: mean display brightness (0-1) and "
                   "saturation of building pixels and of the other pixels.", "",
-                  "| domain | sensor | roof jitter | ground | buildings: brightness real / rendered | saturation "
-                  "| other pixels: brightness real / rendered | saturation |", "|---|---|---|---|---|---|---|---|"]
+                  "| domain | space | sensor | roof jitter | ground | buildings: brightness real / rendered "
+                  "| saturation | other pixels: brightness real / rendered | saturation |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         for domain, row in coloured:
             real, rendered = row["colour"]["real"], row["colour"]["rendered"]
             cells = [f"{real[part][key]:.2f} / {rendered[part][key]:.2f}" if part in real and part in rendered
                      else "-" for part in ("building", "ground") for key in ("brightness", "saturation")]
-            lines.append(f"| {domain} | {row['sensor']} | {row.get('roof_jitter', 0):g} | "
-                         f"{row.get('ground', 'plain')} | " + " | ".join(cells) + " |")
+            lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
+                         f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
+                         + " | ".join(cells) + " |")
     lines += ["", f"Renders: the `{result['render_preset']}` preset; {result['seconds'] / 60:.0f} min of wall time."]
     return "\n".join(lines) + "\n"
