@@ -957,6 +957,7 @@ DENSE_DEPTH_M = (5.0, 14.0)
 DENSE_ROWS = 3  # rows of houses tried behind each lane side
 DENSE_TOUCHING = 0.7  # share of neighbours that share a wall
 DENSE_M2_PER_SEED = 200.0  # interior seeds of house clusters, at building_density 1
+SEED_TURN_DEG = 5.0  # a cluster's houses stand this much askew of their lane (standard deviation)
 DENSE_GROWTH = (0.45, 0.5)  # a house's chance to get a neighbour on each side: a + b * building_density
 DENSE_STOREYS = {1: 0.45, 2: 0.3, 3: 0.17, 4: 0.08}
 STOREY_M = 3.0
@@ -1186,7 +1187,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
                                 break
                     t += along + (0.0 if rng.random() < DENSE_TOUCHING else rng.uniform(0.5, 3.0))
                 front += band + rng.uniform(0.0, 1.5)
-    # Seeds in the blocks' interiors, turned like the nearest lane.
+    # Seeds in the blocks' interiors, turned about like the nearest lane.
     starts = np.array([s[0] for s in segments]).reshape(-1, 2)
     step = np.array([s[1] for s in segments]).reshape(-1, 2) - starts
     x0, y0, x1, y1 = polygon_bbox(window)
@@ -1194,7 +1195,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
         px, py = rng.uniform(x0, x1), rng.uniform(y0, y1)
         t = np.clip(((np.array([px, py]) - starts) * step).sum(1) / (step * step).sum(1), 0.0, 1.0)
         nearest = int(np.argmin(np.hypot(*(starts + t[:, None] * step - (px, py)).T)))
-        angle = math.degrees(math.atan2(step[nearest, 1], step[nearest, 0]))
+        angle = math.degrees(math.atan2(step[nearest, 1], step[nearest, 0])) + rng.normal(0.0, SEED_TURN_DEG)
         attempt(px, py, rng.uniform(*DENSE_FRONTAGE_M), rng.uniform(*DENSE_DEPTH_M), angle)
     # Growth: houses lean on the houses already there (often sharing a wall), until the block is full
     # but for yards.
