@@ -13,6 +13,17 @@ city (highrises only near the centre, industrial on whole-depth lots);
 residential eave heights 3-3.5 or 5-6.5 m times a height factor; roof pitch
 15-25 degrees, overhang 0.2-0.6 m.
 
+That is the `suburban` style. `LayoutParams.style` mixes it with others:
+the city is cut into Voronoi regions of about `REGION_M`, each region gets
+one style (regions ranked at random, their areas cut at the mix's shares)
+and asphalt streets run on the borders between regions of different
+grids. `dense` regions are packed informal towns: long lanes bent at a few
+kinks and short dirt tracks between them, all at the region's own angle;
+houses turned with their lane stand in rows along each lane side and in
+clusters grown from seeds in the blocks, often sharing a wall. `downtown`
+and `industrial` regions take the street grid with their own zones on
+paved lots.
+
 Every stage draws from its own generator spawned from the seed, so changing
 `LayoutParams.tree_density` leaves roads and buildings unchanged, and
 `sloped_share` changes roofs only. All stored floats are rounded to 0.1 mm so
