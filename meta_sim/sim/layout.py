@@ -35,7 +35,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -955,6 +955,7 @@ REGION_ROAD_M = (6.0, 8.0)  # asphalt streets on the borders between regions of 
 STYLE_ZONES = {"downtown": {"downtown": 0.5, "commercial": 0.5}, "industrial": {"industrial": 1.0}}
 STYLE_TREES = {"suburban": 1.0, "downtown": 0.25, "industrial": 0.15, "dense": 0.5}  # x tree_density
 PAVED_STYLES = ("downtown", "industrial")  # whose lots are paved (parking, yards)
+LOT_KEPT = 0.3  # share of a grid lot that must lie in its region for the rest to be kept
 
 # Dense towns: bent lanes and tracks between irregular blocks of packed, often touching houses.
 LANE_SPACING_M = (28.0, 50.0)  # between neighbouring long lanes: two rows of houses back to back
@@ -1255,22 +1256,59 @@ def _dense_trees(rng: np.random.Generator, region: _Region, roads: _Occupancy, b
     return trees
 
 
+@dataclass(frozen=True)
+class _Frame:
+    """Where a style's street grid lies: made on a square of side `side` in its own frame, turned by
+    `angle_deg` and centred on the city. Suburban grids keep the city's frame (no turn, no square)."""
+
+    angle_deg: float
+    side: float
+    centre: Point
+
+    def point(self, x: float, y: float) -> Point:
+        (wx, wy), = polygons.rotate(((x - self.side / 2 + self.centre[0], y - self.side / 2 + self.centre[1]),),
+                                    *self.centre, self.angle_deg)
+        return wx, wy
+
+    def polygon(self, polygon: Polygon) -> Polygon:
+        return _rounded(self.point(x, y) for x, y in polygon)
+
+    def sketch(self, sketch: _Sketch) -> _Sketch:
+        """The sketch moved so its footprint's centre lands where the frame puts it, turned with the frame."""
+        x0, y0, x1, y1 = polygon_bbox(sketch.footprint)
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        wx, wy = self.point(cx, cy)
+        footprint = tuple((_r(x + wx - cx), _r(y + wy - cy)) for x, y in sketch.footprint)
+        return _Sketch(sketch.lot_index, sketch.kind, footprint, sketch.shape, sketch.height_m, _r(self.angle_deg))
+
+
 def _styled_layout(seed: int, width: float, height: float, params: LayoutParams) -> CityLayout:
     """A city of several styles (or one other than suburban): each region is made by its style's rules.
 
     The stages draw from the same generators as a suburban city's, in the same order (streets, lots,
     buildings, roofs, trees), plus one for the regions, so a stage's knob changes that stage only.
+    Downtown and industrial grids are turned by an angle of their own; the suburban grid is not.
     """
     road_rng, lot_rng, building_rng, roof_rng, tree_rng, region_rng = stage_generators(seed, 6)
     regions, roads = _style_regions(region_rng, width, height, params.style)
     grid_styles = [style for style, _ in params.style if style != "dense"]
     cells = {style: [r.cell for r in regions if r.style == style] for style in grid_styles}
+    side = math.hypot(width, height)
+    frames = {style: _Frame(_r(region_rng.uniform(0.0, 90.0)), side, (width / 2, height / 2))
+              for style in grid_styles if style != "suburban"}
+    extent = {style: (side, side) if style in frames else (width, height) for style in grid_styles}
+
+    def world(style: str, polygon: Polygon) -> Polygon:
+        return frames[style].polygon(polygon) if style in frames else polygon
+
+    def inside_cells(style: str, polygon: Polygon) -> bool:
+        return any(polygons.inside(polygon, c) for c in cells[style])
 
     blocks: dict[str, list[_Block]] = {}
     for style in grid_styles:
-        blocks[style], grid_roads = _blocks_and_roads(road_rng, width, height, params)
+        blocks[style], grid_roads = _blocks_and_roads(road_rng, *extent[style], params)
         roads += [Road(piece) for road in grid_roads for cell in cells[style]
-                  if (piece := _piece(road.polygon, cell))]
+                  if (piece := _piece(world(style, road.polygon), cell))]
     lanes = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
@@ -1280,19 +1318,33 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     roads.sort(key=lambda road: road.surface != "dirt")
     road_space = _Occupancy([road.polygon for road in roads])
 
-    plans, lot_styles, first_block = [], [], 0
+    # A lot across a region's border keeps its part inside (most of it, or it is dropped).
+    plans, lot_styles, lots, first_block = [], [], [], 0
     for style in grid_styles:
         for index, block in enumerate(blocks[style]):
-            for plan in _plan_block(lot_rng, block, first_block + index, width, height, style):
-                corners = rect_polygon(*plan.rect)
-                if any(polygons.inside(corners, c) for c in cells[style]) and road_space.clear(corners, 0.0):
+            for plan in _plan_block(lot_rng, block, first_block + index, *extent[style], style):
+                outline = world(style, rect_polygon(*plan.rect))
+                pieces = [piece for c in cells[style] if (piece := _piece(outline, c))]
+                piece = max(pieces, key=polygons.area, default=None)
+                if piece and polygons.area(piece) > LOT_KEPT * polygons.area(outline) and road_space.clear(piece, 0.0):
                     plans.append(plan)
                     lot_styles.append(style)
+                    lots.append(Lot(piece, plan.block_index, "paved" if style in PAVED_STYLES else "ground"))
         first_block += len(blocks[style])
-    lots = [Lot(rect_polygon(*plan.rect), plan.block_index, "paved" if style in PAVED_STYLES else "ground")
-            for plan, style in zip(plans, lot_styles)]
 
-    sketches = _sketch_buildings(building_rng, plans, params.building_density)
+    def fits(sketch: _Sketch) -> bool:
+        """Whether the widest roof the sketch may get stays on its (perhaps cut) lot."""
+        x0, y0, x1, y1 = polygon_bbox(sketch.footprint)
+        o = OVERHANG_RANGE_M[1]
+        roof = rect_polygon(x0 - o, y0 - o, x1 + o, y1 + o)
+        if sketch.rotation_deg:
+            roof = polygons.rotate(roof, (x0 + x1) / 2, (y0 + y1) / 2, sketch.rotation_deg)
+        return polygons.inside(roof, lots[sketch.lot_index].polygon, 1e-3)
+
+    local = _sketch_buildings(building_rng, plans, params.building_density)  # in their grid's frame
+    placed = [frames[lot_styles[s.lot_index]].sketch(s) if lot_styles[s.lot_index] in frames else s for s in local]
+    kept = [i for i, sketch in enumerate(placed) if fits(sketch)]
+    local, sketches = [local[i] for i in kept], [placed[i] for i in kept]
     built = _Occupancy()
     dense = {}
     for k, region in enumerate(regions):
@@ -1305,18 +1357,24 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
                                         house.rotation_deg, outline_placed=True))
     buildings = _roof_buildings(roof_rng, sketches, params.sloped_share)
 
-    by_lot = {b.lot_index: b for b in buildings}
+    # Grid trees are placed in their grid's frame (beside the unturned buildings) and then moved.
+    local_buildings = {s.lot_index: replace(b, footprint=s.footprint, rotation_deg=0.0)
+                       for s, b in zip(local, buildings)}
     trees: list[Tree] = []
     for style in grid_styles:
         density = params.tree_density * STYLE_TREES[style]
-        for block in blocks[style]:
-            for tree in _street_trees(tree_rng, block, density):
-                crown = rect_polygon(*tree.bbox)
-                if any(polygons.inside(crown, c) for c in cells[style]) and road_space.clear(crown, 0.0):
-                    trees.append(tree)
-        for index, style_of_lot in enumerate(lot_styles):
-            if style_of_lot == style:
-                trees += _yard_trees(tree_rng, lots[index], by_lot.get(index), density)
+        planted = [tree for block in blocks[style] for tree in _street_trees(tree_rng, block, density)]
+        for index, plan in enumerate(plans):
+            if lot_styles[index] == style:
+                lot = Lot(rect_polygon(*plan.rect), plan.block_index)
+                planted += _yard_trees(tree_rng, lot, local_buildings.get(index), density)
+        for tree in planted:
+            if style in frames:
+                x, y = frames[style].point(tree.x, tree.y)
+                tree = Tree(_r(x), _r(y), tree.radius_m, tree.height_m)
+            crown = rect_polygon(*tree.bbox)
+            if inside_cells(style, crown) and road_space.clear(crown, 0.0):
+                trees.append(tree)
     for k in dense:
         trees += _dense_trees(tree_rng, regions[k], road_space, built, params.tree_density * STYLE_TREES["dense"],
                               width, height)
