@@ -990,31 +990,38 @@ class _Occupancy:
 
     def __init__(self, polygons_: list[Polygon] = (), cell_m: float = 16.0):
         self.cell_m = cell_m
-        self.items: list[Polygon] = []
+        self.items: list[tuple[Polygon, Rect]] = []
         self.grid: dict[tuple[int, int], list[int]] = {}
         for polygon in polygons_:
             self.add(polygon)
 
-    def _keys(self, polygon: Polygon):
-        x0, y0, x1, y1 = polygon_bbox(polygon)
+    def _keys(self, box: Rect):
+        x0, y0, x1, y1 = box
         c = self.cell_m
         return itertools.product(range(math.floor(x0 / c), math.floor(x1 / c) + 1),
                                  range(math.floor(y0 / c), math.floor(y1 / c) + 1))
 
     def add(self, polygon: Polygon) -> None:
-        self.items.append(polygon)
-        for key in self._keys(polygon):
+        box = polygon_bbox(polygon)
+        self.items.append((polygon, box))
+        for key in self._keys(box):
             self.grid.setdefault(key, []).append(len(self.items) - 1)
 
     def clear(self, polygon: Polygon, gap: float) -> bool:
         """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching)."""
+        box = polygon_bbox(polygon)
         seen = set()
-        for key in self._keys(polygon):
+        for key in self._keys(box):
             for i in self.grid.get(key, ()):
-                if i not in seen:
-                    seen.add(i)
-                    if polygons.separation(polygon, self.items[i]) < gap:
-                        return False
+                if i in seen:
+                    continue
+                seen.add(i)
+                other, (x0, y0, x1, y1) = self.items[i]
+                # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
+                if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
+                    continue
+                if not polygons.apart(polygon, other, gap):
+                    return False
         return True
 
 

@@ -48,6 +48,17 @@ def separation(a, b) -> float:
     return best
 
 
+def apart(a, b, gap: float) -> bool:
+    """Whether `separation` of the two polygons is at least ``gap`` (stops at the first axis that shows it)."""
+    for axes_of in (a, b):
+        for nx, ny in _axes(axes_of):
+            pa = [x * nx + y * ny for x, y in a]
+            pb = [x * nx + y * ny for x, y in b]
+            if min(pb) - max(pa) >= gap or min(pa) - max(pb) >= gap:
+                return True
+    return False
+
+
 def clip(subject, window) -> tuple[Point, ...]:
     """The part of a convex polygon inside a convex counter-clockwise window (Sutherland-Hodgman)."""
     out = list(subject)
