@@ -55,6 +55,7 @@ class RenderSettings:
     sensor: Sensor = Sensor()  # "none" by default: the render as it is
     roof_jitter: float = 0.0  # per-building roof variation (sim.jitter); 0: none
     ground: str = "plain"  # ground cover mix (sim.ground); plain: one lawn
+    style: str = "suburban"  # city style mix (sim.layout.parse_style); suburban: the street grid
 
     @property
     def tile_m(self) -> float:
@@ -88,7 +89,8 @@ def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
             "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields(),
             **({"sensor": settings.sensor.to_dict()} if settings.sensor.active else {}),
             **({"roof_jitter": settings.roof_jitter} if settings.roof_jitter else {}),
-            **({"ground": settings.ground} if settings.ground != "plain" else {})}
+            **({"ground": settings.ground} if settings.ground != "plain" else {}),
+            **({"style": settings.style} if settings.style != "suburban" else {})}
 
 
 def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int) -> list[Job]:

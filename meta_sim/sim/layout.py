@@ -185,6 +185,27 @@ def style_mix(value: Any) -> StyleMix:
     return tuple((name, _r(shares[name] / total)) for name in STYLES if shares.get(name, 0.0) > 0.0)
 
 
+def parse_style(text: str) -> StyleMix:
+    """A style mix from its command-line form: ``dense`` or ``dense=0.7,suburban=0.3``."""
+    parts = [part.strip() for part in str(text).split(",") if part.strip()]
+    if len(parts) == 1 and "=" not in parts[0]:
+        return style_mix(parts[0])
+    shares = {}
+    for part in parts:
+        name, _, share = part.partition("=")
+        try:
+            shares[name.strip()] = float(share)
+        except ValueError:
+            raise MetaSimError(f"style {text!r}: write a style name or name=share pairs such as "
+                               f"dense=0.7,suburban=0.3 (styles: {', '.join(STYLES)})") from None
+    return style_mix(shares)
+
+
+def style_text(mix: StyleMix) -> str:
+    """The command-line form of a style mix: its one style's name, else name=share pairs."""
+    return mix[0][0] if len(mix) == 1 else ",".join(f"{name}={share:g}" for name, share in mix)
+
+
 @dataclass(frozen=True)
 class LayoutParams:
     """User-facing knobs of the city generator.

@@ -56,7 +56,8 @@ def software_versions(**more: str) -> dict:
 
 def tile_metadata(*, design: dict, space: str, city_seed: int, tile_index: int, origin_m, size_px,
                   pixel_size_m: float, preset, software: dict | None = None, sensor: dict | None = None,
-                  roof_jitter: float = 0.0, ground: str = "plain", sun: dict | None = None) -> dict:
+                  roof_jitter: float = 0.0, ground: str = "plain", sun: dict | None = None,
+                  style: str = "suburban") -> dict:
     """A tile's header; ``preset`` is a ``RenderPreset`` or its name (its settings are recorded),
     ``software`` the versions that made it (default: ``software_versions()``)."""
     from .quality import get_preset
@@ -69,7 +70,8 @@ def tile_metadata(*, design: dict, space: str, city_seed: int, tile_index: int, 
             "pixel_size_m": float(pixel_size_m), "preset": preset.name, "render": preset.to_dict(),
             "exposure": preset.exposure, "software": software or software_versions(),
             **({"sensor": sensor} if sensor else {}), **({"roof_jitter": roof_jitter} if roof_jitter else {}),
-            **({"ground": ground} if ground != "plain" else {}), **({"sun": sun} if sun else {})}
+            **({"ground": ground} if ground != "plain" else {}), **({"sun": sun} if sun else {}),
+            **({"style": style} if style != "suburban" else {})}
 
 
 def write_tile(path: str | Path, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray,

@@ -488,3 +488,23 @@ def test_a_dense_town_renders_with_turned_buildings_labelled_exactly_and_brown_d
     if (_erode(asphalt & ~covered, 1)).sum() > 50:
         ar, ag, ab = tile.rgb[_erode(asphalt & ~covered, 1)].mean(axis=0)
         assert ar < 1.3 * ab and ar < r
+
+
+def test_render_cli_takes_a_city_style_and_records_it(tmp_path):
+    args = ["render", "--design", "flat_roof=1,sloped_roof=1", "--tiles", 1, "--tile-px", 48, "--gsd", 2.4,
+            "--seed", 4]
+    result = _cli(*args, "--style", "dense=3,suburban=1", "--out", tmp_path / "a")
+    assert result.exit_code == 0, result.output
+    tile = tiles.read_tile(next((tmp_path / "a").glob("*.exr")))
+    assert tile.meta["style"] == "suburban=0.25,dense=0.75" and tile.instance.max() > 0
+    again = _cli(*args, "--style", "suburban=1,dense=3", "--out", tmp_path / "a")
+    assert "0 tiles written, 1 already done" in again.output  # one spelling of one mix
+    plain = _cli(*args, "--out", tmp_path / "b")
+    assert plain.exit_code == 0 and "style" not in tiles.read_tile(next((tmp_path / "b").glob("*.exr"))).meta
+    bad = _cli(*args, "--style", "slum", "--out", tmp_path / "c")
+    assert bad.exit_code == 2 and "'slum' is not a style" in bad.output
+    space = DesignSpace.load().to_dict()
+    space["layout"] = {"style": "dense"}
+    (tmp_path / "space.json").write_text(json.dumps(space))
+    twice = _cli(*args, "--space", tmp_path / "space.json", "--style", "industrial", "--out", tmp_path / "d")
+    assert twice.exit_code == 2 and "declares a city style already" in twice.output

@@ -336,3 +336,31 @@ def test_generating_a_styled_city_is_quick():
     start = time.perf_counter()
     generate_layout(1, 345.6, 345.6, LayoutParams(style="dense"))
     assert time.perf_counter() - start < 5.0
+
+
+@pytest.mark.parametrize("text,mix", [
+    ("dense", (("dense", 1.0),)),
+    ("dense=0.7,suburban=0.3", (("suburban", 0.3), ("dense", 0.7))),
+    (" industrial = 2 , downtown=2 ", (("downtown", 0.5), ("industrial", 0.5))),
+])
+def test_style_from_the_command_line_and_back(text, mix):
+    assert layout_module.parse_style(text) == mix
+    assert layout_module.parse_style(layout_module.style_text(mix)) == mix
+
+
+@pytest.mark.parametrize("text,message", [
+    ("dense=lots", "name=share pairs"), ("dense=0.5,slum=0.5", "'slum' is not a style"),
+    ("dense=0", "at least one share positive"), ("", "style name or a mapping"),
+])
+def test_bad_style_text_raises_a_clear_error(text, message):
+    with pytest.raises(MetaSimError, match=message):
+        layout_module.parse_style(text)
+
+
+def test_polygons_apart_agrees_with_their_separation():
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        a, b = (polygons.oriented_rect(*rng.uniform(0, 20, 2), *rng.uniform(1, 8, 2), rng.uniform(0, 180))
+                for _ in range(2))
+        gap = rng.uniform(-2, 2)
+        assert polygons.apart(a, b, gap) == (polygons.separation(a, b) >= gap)
