@@ -16,13 +16,13 @@ residential eave heights 3-3.5 or 5-6.5 m times a height factor; roof pitch
 That is the `suburban` style. `LayoutParams.style` mixes it with others:
 the city is cut into Voronoi regions of about `REGION_M`, each region gets
 one style (regions ranked at random, their areas cut at the mix's shares)
-and asphalt streets run on the borders between regions of different
+and streets run on the borders between regions of different
 grids. `dense` regions are packed informal towns: long lanes bent at a few
 kinks and short dirt tracks between them, all at the region's own angle;
 houses turned with their lane stand in rows along each lane side and in
 clusters grown from seeds in the blocks, often sharing a wall. `downtown`
-and `industrial` regions take the street grid with their own zones on
-paved lots.
+and `industrial` regions take a street grid turned by an angle of its own,
+with their own zones, on paved lots.
 
 Every stage draws from its own generator spawned from the seed, so changing
 `LayoutParams.tree_density` leaves roads and buildings unchanged, and
@@ -972,7 +972,8 @@ def _yard_trees(rng: np.random.Generator, lot: Lot, building: Building | None, d
 # ---------------------------------------------------------------- city styles
 
 REGION_M = 200.0  # style regions are Voronoi cells of about this size
-REGION_ROAD_M = (6.0, 8.0)  # asphalt streets on the borders between regions of different grids
+REGION_ROAD_M = (6.0, 8.0)  # streets on the borders between regions of different grids
+DENSE_DIRT_STREETS = 0.5  # share of the streets between two dense regions that are dirt
 STYLE_ZONES = {"downtown": {"downtown": 0.5, "commercial": 0.5}, "industrial": {"industrial": 1.0}}
 STYLE_TREES = {"suburban": 1.0, "downtown": 0.25, "industrial": 0.15, "dense": 0.5}  # x tree_density
 PAVED_STYLES = ("downtown", "industrial")  # whose lots are paved (parking, yards)
@@ -996,7 +997,7 @@ DENSE_STOREYS = {1: 0.45, 2: 0.3, 3: 0.17, 4: 0.08}
 STOREY_M = 3.0
 ROAD_CLEARANCE_M = 0.2  # between any roof outline and a road
 TOUCH_M = 1e-3  # neighbours may share walls: outlines may meet within the 0.1 mm rounding
-DENSE_M2_PER_TREE = 800.0  # at tree_density 1
+DENSE_M2_PER_TREE = 400.0  # at tree_density 1
 
 
 @dataclass(frozen=True)
@@ -1109,9 +1110,11 @@ def _style_regions(rng: np.random.Generator, width: float, height: float,
             if j <= i or abs(d[j] - d[i]) > 1e-6 or same_grid or math.dist(a, b) < 1.0:
                 continue
             road_width = rng.uniform(*REGION_ROAD_M)
+            # Between two dense regions the through road is often unpaved too.
+            dirt = styles[i] == styles[j] == "dense" and rng.random() < DENSE_DIRT_STREETS
             piece = _piece(polygons.strip(*a, *b, road_width, road_width / 2), city)
             if piece:
-                roads.append(Road(piece))
+                roads.append(Road(piece, "dirt" if dirt else "asphalt"))
     return regions, roads
 
 
