@@ -212,15 +212,18 @@ class LayoutParams:
 
     building_density: share of lots built on is ``1 - (1 - d)**2`` (0.91 at
         the default 0.7), and footprints fill ``0.4 + 0.5 d`` of a lot's
-        usable width and depth (before per-kind scaling and caps).
+        usable width and depth (before per-kind scaling and caps). In dense
+        regions: the share of places along the lanes built on, the seeds of
+        house clusters in the blocks and how readily a cluster grows.
     sloped_share: share of buildings with gable or hip roofs. Sloped roofs
         go to rectangular residential buildings first, then apartments,
         industrial and office buildings; highrises and L/T footprints are
         always flat, which caps the share reachable (about 0.82 with the default mix).
     tree_density: street-tree probability per planting spot and yard trees
-        per lot area.
-    road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider.
-    block_size_m: (min, max) side length of a block between streets.
+        per lot area; scaled down in downtown, industrial and dense regions.
+    road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider
+        (grid styles; dense lanes have widths of their own).
+    block_size_m: (min, max) side length of a block between streets (grid styles).
     style: the city styles and the share of the city each covers (see `style_mix`):
         suburban (the street grid above), dense (a packed informal town on bent
         lanes), downtown (offices and highrises on paved lots), industrial (halls
