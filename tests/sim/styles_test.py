@@ -10,7 +10,7 @@ import pytest
 from meta_sim.core.errors import MetaSimError
 from meta_sim.sim import layout as layout_module
 from meta_sim.sim import meshes, polygons
-from meta_sim.sim.layout import Building, CityLayout, LayoutParams, Road, generate_layout, rect_polygon
+from meta_sim.sim.layout import Building, CityLayout, LayoutParams, Lot, Road, generate_layout, rect_polygon
 
 # sha256 of the sorted JSON of default layouts, taken before city styles existed: published
 # benchmarks and caches depend on the default city never changing.
@@ -364,3 +364,11 @@ def test_polygons_apart_agrees_with_their_separation():
                 for _ in range(2))
         gap = rng.uniform(-2, 2)
         assert polygons.apart(a, b, gap) == (polygons.separation(a, b) >= gap)
+
+
+def test_lot_mesh_lays_paved_lots_between_ground_and_roads():
+    lots = [Lot(rect_polygon(0, 0, 30, 20), 0, "paved"), Lot(polygons.oriented_rect(50, 50, 20, 10, 30.0), 1)]
+    arrays = meshes.lot_mesh(lots).arrays()
+    assert arrays["loop_total"].tolist() == [4, 4]
+    assert np.all((arrays["vertices"][:, 2] > 0.0) & (arrays["vertices"][:, 2] < 0.03))
+    assert np.all(arrays["label"] == meshes.label_color(0, 0))  # background in the labels
