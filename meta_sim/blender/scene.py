@@ -282,6 +282,7 @@ class CityScene:
         lay = self.layout
         self.buildings = sorted(self._visible(lay.buildings_in_rect, margin), key=lambda b: b.id)
         roads = self._visible(lay.roads_in_rect, 0.0)
+        paved = [lot for lot in self._visible(lay.lots_in_rect, 0.0) if lot.surface == "paved"]
         trees = self._visible(lay.trees_in_rect, margin)
         region = bounding_rect(self.rects).grown(margin)
         seed, key = int(lay.seed), self.key
@@ -298,6 +299,7 @@ class CityScene:
         else:
             ground = _image_material("ground", _noise_image("ground", lawn, 0.25, seed + 1, key), key)
         road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
+        dirt = _image_material("dirt", _noise_image("dirt", (0.30, 0.22, 0.15), 0.18, seed + 4, key), key)
         leaves = vegetation_colour("tree", self.greenness, (0.05, 0.13, 0.035))
         tree = _image_material("tree", _noise_image("tree", leaves, 0.35, seed + 3, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
@@ -311,7 +313,10 @@ class CityScene:
         _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(self.ground_mix)),
                          [ground], self.collection, key)
         if roads:
-            _new_mesh_object(meshes.road_mesh(roads), [road], self.collection, key)
+            _new_mesh_object(meshes.road_mesh(roads), [road, dirt], self.collection, key)
+        if paved:
+            concrete = _image_material("paved", _noise_image("paved", (0.36, 0.36, 0.35), 0.08, seed + 5, key), key)
+            _new_mesh_object(meshes.lot_mesh(paved), [concrete], self.collection, key)
         if trees:
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)

@@ -16,7 +16,8 @@ def jobs():
 
 
 _PLAN_FLAGS = ("--design", "--random-designs", "--population", "--images", "-r", "--seed", "--cities", "--tiles",
-               "--preset", "--sensor", "--roof-jitter", "--ground", "--bank", "--space", "--tile-px", "--gsd")
+               "--preset", "--sensor", "--roof-jitter", "--ground", "--style", "--bank", "--space", "--tile-px",
+               "--gsd")
 
 
 def _plan_options(command):

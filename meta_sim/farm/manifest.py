@@ -78,7 +78,8 @@ class Manifest:
     pixel_size_m: float
     out_dir: Path  # absolute in memory
     tasks: tuple = field(default_factory=tuple)
-    # What the renders look like beyond the preset (sim.sensor, sim.jitter, sim.ground); defaults: as rendered.
+    # What the renders look like beyond the preset (sim.sensor, sim.jitter, sim.ground, the city style of
+    # sim.layout); defaults: as rendered before they existed.
     appearance: dict = field(default_factory=lambda: dict(DEFAULT_APPEARANCE))
 
     @property
@@ -147,13 +148,14 @@ class Manifest:
         return self.subset(self.tasks[index::count])
 
 
-DEFAULT_APPEARANCE = {"sensor": "none", "roof_jitter": 0.0, "ground": "plain"}
+DEFAULT_APPEARANCE = {"sensor": "none", "roof_jitter": 0.0, "ground": "plain", "style": "suburban"}
 
 
 def check_appearance(appearance) -> dict:
     """A manifest's appearance settings, each checked; MetaSimError for an unknown key or value."""
     from ..sim.ground import get_mix
     from ..sim.jitter import check_strength
+    from ..sim.layout import parse_style, style_text
     from ..sim.sensor import get_sensor
 
     if not isinstance(appearance, dict) or set(appearance) - set(DEFAULT_APPEARANCE):
@@ -162,6 +164,7 @@ def check_appearance(appearance) -> dict:
     get_sensor(out["sensor"])
     get_mix(out["ground"])
     out["roof_jitter"] = check_strength(out["roof_jitter"])
+    out["style"] = style_text(parse_style(out["style"]))
     return out
 
 
@@ -202,7 +205,8 @@ def plan(options: dict, out_dir: Path) -> Manifest:
     from ..render.plan import plan as plan_render
 
     jobs, settings = plan_render({**options, "out": out_dir, "preview": False})
-    appearance = {"sensor": settings.sensor.name, "roof_jitter": settings.roof_jitter, "ground": settings.ground}
+    appearance = {"sensor": settings.sensor.name, "roof_jitter": settings.roof_jitter, "ground": settings.ground,
+                  "style": settings.style}
     shared = shared_settings(settings.space.name, settings.preset.name, settings.n_tiles, settings.tile_px,
                              settings.pixel_size_m, appearance)
     tasks = {}
@@ -266,7 +270,8 @@ def render_setup(manifest: Manifest, with_banks: bool = True):
                               preset=get_preset(manifest.preset), out_dir=Path(manifest.out_dir),
                               n_tiles=manifest.n_tiles, tile_px=manifest.tile_px,
                               pixel_size_m=manifest.pixel_size_m, sensor=get_sensor(manifest.appearance["sensor"]),
-                              roof_jitter=manifest.appearance["roof_jitter"], ground=manifest.appearance["ground"])
+                              roof_jitter=manifest.appearance["roof_jitter"], ground=manifest.appearance["ground"],
+                              style=manifest.appearance["style"])
     jobs = [Job(t.design, t.city_seed, t.name, t.tiles) for t in manifest.tasks]
     return jobs, settings
 

@@ -56,11 +56,16 @@ class RenderSettings:
     sensor: Sensor = Sensor()  # "none" by default: the render as it is
     roof_jitter: float = 0.0  # per-building roof variation (sim.jitter); 0: none
     ground: str = "plain"  # ground cover mix (sim.ground); plain: one lawn
+    style: str = "suburban"  # city style mix (sim.layout.parse_style); suburban: the street grid
 
     def appearance(self, job: "Job") -> Appearance:
         """How ``job``'s tiles look: this render's sensor, roof jitter and ground, with whatever the
         job's design sets through the space's appearance parameters."""
         return Appearance(self.sensor, self.roof_jitter, self.ground).with_design(self.space, job.design)
+
+    def header(self, job: "Job") -> dict:
+        """What a tile header of ``job`` records beyond a plain render: its look and the city style."""
+        return {**self.appearance(job).header(), **({"style": self.style} if self.style != "suburban" else {})}
 
     @property
     def tile_m(self) -> float:
@@ -92,7 +97,7 @@ def expected_meta(settings: RenderSettings, job: Job, index: int) -> dict:
             "tile_index": index, "tile_size_px": [settings.tile_px, settings.tile_px],
             "pixel_size_m": settings.pixel_size_m, "preset": settings.preset.name,
             "format_version": tiles.TILE_FORMAT_VERSION, **settings.preset.cache_fields(),
-            **settings.appearance(job).header()}
+            **settings.header(job)}
 
 
 def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int) -> list[Job]:

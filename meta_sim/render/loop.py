@@ -24,7 +24,7 @@ from ..core.fileio import writable_dir
 from ..sim import meshes, tiles
 from ..sim.design import DesignSpace
 from ..sim.ground import get_mix
-from ..sim.layout import LayoutParams, layout_for_tiles
+from ..sim.layout import LayoutParams, layout_for_tiles, parse_style
 from ..sim.preview import write_mosaic, write_previews
 from .jobs import Job, RenderSettings, RenderSummary, expected_meta, tile_path, write_job_manifest
 
@@ -65,8 +65,14 @@ def blocks_of(n_tiles: int, cols: int) -> list[list[int]]:
     return [groups[key] for key in sorted(groups)]
 
 
-def _layout_params(space: DesignSpace, design: dict) -> LayoutParams:
+def _layout_params(space: DesignSpace, design: dict, style: str = "suburban") -> LayoutParams:
+    """The city's layout parameters: the design space's overrides, and the render's style if it has one."""
     overrides = space.layout_overrides(design)
+    if style != "suburban":
+        if "style" in overrides:
+            raise MetaSimError(f"design space {space.name!r} declares a city style already; "
+                               "drop --style or the space's layout style")
+        overrides["style"] = parse_style(style)
     try:
         return LayoutParams(**overrides)
     except TypeError as exc:
@@ -98,7 +104,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         if missing:
             raise MetaSimError(f"job {job.name}: its design lacks {', '.join(missing)} of design space "
                                f"{settings.space.name!r}")
-        params = _layout_params(settings.space, job.design)
+        params = _layout_params(settings.space, job.design, settings.style)
         textures = resolve_textures(settings.space, job.design, settings.banks)  # fail early
         wanted = job.tile_indices(settings.n_tiles)
         pending = [j for j in wanted
@@ -149,7 +155,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             design=job.design, space=settings.space.name, city_seed=job.city_seed,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
-                            software=software, appearance=look.header(), sun=scene.sun)
+                            software=software, appearance=settings.header(job), sun=scene.sun)
                         # the sensor sees each tile alone (its noise seeded by the tile); labels untouched
                         image = look.apply(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
                                            [job.city_seed, j])

@@ -45,6 +45,8 @@ RENDER_OPTIONS = (
            "blur, a tone curve that does not clip, noise, JPEG; see meta_sim/sim/sensor.py)"),
     Option("--ground", str, "plain", "ground cover: plain (one lawn), suburban, mixed or arid (patches of lawn, "
            "dry grass, soil, sand, gravel, pavement; see meta_sim/sim/ground.py)"),
+    Option("--style", str, "suburban", "city style: suburban (a street grid), dense (a packed informal town), "
+           "downtown, industrial, or a mix such as dense=0.7,suburban=0.3 (see meta_sim/sim/layout.py)"),
     Option("--roof-jitter", float, 0.0, "per-building roof variation, 0 (none) to 1: brightness, tint and "
            "weathering drawn per building (see meta_sim/sim/jitter.py)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),

@@ -8,6 +8,7 @@ from ..core.errors import MetaSimError
 from ..sim.design import DesignSpace
 from ..sim.ground import get_mix
 from ..sim.jitter import check_strength
+from ..sim.layout import parse_style, style_text
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
 from ..sim.sensor import get_sensor
@@ -50,6 +51,7 @@ def plan(options: dict):
     roof_jitter = check_strength(options.get("roof_jitter", 0.0))
     ground = options.get("ground") or "plain"
     get_mix(ground)
+    style = style_text(parse_style(options.get("style") or "suburban"))  # checked, in one spelling
     banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
     if options.get("space"):
         space = DesignSpace.load(options["space"])
@@ -78,5 +80,8 @@ def plan(options: dict):
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
                               preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter,
-                              ground=ground)
+                              ground=ground, style=style)
+    if style != "suburban" and "style" in space.layout:
+        raise MetaSimError(f"design space {space.name!r} declares a city style already; "
+                           "drop --style or the space's layout style")
     return jobs, settings

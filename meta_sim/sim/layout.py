@@ -13,6 +13,17 @@ city (highrises only near the centre, industrial on whole-depth lots);
 residential eave heights 3-3.5 or 5-6.5 m times a height factor; roof pitch
 15-25 degrees, overhang 0.2-0.6 m.
 
+That is the `suburban` style. `LayoutParams.style` mixes it with others:
+the city is cut into Voronoi regions of about `REGION_M`, each region gets
+one style (regions ranked at random, their areas cut at the mix's shares)
+and streets run on the borders between regions of different
+grids. `dense` regions are packed informal towns: long lanes bent at a few
+kinks and short dirt tracks between them, all at the region's own angle;
+houses turned with their lane stand in rows along each lane side and in
+clusters grown from seeds in the blocks, often sharing a wall. `downtown`
+and `industrial` regions take a street grid turned by an angle of its own,
+with their own zones, on paved lots.
+
 Every stage draws from its own generator spawned from the seed, so changing
 `LayoutParams.tree_density` leaves roads and buildings unchanged, and
 `sloped_share` changes roofs only. All stored floats are rounded to 0.1 mm so
@@ -23,13 +34,15 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 from ..core.errors import MetaSimError
+from . import polygons
 
 LAYOUT_VERSION = 1
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
@@ -140,21 +153,81 @@ def _check_number(owner: str, name: str, value: Any, lo: float, hi: float) -> fl
     return float(value)
 
 
+STYLES = ("suburban", "dense", "downtown", "industrial")
+DEFAULT_STYLE = (("suburban", 1.0),)
+StyleMix = tuple[tuple[str, float], ...]
+
+
+def style_mix(value: Any) -> StyleMix:
+    """A city style mix as ``((name, share), ...)`` in `STYLES` order, shares summing to 1.
+
+    Takes a style name (``"dense"``), a mapping of names to non-negative shares (``{"dense": 0.7,
+    "suburban": 0.3}``, as a design space's JSON gives it) or such pairs; MetaSimError otherwise.
+    """
+    usage = (f"LayoutParams.style must be a style name or a mapping of style names to shares, "
+             f"with styles among {', '.join(STYLES)} and at least one share positive")
+    if isinstance(value, str):
+        value = {value: 1.0}
+    elif isinstance(value, (list, tuple)):
+        if not all(isinstance(pair, (list, tuple)) and len(pair) == 2 for pair in value):
+            raise MetaSimError(f"{usage}; got {value!r}")
+        value = dict(value)
+    if not isinstance(value, Mapping) or not value:
+        raise MetaSimError(f"{usage}; got {value!r}")
+    shares = {}
+    for name, share in value.items():
+        if name not in STYLES:
+            raise MetaSimError(f"{usage}; {name!r} is not a style")
+        shares[name] = _check_number("LayoutParams", f"style[{name!r}]", share, 0.0, 1e6)
+    total = sum(shares.values())
+    if total <= 0.0:
+        raise MetaSimError(f"{usage}; got {value!r}")
+    return tuple((name, _r(shares[name] / total)) for name in STYLES if shares.get(name, 0.0) > 0.0)
+
+
+def parse_style(text: str) -> StyleMix:
+    """A style mix from its command-line form: ``dense`` or ``dense=0.7,suburban=0.3``."""
+    parts = [part.strip() for part in str(text).split(",") if part.strip()]
+    if len(parts) == 1 and "=" not in parts[0]:
+        return style_mix(parts[0])
+    shares = {}
+    for part in parts:
+        name, _, share = part.partition("=")
+        try:
+            shares[name.strip()] = float(share)
+        except ValueError:
+            raise MetaSimError(f"style {text!r}: write a style name or name=share pairs such as "
+                               f"dense=0.7,suburban=0.3 (styles: {', '.join(STYLES)})") from None
+    return style_mix(shares)
+
+
+def style_text(mix: StyleMix) -> str:
+    """The command-line form of a style mix: its one style's name, else name=share pairs."""
+    return mix[0][0] if len(mix) == 1 else ",".join(f"{name}={share:g}" for name, share in mix)
+
+
 @dataclass(frozen=True)
 class LayoutParams:
     """User-facing knobs of the city generator.
 
     building_density: share of lots built on is ``1 - (1 - d)**2`` (0.91 at
         the default 0.7), and footprints fill ``0.4 + 0.5 d`` of a lot's
-        usable width and depth (before per-kind scaling and caps).
+        usable width and depth (before per-kind scaling and caps). In dense
+        regions: the share of places along the lanes built on, the seeds of
+        house clusters in the blocks and how readily a cluster grows.
     sloped_share: share of buildings with gable or hip roofs. Sloped roofs
         go to rectangular residential buildings first, then apartments,
         industrial and office buildings; highrises and L/T footprints are
         always flat, which caps the share reachable (about 0.82 with the default mix).
     tree_density: street-tree probability per planting spot and yard trees
-        per lot area.
-    road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider.
-    block_size_m: (min, max) side length of a block between streets.
+        per lot area; scaled down in downtown, industrial and dense regions.
+    road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider
+        (grid styles; dense lanes have widths of their own).
+    block_size_m: (min, max) side length of a block between streets (grid styles).
+    style: the city styles and the share of the city each covers (see `style_mix`):
+        suburban (the street grid above), dense (a packed informal town on bent
+        lanes), downtown (offices and highrises on paved lots), industrial (halls
+        on large paved lots). Stored as ``((name, share), ...)``.
     """
 
     building_density: float = 0.7
@@ -162,6 +235,7 @@ class LayoutParams:
     tree_density: float = 0.4
     road_width_m: float = 10.0
     block_size_m: tuple[float, float] = (60.0, 140.0)
+    style: StyleMix = DEFAULT_STYLE
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
@@ -179,19 +253,24 @@ class LayoutParams:
         if lo > hi:
             raise MetaSimError(f"LayoutParams.block_size_m must be (min, max) with min <= max, got {block!r}")
         object.__setattr__(self, "block_size_m", (lo, hi))
+        object.__setattr__(self, "style", style_mix(self.style))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "building_density": self.building_density,
             "sloped_share": self.sloped_share,
             "tree_density": self.tree_density,
             "road_width_m": self.road_width_m,
             "block_size_m": list(self.block_size_m),
         }
+        if self.style != DEFAULT_STYLE:  # layouts from before styles keep their JSON
+            out["style"] = dict(self.style)
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> LayoutParams:
-        unknown = set(data) - {"building_density", "sloped_share", "tree_density", "road_width_m", "block_size_m"}
+        known = {"building_density", "sloped_share", "tree_density", "road_width_m", "block_size_m", "style"}
+        unknown = set(data) - known
         if unknown:
             raise MetaSimError(f"unknown layout parameter(s) {sorted(unknown)}; remove them")
         data = dict(data)
@@ -200,41 +279,68 @@ class LayoutParams:
         return cls(**data)
 
 
+ROAD_SURFACES = ("asphalt", "dirt")
+LOT_SURFACES = ("ground", "paved")
+
+
+def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
+    if value not in allowed:
+        raise MetaSimError(f"{owner}: surface {value!r} is not one of {allowed}; the layout file is damaged")
+    return str(value)
+
+
 @dataclass(frozen=True)
 class Road:
-    """A street or avenue: an axis-aligned rectangle (roads may overlap at crossings)."""
+    """A street, lane or track: a convex polygon (roads may overlap at crossings and bends).
+
+    Suburban streets are axis-aligned rectangles; the lanes of other styles run at any angle.
+    `surface` is "asphalt" or "dirt" (a track).
+    """
 
     polygon: Polygon
+    surface: str = "asphalt"
 
     @property
     def bbox(self) -> Rect:
         return polygon_bbox(self.polygon)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"polygon": _polygon_to_list(self.polygon)}
+        out: dict[str, Any] = {"polygon": _polygon_to_list(self.polygon)}
+        if self.surface != "asphalt":
+            out["surface"] = self.surface
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Road:
-        return cls(_polygon_from_list(data["polygon"]))
+        return cls(_polygon_from_list(data["polygon"]), _surface("road", data.get("surface", "asphalt"), ROAD_SURFACES))
 
 
 @dataclass(frozen=True)
 class Lot:
-    """A parcel (axis-aligned rectangle) of one block; holds at most one building."""
+    """A parcel (a convex polygon, axis-aligned in suburban blocks) that holds at most one building.
+
+    `block_index` is the grid block of the lot, -1 for lots of a dense region (one per building).
+    `surface` is "ground" or "paved" (downtown parking, industrial yards).
+    """
 
     polygon: Polygon
     block_index: int
+    surface: str = "ground"
 
     @property
     def bbox(self) -> Rect:
         return polygon_bbox(self.polygon)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"polygon": _polygon_to_list(self.polygon), "block_index": self.block_index}
+        out: dict[str, Any] = {"polygon": _polygon_to_list(self.polygon), "block_index": self.block_index}
+        if self.surface != "ground":
+            out["surface"] = self.surface
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Lot:
-        return cls(_polygon_from_list(data["polygon"]), int(data["block_index"]))
+        return cls(_polygon_from_list(data["polygon"]), int(data["block_index"]),
+                   _surface("lot", data.get("surface", "ground"), LOT_SURFACES))
 
 
 @dataclass(frozen=True)
@@ -247,6 +353,11 @@ class Building:
     `height_m` and its planes rise at `roof_pitch_deg` to a ridge (gable) or
     top ridge (hip) along `ridge_axis`, the footprint's long side. Flat roofs
     have no overhang and an optional parapet of `parapet_m` around the edge.
+
+    The building is turned by `rotation_deg` (counter-clockwise) about the
+    centre of its footprint's bounding box: `footprint` stays axis-aligned in
+    the building's own frame, and `wall_outline`, `roof_outline` and `bbox` are
+    the turned outlines in the world.
     """
 
     id: int
@@ -260,6 +371,7 @@ class Building:
     overhang_m: float
     ridge_axis: str
     parapet_m: float
+    rotation_deg: float = 0.0
 
     @property
     def roof_class(self) -> int:
@@ -267,13 +379,29 @@ class Building:
         return 1 if self.roof == "flat" else 2
 
     @property
-    def roof_outline(self) -> Polygon:
-        """The footprint grown by the overhang: what a nadir camera sees of the roof."""
+    def _own_roof_outline(self) -> Polygon:
+        """The footprint grown by the overhang, in the building's own (unturned) frame."""
         if self.overhang_m == 0.0:
             return self.footprint
         x0, y0, x1, y1 = polygon_bbox(self.footprint)  # sloped roofs sit on rectangles only
         o = self.overhang_m
         return rect_polygon(x0 - o, y0 - o, x1 + o, y1 + o)
+
+    def _turned(self, polygon: Polygon) -> Polygon:
+        if self.rotation_deg == 0.0:
+            return polygon
+        x0, y0, x1, y1 = polygon_bbox(self.footprint)
+        return polygons.rotate(polygon, (x0 + x1) / 2, (y0 + y1) / 2, self.rotation_deg)
+
+    @property
+    def wall_outline(self) -> Polygon:
+        """The footprint turned into the world."""
+        return self._turned(self.footprint)
+
+    @property
+    def roof_outline(self) -> Polygon:
+        """The footprint grown by the overhang and turned into the world: what a nadir camera sees of the roof."""
+        return self._turned(self._own_roof_outline)
 
     @property
     def bbox(self) -> Rect:
@@ -288,7 +416,7 @@ class Building:
         """
         if self.roof == "flat":
             return self.height_m
-        x0, y0, x1, y1 = self.bbox
+        x0, y0, x1, y1 = polygon_bbox(self._own_roof_outline)
         half_span = min(x1 - x0, y1 - y0) / 2.0
         return _r(self.height_m + half_span * math.tan(math.radians(self.roof_pitch_deg)))
 
@@ -305,6 +433,7 @@ class Building:
             "overhang_m": self.overhang_m,
             "ridge_axis": self.ridge_axis,
             "parapet_m": self.parapet_m,
+            **({"rotation_deg": self.rotation_deg} if self.rotation_deg != 0.0 else {}),
         }
 
     @classmethod
@@ -321,8 +450,11 @@ class Building:
             overhang_m=float(data["overhang_m"]),
             ridge_axis=str(data["ridge_axis"]),
             parapet_m=float(data["parapet_m"]),
+            rotation_deg=float(data.get("rotation_deg", 0.0)),
         )
         where = f"building {building.id}"
+        if not math.isfinite(building.rotation_deg):
+            raise MetaSimError(f"{where}: rotation_deg must be finite; the layout file is damaged")
         for name, value, allowed in (
             ("kind", building.kind, KINDS),
             ("roof", building.roof, ROOFS),
@@ -432,6 +564,10 @@ class CityLayout:
     def _road_boxes(self) -> np.ndarray:
         return _boxes(self.roads)
 
+    @cached_property
+    def _lot_boxes(self) -> np.ndarray:
+        return _boxes(self.lots)
+
     def buildings_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Building]:
         """Buildings whose roof-outline bbox shares positive area with the rectangle, in id order."""
         return _in_rect(self.buildings, self._building_boxes, x0, y0, x1, y1)
@@ -441,8 +577,12 @@ class CityLayout:
         return _in_rect(self.trees, self._tree_boxes, x0, y0, x1, y1)
 
     def roads_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Road]:
-        """Roads that share positive area with the rectangle."""
+        """Roads whose bbox shares positive area with the rectangle."""
         return _in_rect(self.roads, self._road_boxes, x0, y0, x1, y1)
+
+    def lots_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Lot]:
+        """Lots whose bbox shares positive area with the rectangle."""
+        return _in_rect(self.lots, self._lot_boxes, x0, y0, x1, y1)
 
     def tile_grid(self, tile_m: float = TILE_M) -> list[Rect]:
         """Square tiles from the origin covering the city, row-major, row 0 at y = 0 (south).
@@ -605,8 +745,12 @@ def _frontage_cuts(rng: np.random.Generator, length: float, frontage: tuple[floa
     return [0.0] + [k * base + rng.uniform(-slack / 2, slack / 2) for k in range(1, n)] + [length]
 
 
-def _plan_block(rng: np.random.Generator, block: _Block, index: int, width: float, height: float) -> list[_LotPlan]:
-    """Cut a block's buildable area (inside the verges) into lots along its long side."""
+def _plan_block(rng: np.random.Generator, block: _Block, index: int, width: float, height: float,
+                style: str = "suburban") -> list[_LotPlan]:
+    """Cut a block's buildable area (inside the verges) into lots along its long side.
+
+    Suburban blocks take their zone from where they lie; downtown and industrial ones from the style.
+    """
     x0, y0, x1, y1 = block.rect
     sides = block.road_sides
     x0, x1 = x0 + VERGE_M * ("W" in sides), x1 - VERGE_M * ("E" in sides)
@@ -614,7 +758,7 @@ def _plan_block(rng: np.random.Generator, block: _Block, index: int, width: floa
     min_side = MIN_BUILDING_SIDE_M + 2 * (BUILDING_MARGIN_M + OVERHANG_RANGE_M[1])
     if min(x1 - x0, y1 - y0) < min_side:
         return []  # a sliver between a street and the city edge stays open ground
-    zone = _zone_of(rng, block.rect, width, height)
+    zone = _zone_of(rng, block.rect, width, height) if style == "suburban" else _pick(rng, STYLE_ZONES[style])
     along_x = x1 - x0 >= y1 - y0
     lo, hi, near, far = (x0, x1, y0, y1) if along_x else (y0, y1, x0, x1)
     fronts = ("S", "N") if along_x else ("W", "E")
@@ -644,6 +788,10 @@ class _Sketch:
     footprint: Polygon
     shape: str
     height_m: float
+    rotation_deg: float = 0.0
+    # Dense buildings touch their neighbours: their roof outline is what was placed, so a sloped
+    # roof's walls step in by its overhang instead of the eaves growing out.
+    outline_placed: bool = False
 
 
 def _to_world(plan: _LotPlan, u0: float, u1: float, v0: float, v1: float) -> Rect:
@@ -750,16 +898,20 @@ def _roof_buildings(rng: np.random.Generator, sketches: list[_Sketch], sloped_sh
     for i, s in enumerate(sketches):
         x0, y0, x1, y1 = polygon_bbox(s.footprint)
         roof, pitch, overhang, parapet = "flat", 0.0, 0.0, 0.0
+        footprint = s.footprint
         if i in sloped:
             roof = "gable" if rng.random() < 0.5 else "hip"
             pitch, overhang = rng.uniform(*PITCH_RANGE_DEG), rng.uniform(*OVERHANG_RANGE_M)
+            if s.outline_placed:
+                o = _r(overhang)
+                footprint = rect_polygon(x0 + o, y0 + o, x1 - o, y1 - o)
         elif rng.random() < 0.6:
             parapet = rng.uniform(*PARAPET_RANGE_M)
         buildings.append(Building(
             id=i + 1,
             kind=s.kind,
             lot_index=s.lot_index,
-            footprint=s.footprint,
+            footprint=footprint,
             shape=s.shape,
             height_m=s.height_m,
             roof=roof,
@@ -767,6 +919,7 @@ def _roof_buildings(rng: np.random.Generator, sketches: list[_Sketch], sloped_sh
             overhang_m=_r(overhang),
             ridge_axis="x" if x1 - x0 >= y1 - y0 else "y",
             parapet_m=_r(parapet),
+            rotation_deg=s.rotation_deg,
         ))
     return buildings
 
@@ -819,6 +972,450 @@ def _yard_trees(rng: np.random.Generator, lot: Lot, building: Building | None, d
     return placed
 
 
+# ---------------------------------------------------------------- city styles
+
+REGION_M = 200.0  # style regions are Voronoi cells of about this size
+REGION_ROAD_M = (6.0, 8.0)  # streets on the borders between regions of different grids
+DENSE_DIRT_STREETS = 0.5  # share of the streets between two dense regions that are dirt
+STYLE_ZONES = {"downtown": {"downtown": 0.5, "commercial": 0.5}, "industrial": {"industrial": 1.0}}
+STYLE_TREES = {"suburban": 1.0, "downtown": 0.25, "industrial": 0.15, "dense": 0.5}  # x tree_density
+PAVED_STYLES = ("downtown", "industrial")  # whose lots are paved (parking, yards)
+LOT_KEPT = 0.3  # share of a grid lot that must lie in its region for the rest to be kept
+
+# Dense towns: bent lanes and tracks between irregular blocks of packed, often touching houses.
+LANE_SPACING_M = (28.0, 50.0)  # between neighbouring long lanes: two rows of houses back to back
+CROSS_SPACING_M = (30.0, 80.0)  # between the short lanes that join them
+KINK_SPACING_M = (20.0, 55.0)
+KINK_SHIFT_M = 3.0  # standard deviation of a lane's sideways step at each kink
+LANE_WIDTH_M = {"dirt": (2.5, 4.5), "asphalt": (4.0, 6.0)}
+DIRT_LANE_SHARE = 0.7
+DENSE_FRONTAGE_M = (4.0, 12.0)
+DENSE_DEPTH_M = (5.0, 14.0)
+DENSE_ROWS = 3  # rows of houses tried behind each lane side
+DENSE_TOUCHING = 0.7  # share of neighbours that share a wall
+DENSE_M2_PER_SEED = 200.0  # interior seeds of house clusters, at building_density 1
+SEED_TURN_DEG = 5.0  # a cluster's houses stand this much askew of their lane (standard deviation)
+DENSE_GROWTH = (0.45, 0.5)  # a house's chance to get a neighbour on each side: a + b * building_density
+DENSE_STOREYS = {1: 0.45, 2: 0.3, 3: 0.17, 4: 0.08}
+STOREY_M = 3.0
+ROAD_CLEARANCE_M = 0.2  # between any roof outline and a road
+TOUCH_M = 1e-3  # neighbours may share walls: outlines may meet within the 0.1 mm rounding
+DENSE_M2_PER_TREE = 400.0  # at tree_density 1
+
+
+@dataclass(frozen=True)
+class _Region:
+    style: str
+    cell: Polygon  # convex, counter-clockwise
+    angle_deg: float  # direction of a dense region's long lanes
+
+
+class _Occupancy:
+    """Convex polygons hashed into square cells, to ask quickly whether a new one keeps clear of them."""
+
+    def __init__(self, polygons_: list[Polygon] = (), cell_m: float = 16.0):
+        self.cell_m = cell_m
+        self.items: list[tuple[Polygon, Rect]] = []
+        self.grid: dict[tuple[int, int], list[int]] = {}
+        for polygon in polygons_:
+            self.add(polygon)
+
+    def _keys(self, box: Rect):
+        x0, y0, x1, y1 = box
+        c = self.cell_m
+        return itertools.product(range(math.floor(x0 / c), math.floor(x1 / c) + 1),
+                                 range(math.floor(y0 / c), math.floor(y1 / c) + 1))
+
+    def add(self, polygon: Polygon) -> None:
+        box = polygon_bbox(polygon)
+        self.items.append((polygon, box))
+        for key in self._keys(box):
+            self.grid.setdefault(key, []).append(len(self.items) - 1)
+
+    def clear(self, polygon: Polygon, gap: float) -> bool:
+        """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching)."""
+        box = polygon_bbox(polygon)
+        seen = set()
+        for key in self._keys(box):
+            for i in self.grid.get(key, ()):
+                if i in seen:
+                    continue
+                seen.add(i)
+                other, (x0, y0, x1, y1) = self.items[i]
+                # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
+                if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
+                    continue
+                if not polygons.apart(polygon, other, gap):
+                    return False
+        return True
+
+
+def _rounded(points) -> Polygon:
+    out: list[Point] = []
+    for x, y in points:
+        p = (_r(x), _r(y))
+        if not out or p != out[-1]:
+            out.append(p)
+    while len(out) > 1 and out[0] == out[-1]:
+        out.pop()
+    return tuple(out)
+
+
+def _piece(polygon, window) -> Polygon | None:
+    """The part of a convex polygon inside a convex window, rounded; None if (almost) nothing is left."""
+    piece = _rounded(polygons.clip(polygon, window))
+    return piece if len(piece) >= 3 and polygons.area(piece) > 1.0 else None
+
+
+def _half_plane(a: Point, b: Point, size: float) -> Polygon:
+    """A huge counter-clockwise quad standing for the half-plane of points nearer to `a` than to `b`."""
+    mx, my = (a[0] + b[0]) / 2, (a[1] + b[1]) / 2
+    length = math.hypot(a[0] - b[0], a[1] - b[1])
+    dx, dy = (a[0] - b[0]) / length * size, (a[1] - b[1]) / length * size
+    ex, ey = -dy, dx
+    return ((mx + ex, my + ey), (mx - ex, my - ey), (mx - ex + dx, my - ey + dy), (mx + ex + dx, my + ey + dy))
+
+
+def _style_regions(rng: np.random.Generator, width: float, height: float,
+                   mix: StyleMix) -> tuple[list[_Region], list[Road]]:
+    """The city cut into Voronoi cells, each of one style, and the streets between cells of different grids.
+
+    Cells are ranked at random and their areas cut at the mix's cumulative shares, so each style
+    covers about its share of the city (exactly so for a city of many cells).
+    """
+    nx, ny = max(1, round(width / REGION_M)), max(1, round(height / REGION_M))
+    sites = [((i + rng.uniform(0.25, 0.75)) * width / nx, (j + rng.uniform(0.25, 0.75)) * height / ny)
+             for j in range(ny) for i in range(nx)]
+    city = rect_polygon(0.0, 0.0, width, height)
+    cells = []
+    for i, site in enumerate(sites):
+        cell = city
+        for j, other in enumerate(sites):
+            if j != i:
+                cell = polygons.clip(cell, _half_plane(site, other, 4 * (width + height)))
+        cells.append(tuple(cell))
+    areas = np.array([polygons.area(c) for c in cells])
+    order = rng.permutation(len(cells))
+    middles = (np.cumsum(areas[order]) - areas[order] / 2) / areas.sum()
+    edges = np.cumsum([share for _, share in mix])
+    styles = [""] * len(cells)
+    for k, middle in zip(order, middles):
+        styles[k] = mix[min(int(np.searchsorted(edges, middle, side="right")), len(mix) - 1)][0]
+    regions = [_Region(style, _rounded(cell), _r(rng.uniform(0.0, 180.0)) if style == "dense" else 0.0)
+               for style, cell in zip(styles, cells)]
+    roads = []
+    for i, cell in enumerate(cells):
+        for a, b in zip(cell, cell[1:] + cell[:1]):
+            mid = ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
+            d = [math.hypot(mid[0] - x, mid[1] - y) for x, y in sites]
+            j = min((k for k in range(len(sites)) if k != i), key=lambda k: abs(d[k] - d[i]), default=i)
+            same_grid = styles[i] == styles[j] != "dense"
+            if j <= i or abs(d[j] - d[i]) > 1e-6 or same_grid or math.dist(a, b) < 1.0:
+                continue
+            road_width = rng.uniform(*REGION_ROAD_M)
+            # Between two dense regions the through road is often unpaved too.
+            dirt = styles[i] == styles[j] == "dense" and rng.random() < DENSE_DIRT_STREETS
+            piece = _piece(polygons.strip(*a, *b, road_width, road_width / 2), city)
+            if piece:
+                roads.append(Road(piece, "dirt" if dirt else "asphalt"))
+    return regions, roads
+
+
+def _dense_lanes(rng: np.random.Generator, region: _Region) -> tuple[list[Road], list[tuple[Point, Point, float]]]:
+    """Bent long lanes across a dense region and short ones joining them, at the region's angle.
+
+    Returns the lane pieces inside the region and the lanes' centre segments (start, end, width).
+    """
+    cx = sum(p[0] for p in region.cell) / len(region.cell)
+    cy = sum(p[1] for p in region.cell) / len(region.cell)
+    u0, v0, u1, v1 = polygon_bbox(polygons.rotate(region.cell, cx, cy, -region.angle_deg))
+    roads: list[Road] = []
+    segments: list[tuple[Point, Point, float]] = []
+
+    def add(line, width: float, surface: str) -> None:
+        points = polygons.rotate(line, cx, cy, region.angle_deg)
+        for a, b in zip(points[:-1], points[1:]):
+            # Lengthened by half a width, consecutive pieces cover the outside of each bend.
+            piece = _piece(polygons.strip(*a, *b, width, width / 2), region.cell)
+            if piece:
+                roads.append(Road(piece, surface))
+            segments.append((a, b, width))
+
+    def lane_width() -> tuple[float, str]:
+        surface = "dirt" if rng.random() < DIRT_LANE_SHARE else "asphalt"
+        return rng.uniform(*LANE_WIDTH_M[surface]), surface
+
+    lanes = []  # (u, v) of each long lane's kinks
+    v = v0 + rng.uniform(8.0, LANE_SPACING_M[1] / 2)
+    while v < v1 - 8.0:
+        us = [u0 - 5.0]
+        while us[-1] < u1 + 5.0:
+            us.append(us[-1] + rng.uniform(*KINK_SPACING_M))
+        shift = np.clip(np.cumsum(rng.normal(0.0, KINK_SHIFT_M, len(us))), -8.0, 8.0)
+        lanes.append((np.array(us), v + shift))
+        add(list(zip(us, v + shift)), *lane_width())
+        v += rng.uniform(*LANE_SPACING_M)
+    # Short lanes run between neighbouring long lanes (or a long lane and the region's edge),
+    # at staggered places, so blocks are irregular and lanes meet in T junctions.
+    bounds = [None, *lanes, None]
+    for below, above in zip(bounds[:-1], bounds[1:]):
+        u = u0 + rng.uniform(0.0, CROSS_SPACING_M[1] / 2)
+        while u < u1:
+            if rng.random() < 0.75:
+                tilt = rng.uniform(-5.0, 5.0)
+                ua, ub = u - tilt, u + tilt
+                va = v0 - 5.0 if below is None else float(np.interp(ua, *below)) - 1.0
+                vb = v1 + 5.0 if above is None else float(np.interp(ub, *above)) + 1.0
+                width = rng.uniform(*LANE_WIDTH_M["dirt"])
+                if vb - va > 4.0:
+                    add([(ua, va), (ub, vb)], width, "dirt")
+            u += rng.uniform(*CROSS_SPACING_M)
+    return roads, segments
+
+
+@dataclass(frozen=True)
+class _Placed:
+    outline: Polygon  # the roof outline in the world
+    footprint: Polygon  # axis-aligned, in the building's own frame
+    rotation_deg: float
+    kind: str
+    height_m: float
+
+
+def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[tuple[Point, Point, float]],
+                     roads: _Occupancy, built: _Occupancy, density: float, width: float,
+                     height: float) -> list[_Placed]:
+    """Packed houses of one dense region: rows along both sides of every lane, then infill behind them.
+
+    Each house keeps `ROAD_CLEARANCE_M` off every road and stays inside its region; houses of a row
+    often share walls, and infill houses take the direction of the nearest lane.
+    """
+    window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
+    placed: list[_Placed] = []
+    storeys, storey_p = list(DENSE_STOREYS), list(DENSE_STOREYS.values())
+
+    def attempt(cx: float, cy: float, along: float, depth: float, angle: float) -> bool:
+        footprint = rect_polygon(cx - along / 2, cy - depth / 2, cx + along / 2, cy + depth / 2)
+        rotation = _r(angle)
+        x0, y0, x1, y1 = polygon_bbox(footprint)
+        outline = polygons.rotate(footprint, (x0 + x1) / 2, (y0 + y1) / 2, rotation)  # as Building turns it
+        if not polygons.inside(outline, window, 0.0) or not roads.clear(outline, ROAD_CLEARANCE_M):
+            return False
+        if not built.clear(outline, -TOUCH_M):
+            return False
+        built.add(outline)
+        floors = int(rng.choice(storeys, p=storey_p))
+        eave = floors * STOREY_M + rng.uniform(-0.2, 0.4)
+        kind = "residential" if eave <= HEIGHT_RANGES_M["residential"][1] else "apartment"
+        placed.append(_Placed(outline, footprint, rotation, kind, _r(eave)))
+        return True
+
+    spot = 0.5 + 0.5 * density  # share of row places built on
+    for (ax, ay), (bx, by), lane in segments:
+        length = math.hypot(bx - ax, by - ay)
+        dx, dy = (bx - ax) / length, (by - ay) / length
+        angle = math.degrees(math.atan2(dy, dx))
+        for side in (1.0, -1.0):
+            # Rows of houses behind one another, the first facing the lane; a row's houses share its
+            # depth band but not their depth, so the backs are ragged.
+            front = lane / 2 + ROAD_CLEARANCE_M + rng.uniform(0.0, 1.0)
+            for _row in range(DENSE_ROWS):
+                band = rng.uniform(*DENSE_DEPTH_M)
+                t = rng.uniform(0.0, 3.0)
+                while t < length:
+                    along, depth = rng.uniform(*DENSE_FRONTAGE_M), band * rng.uniform(0.6, 1.0)
+                    if rng.random() < spot:
+                        for d in (depth, 0.6 * depth):
+                            off = front + rng.uniform(0.0, 0.4) + d / 2
+                            mid = t + along / 2
+                            cx, cy = ax + dx * mid - side * dy * off, ay + dy * mid + side * dx * off
+                            if d >= DENSE_DEPTH_M[0] - 1.0 and attempt(cx, cy, along, d, angle):
+                                break
+                    t += along + (0.0 if rng.random() < DENSE_TOUCHING else rng.uniform(0.5, 3.0))
+                front += band + rng.uniform(0.0, 1.5)
+    # Seeds in the blocks' interiors, turned about like the nearest lane.
+    starts = np.array([s[0] for s in segments]).reshape(-1, 2)
+    step = np.array([s[1] for s in segments]).reshape(-1, 2) - starts
+    x0, y0, x1, y1 = polygon_bbox(window)
+    for _ in range(int(density * polygons.area(window) / DENSE_M2_PER_SEED) if len(segments) else 0):
+        px, py = rng.uniform(x0, x1), rng.uniform(y0, y1)
+        t = np.clip(((np.array([px, py]) - starts) * step).sum(1) / (step * step).sum(1), 0.0, 1.0)
+        nearest = int(np.argmin(np.hypot(*(starts + t[:, None] * step - (px, py)).T)))
+        angle = math.degrees(math.atan2(step[nearest, 1], step[nearest, 0])) + rng.normal(0.0, SEED_TURN_DEG)
+        attempt(px, py, rng.uniform(*DENSE_FRONTAGE_M), rng.uniform(*DENSE_DEPTH_M), angle)
+    # Growth: houses lean on the houses already there (often sharing a wall), until the block is full
+    # but for yards.
+    grow = DENSE_GROWTH[0] + DENSE_GROWTH[1] * density
+    k = 0
+    while k < len(placed):
+        house = placed[k]
+        k += 1
+        fx0, fy0, fx1, fy1 = polygon_bbox(house.footprint)
+        cx, cy, half_u, half_v = (fx0 + fx1) / 2, (fy0 + fy1) / 2, (fx1 - fx0) / 2, (fy1 - fy0) / 2
+        c, s = math.cos(math.radians(house.rotation_deg)), math.sin(math.radians(house.rotation_deg))
+        for side in rng.permutation(4):
+            if rng.random() >= grow:
+                continue
+            along, depth = rng.uniform(*DENSE_FRONTAGE_M), rng.uniform(*DENSE_DEPTH_M)
+            gap = 0.0 if rng.random() < DENSE_TOUCHING else rng.uniform(0.5, 2.0)
+            for shrink in (1.0, 0.75, 0.5):  # a smaller house may fit where a big one does not
+                a, d = max(DENSE_FRONTAGE_M[0], along * shrink), max(DENSE_FRONTAGE_M[0], depth * shrink)
+                if side < 2:  # beside: along the house's frontage, one of the long lines even
+                    u = (1 if side == 0 else -1) * (half_u + a / 2 + gap)
+                    v = rng.uniform(-0.5, 0.5) + (d / 2 - half_v) * rng.choice((-1, 1))
+                else:  # behind or in front
+                    u = rng.uniform(-1.0, 1.0) * abs(half_u - a / 2)
+                    v = (1 if side == 2 else -1) * (half_v + d / 2 + gap)
+                if attempt(cx + c * u - s * v, cy + s * u + c * v, a, d, house.rotation_deg):
+                    break
+    return placed
+
+
+def _dense_trees(rng: np.random.Generator, region: _Region, roads: _Occupancy, built: _Occupancy,
+                 density: float, width: float, height: float) -> list[Tree]:
+    """A few trees in the yards left between a dense region's houses, clear of roofs and roads."""
+    window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
+    x0, y0, x1, y1 = polygon_bbox(window)
+    trees: list[Tree] = []
+    for _ in range(rng.poisson(density * polygons.area(window) / DENSE_M2_PER_TREE)):
+        for _attempt in range(20):
+            radius = _r(rng.uniform(1.5, 4.0))
+            x, y = _r(rng.uniform(x0, x1)), _r(rng.uniform(y0, y1))
+            crown = rect_polygon(x - radius, y - radius, x + radius, y + radius)  # holds the disc
+            if (polygons.inside(crown, window, 0.0) and roads.clear(crown, 0.0)
+                    and built.clear(crown, TREE_CLEARANCE_M)
+                    and all(math.hypot(x - t.x, y - t.y) >= max(radius, t.radius_m) for t in trees)):
+                trees.append(Tree(x, y, radius, _r(radius * rng.uniform(1.8, 2.8))))
+                break
+    return trees
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """Where a style's street grid lies: made on a square of side `side` in its own frame, turned by
+    `angle_deg` and centred on the city. Suburban grids keep the city's frame (no turn, no square)."""
+
+    angle_deg: float
+    side: float
+    centre: Point
+
+    def point(self, x: float, y: float) -> Point:
+        (wx, wy), = polygons.rotate(((x - self.side / 2 + self.centre[0], y - self.side / 2 + self.centre[1]),),
+                                    *self.centre, self.angle_deg)
+        return wx, wy
+
+    def polygon(self, polygon: Polygon) -> Polygon:
+        return _rounded(self.point(x, y) for x, y in polygon)
+
+    def sketch(self, sketch: _Sketch) -> _Sketch:
+        """The sketch moved so its footprint's centre lands where the frame puts it, turned with the frame."""
+        x0, y0, x1, y1 = polygon_bbox(sketch.footprint)
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        wx, wy = self.point(cx, cy)
+        footprint = tuple((_r(x + wx - cx), _r(y + wy - cy)) for x, y in sketch.footprint)
+        return _Sketch(sketch.lot_index, sketch.kind, footprint, sketch.shape, sketch.height_m, _r(self.angle_deg))
+
+
+def _styled_layout(seed: int, width: float, height: float, params: LayoutParams) -> CityLayout:
+    """A city of several styles (or one other than suburban): each region is made by its style's rules.
+
+    The stages draw from the same generators as a suburban city's, in the same order (streets, lots,
+    buildings, roofs, trees), plus one for the regions, so a stage's knob changes that stage only.
+    Downtown and industrial grids are turned by an angle of their own; the suburban grid is not.
+    """
+    road_rng, lot_rng, building_rng, roof_rng, tree_rng, region_rng = stage_generators(seed, 6)
+    regions, roads = _style_regions(region_rng, width, height, params.style)
+    grid_styles = [style for style, _ in params.style if style != "dense"]
+    cells = {style: [r.cell for r in regions if r.style == style] for style in grid_styles}
+    side = math.hypot(width, height)
+    frames = {style: _Frame(_r(region_rng.uniform(0.0, 90.0)), side, (width / 2, height / 2))
+              for style in grid_styles if style != "suburban"}
+    extent = {style: (side, side) if style in frames else (width, height) for style in grid_styles}
+
+    def world(style: str, polygon: Polygon) -> Polygon:
+        return frames[style].polygon(polygon) if style in frames else polygon
+
+    def inside_cells(style: str, polygon: Polygon) -> bool:
+        return any(polygons.inside(polygon, c) for c in cells[style])
+
+    blocks: dict[str, list[_Block]] = {}
+    for style in grid_styles:
+        blocks[style], grid_roads = _blocks_and_roads(road_rng, *extent[style], params)
+        roads += [Road(piece) for road in grid_roads for cell in cells[style]
+                  if (piece := _piece(world(style, road.polygon), cell))]
+    lanes = {}
+    for k, region in enumerate(regions):
+        if region.style == "dense":
+            lane_roads, lanes[k] = _dense_lanes(road_rng, region)
+            roads += lane_roads
+    # Dirt first: where a track meets a paved street, the street is drawn over it.
+    roads.sort(key=lambda road: road.surface != "dirt")
+    road_space = _Occupancy([road.polygon for road in roads])
+
+    # A lot across a region's border keeps its part inside (most of it, or it is dropped).
+    plans, lot_styles, lots, first_block = [], [], [], 0
+    for style in grid_styles:
+        for index, block in enumerate(blocks[style]):
+            for plan in _plan_block(lot_rng, block, first_block + index, *extent[style], style):
+                outline = world(style, rect_polygon(*plan.rect))
+                pieces = [piece for c in cells[style] if (piece := _piece(outline, c))]
+                piece = max(pieces, key=polygons.area, default=None)
+                if piece and polygons.area(piece) > LOT_KEPT * polygons.area(outline) and road_space.clear(piece, 0.0):
+                    plans.append(plan)
+                    lot_styles.append(style)
+                    lots.append(Lot(piece, plan.block_index, "paved" if style in PAVED_STYLES else "ground"))
+        first_block += len(blocks[style])
+
+    def fits(sketch: _Sketch) -> bool:
+        """Whether the widest roof the sketch may get stays on its (perhaps cut) lot."""
+        x0, y0, x1, y1 = polygon_bbox(sketch.footprint)
+        o = OVERHANG_RANGE_M[1]
+        roof = rect_polygon(x0 - o, y0 - o, x1 + o, y1 + o)
+        if sketch.rotation_deg:
+            roof = polygons.rotate(roof, (x0 + x1) / 2, (y0 + y1) / 2, sketch.rotation_deg)
+        return polygons.inside(roof, lots[sketch.lot_index].polygon, 1e-3)
+
+    local = _sketch_buildings(building_rng, plans, params.building_density)  # in their grid's frame
+    placed = [frames[lot_styles[s.lot_index]].sketch(s) if lot_styles[s.lot_index] in frames else s for s in local]
+    kept = [i for i, sketch in enumerate(placed) if fits(sketch)]
+    local, sketches = [local[i] for i in kept], [placed[i] for i in kept]
+    built = _Occupancy()
+    dense = {}
+    for k, region in enumerate(regions):
+        if region.style == "dense":
+            dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
+                                        params.building_density, width, height)
+            for house in dense[k]:
+                lots.append(Lot(_rounded(house.outline), -1))
+                sketches.append(_Sketch(len(lots) - 1, house.kind, house.footprint, "rect", house.height_m,
+                                        house.rotation_deg, outline_placed=True))
+    buildings = _roof_buildings(roof_rng, sketches, params.sloped_share)
+
+    # Grid trees are placed in their grid's frame (beside the unturned buildings) and then moved.
+    local_buildings = {s.lot_index: replace(b, footprint=s.footprint, rotation_deg=0.0)
+                       for s, b in zip(local, buildings)}
+    trees: list[Tree] = []
+    for style in grid_styles:
+        density = params.tree_density * STYLE_TREES[style]
+        planted = [tree for block in blocks[style] for tree in _street_trees(tree_rng, block, density)]
+        for index, plan in enumerate(plans):
+            if lot_styles[index] == style:
+                lot = Lot(rect_polygon(*plan.rect), plan.block_index)
+                planted += _yard_trees(tree_rng, lot, local_buildings.get(index), density)
+        for tree in planted:
+            if style in frames:
+                x, y = frames[style].point(tree.x, tree.y)
+                tree = Tree(_r(x), _r(y), tree.radius_m, tree.height_m)
+            crown = rect_polygon(*tree.bbox)
+            if inside_cells(style, crown) and road_space.clear(crown, 0.0):
+                trees.append(tree)
+    for k in dense:
+        trees += _dense_trees(tree_rng, regions[k], road_space, built, params.tree_density * STYLE_TREES["dense"],
+                              width, height)
+    return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
+                      tuple(trees))
+
+
 # ---------------------------------------------------------------- entry points
 
 MIN_CITY_M = 30.0
@@ -839,6 +1436,8 @@ def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutPa
     width = _check_number("generate_layout", "width_m", width_m, MIN_CITY_M, MAX_CITY_M)
     height = _check_number("generate_layout", "height_m", height_m, MIN_CITY_M, MAX_CITY_M)
     params = LayoutParams() if params is None else params
+    if params.style != DEFAULT_STYLE:
+        return _styled_layout(int(seed), width, height, params)
     road_rng, lot_rng, building_rng, roof_rng, tree_rng = stage_generators(int(seed), 5)
 
     blocks, roads = _blocks_and_roads(road_rng, width, height, params)

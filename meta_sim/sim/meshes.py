@@ -5,9 +5,11 @@ testable without Blender. Everything of one role goes into one mesh (all
 buildings, all roads, all trees): a city of hundreds of buildings is a handful
 of objects, quick to build and to render.
 
-Material slots of the building mesh: 0 walls, 1 flat roofs, 2 sloped roofs.
-UVs are in metres; the builder divides them by the repeat size of the texture
-a design puts on each slot. Every polygon carries a label colour that encodes
+Material slots of the building mesh: 0 walls, 1 flat roofs, 2 sloped roofs;
+of the road mesh: 0 asphalt, 1 dirt. A turned building is built in its own
+frame and its vertices turned about its centre. UVs are in metres; the
+builder divides them by the repeat size of the texture a design puts on
+each slot. Every polygon carries a label colour that encodes
 its building instance id and roof class exactly (see ``label_color``).
 """
 
@@ -19,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 WALL, FLAT_ROOF, SLOPED_ROOF = 0, 1, 2
+ASPHALT, DIRT = 0, 1
 
 
 def label_color(instance_id: int, roof_class: int) -> tuple[float, float, float, float]:
@@ -136,9 +139,20 @@ def _sloped_roof(mesh: MeshArrays, b, label) -> None:
             mesh.add(pts, WALL, [(0, 0)] * 3, label)
 
 
+def _turn(mesh: MeshArrays, start: int, b) -> None:
+    """Turn the vertices from ``start`` on by the building's rotation about its footprint's bbox centre."""
+    xs = [x for x, _ in b.footprint]
+    ys = [y for _, y in b.footprint]
+    cx, cy = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    c, s = math.cos(math.radians(b.rotation_deg)), math.sin(math.radians(b.rotation_deg))
+    mesh.vertices[start:] = [(cx + c * (x - cx) - s * (y - cy), cy + s * (x - cx) + c * (y - cy), z)
+                             for x, y, z in mesh.vertices[start:]]
+
+
 def building_mesh(buildings) -> MeshArrays:
     mesh = MeshArrays("buildings")
     for b in buildings:
+        start = len(mesh.vertices)
         footprint = _ccw([tuple(p) for p in b.footprint])
         roof_class = FLAT_ROOF if b.roof == "flat" else SLOPED_ROOF
         label = label_color(b.id, roof_class)
@@ -147,16 +161,29 @@ def building_mesh(buildings) -> MeshArrays:
             mesh.add([(x, y, b.height_m) for x, y in footprint], FLAT_ROOF, footprint, label)
         else:
             _sloped_roof(mesh, b, label)
+        if b.rotation_deg:
+            _turn(mesh, start, b)
     return mesh
 
 
 def road_mesh(roads, z: float = 0.03) -> MeshArrays:
-    """Road rectangles; crossing roads overlap, so each sits a millimetre above the last."""
+    """Road polygons; crossing roads overlap, so each sits a millimetre above the last."""
     mesh = MeshArrays("roads")
     background = label_color(0, 0)
     for k, road in enumerate(roads):
         pts = _ccw([tuple(p) for p in road.polygon])
-        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], 0, pts, background)
+        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], DIRT if road.surface == "dirt" else ASPHALT, pts,
+                 background)
+    return mesh
+
+
+def lot_mesh(lots, z: float = 0.015) -> MeshArrays:
+    """Paved lots (parking, yards) a little above the ground and below the roads."""
+    mesh = MeshArrays("paved")
+    background = label_color(0, 0)
+    for lot in lots:
+        pts = _ccw([tuple(p) for p in lot.polygon])
+        mesh.add([(x, y, z) for x, y in pts], 0, pts, background)
     return mesh
 
 

@@ -94,3 +94,25 @@ def test_quick_task_benchmark_end_to_end(tmp_path):
         assert (tmp_path / "pictures" / f"{e}-predictions.png").is_file()
     assert set(data["sim_only"]["domains"]) == set(realdomains.DOMAINS)
     assert "| E3 paper |" in result.output
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (REALDATA / "banepa").is_dir(), reason="../shared/realdata is not beside the project")
+def test_quick_realism_benchmark_end_to_end_infers_the_look_in_overhead_v1(tmp_path):
+    """`meta-sim bench realism --quick`: every variant, and the overhead-v1 model's inferred looks."""
+    from meta_sim.cli import main
+    from meta_sim.sim.design import DesignSpace
+
+    out = tmp_path / "realism.json"
+    result = CliRunner().invoke(main, ["bench", "realism", "--quick", "--out", str(out), "--pictures",
+                                       str(tmp_path / "pictures"), "--cache", str(tmp_path / "cache")])
+    assert result.exit_code == 0, result.output
+    runs = json.loads(out.read_text())["runs"]
+    assert "overhead-v1" in runs and len(runs) == 5
+    space = DesignSpace.load("overhead-v1")
+    for row in runs["overhead-v1"].values():
+        assert row["space"] == "overhead-v1" and row["ground"] == row["sensor"] == "inferred"
+        assert all(space.validate(d) == d for d in row["designs"])
+        assert 0 <= row["rendered_only"]["iou"] <= 1 and 0 <= row["realness"]["accuracy"] <= 1
+    assert (tmp_path / "pictures" / "realism-overhead-v1.png").is_file()
+    assert "| overhead-v1 | inferred |" in result.output

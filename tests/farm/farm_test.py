@@ -276,17 +276,20 @@ def test_flamenco_export_of_a_hostile_path_runs_no_code(tmp_path, reference):
     assert compiled["tasks"][0]["commands"][0]["params"]["args"][6] == str(manifest_path.resolve())
 
 
-def test_a_job_carries_its_sensor_ground_and_roof_jitter_to_the_workers(tmp_path, reference):
+def test_a_job_carries_its_sensor_ground_roof_jitter_and_style_to_the_workers(tmp_path, reference):
     args = ["--design", "flat_roof=6,sloped_roof=11", "--seed", "21", "--tiles", "2", *SMALL]
     plain = _plan(tmp_path / "plain.json", *args)
-    dressed = _plan(tmp_path / "dressed.json", *args, "--sensor", "drone", "--ground", "mixed", "--roof-jitter", "0.5")
+    dressed = _plan(tmp_path / "dressed.json", *args, "--sensor", "drone", "--ground", "mixed", "--roof-jitter", "0.5",
+                    "--style", "dense=3,suburban=1")
     assert plain.appearance == farm.DEFAULT_APPEARANCE
-    assert dressed.appearance == {"sensor": "drone", "roof_jitter": 0.5, "ground": "mixed"}
+    assert dressed.appearance == {"sensor": "drone", "roof_jitter": 0.5, "ground": "mixed",
+                                  "style": "suburban=0.25,dense=0.75"}
     assert dressed.tasks[0].name != plain.tasks[0].name  # other pixels, another task
     summary = executors.run(dressed, executors.RunOptions(workers=1, **QUIET))
     assert not summary.failed and _counts(dressed) == (2, 0, 0)
     meta = tiles.read_meta(dressed.out_dir / dressed.tasks[0].outputs[0])
     assert meta["sensor"]["name"] == "drone" and meta["ground"] == "mixed" and meta["roof_jitter"] == 0.5
+    assert meta["style"] == "suburban=0.25,dense=0.75"
     data = json.loads((tmp_path / "dressed.json").read_text())
     data["appearance"]["sensor"] = "xray"
     (tmp_path / "bad.json").write_text(json.dumps(data))

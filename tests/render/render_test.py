@@ -16,7 +16,7 @@ from meta_sim.render.loop import render_jobs
 from meta_sim.sim import tiles
 from meta_sim.sim.design import DesignSpace
 from meta_sim.sim.imageio import read_rgb8
-from meta_sim.sim.layout import layout_for_tiles
+from meta_sim.sim.layout import LayoutParams, layout_for_tiles
 from meta_sim.sim.quality import get_preset
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -487,3 +487,70 @@ def test_a_space_declaring_appearance_renders_each_design_with_its_look(space, b
 
 def linear_luma(rgb):
     return rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+
+def _rasterise_polygons(polygons_, rect, px, gsd):
+    """Pixels (row 0 north) whose centres lie inside any of the convex counter-clockwise polygons."""
+    x0, y0, x1, y1 = rect
+    gx, gy = np.meshgrid(x0 + (np.arange(px) + 0.5) * gsd, y1 - (np.arange(px) + 0.5) * gsd)
+    out = np.zeros((px, px), dtype=bool)
+    for polygon in polygons_:
+        inside = np.ones((px, px), dtype=bool)
+        for (ax, ay), (bx, by) in zip(polygon, polygon[1:] + polygon[:1]):
+            inside &= (bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= 0
+        out |= inside
+    return out
+
+
+def test_a_dense_town_renders_with_turned_buildings_labelled_exactly_and_brown_dirt_tracks(space, bank, tmp_path):
+    import dataclasses
+
+    dense = dataclasses.replace(space, name="rooftops-dense", layout={"style": "dense"})
+    px, gsd, seed = 192, 0.6, 4
+    _, (tile,) = _render(dense, [bank], tmp_path, _design(space, 5, 9), n_tiles=1, seed=seed, tile_px=px,
+                         pixel_size_m=gsd)
+    layout, (rect,) = layout_for_tiles(seed, 1, px * gsd, LayoutParams(style="dense"))
+    turned = [b for b in layout.buildings if b.rotation_deg % 90.0]
+    assert len(turned) > 50
+    ious = []
+    for b in layout.buildings:
+        reference = _rasterise_polygons([b.roof_outline], rect, px, gsd)
+        if reference.sum() < 30:
+            continue
+        rendered = tile.instance == b.id
+        ious.append((reference & rendered).sum() / (reference | rendered).sum())
+    assert len(ious) > 50 and min(ious) > 0.9, sorted(ious)[:5]
+    # Dirt tracks render light brown, asphalt grey: pixels of each surface away from roofs, trees and edges.
+    asphalt = _rasterise_polygons([r.polygon for r in layout.roads if r.surface == "asphalt"], rect, px, gsd)
+    dirt = _rasterise_polygons([r.polygon for r in layout.roads if r.surface == "dirt"], rect, px, gsd)
+    covered = (tile.instance > 0) | _rasterise_polygons(
+        [((t.x - t.radius_m, t.y - t.radius_m), (t.x + t.radius_m, t.y - t.radius_m),
+          (t.x + t.radius_m, t.y + t.radius_m), (t.x - t.radius_m, t.y + t.radius_m)) for t in layout.trees],
+        rect, px, gsd)
+    dirt_only = _erode(dirt & ~asphalt & ~covered, 1)
+    assert dirt_only.sum() > 200
+    r, g, b = tile.rgb[dirt_only].mean(axis=0)
+    assert r > g > b and r > 1.5 * b, (r, g, b)
+    if (_erode(asphalt & ~covered, 1)).sum() > 50:
+        ar, ag, ab = tile.rgb[_erode(asphalt & ~covered, 1)].mean(axis=0)
+        assert ar < 1.3 * ab and ar < r
+
+
+def test_render_cli_takes_a_city_style_and_records_it(tmp_path):
+    args = ["render", "--design", "flat_roof=1,sloped_roof=1", "--tiles", 1, "--tile-px", 48, "--gsd", 2.4,
+            "--seed", 4]
+    result = _cli(*args, "--style", "dense=3,suburban=1", "--out", tmp_path / "a")
+    assert result.exit_code == 0, result.output
+    tile = tiles.read_tile(next((tmp_path / "a").glob("*.exr")))
+    assert tile.meta["style"] == "suburban=0.25,dense=0.75" and tile.instance.max() > 0
+    again = _cli(*args, "--style", "suburban=1,dense=3", "--out", tmp_path / "a")
+    assert "0 tiles written, 1 already done" in again.output  # one spelling of one mix
+    plain = _cli(*args, "--out", tmp_path / "b")
+    assert plain.exit_code == 0 and "style" not in tiles.read_tile(next((tmp_path / "b").glob("*.exr"))).meta
+    bad = _cli(*args, "--style", "slum", "--out", tmp_path / "c")
+    assert bad.exit_code == 2 and "'slum' is not a style" in bad.output
+    space = DesignSpace.load().to_dict()
+    space["layout"] = {"style": "dense"}
+    (tmp_path / "space.json").write_text(json.dumps(space))
+    twice = _cli(*args, "--space", tmp_path / "space.json", "--style", "industrial", "--out", tmp_path / "d")
+    assert twice.exit_code == 2 and "declares a city style already" in twice.output

@@ -1,0 +1,118 @@
+"""Plane geometry of convex polygons for the city layout: rotation, clipping and overlap tests.
+
+Pure Python (polygons here have a handful of vertices, where numpy's call overhead dominates).
+Polygons are sequences of (x, y) vertices, counter-clockwise.
+"""
+
+from __future__ import annotations
+
+import math
+
+Point = tuple[float, float]
+
+
+def rotate(points, cx: float, cy: float, degrees: float) -> tuple[Point, ...]:
+    """The points turned counter-clockwise by ``degrees`` about (cx, cy)."""
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return tuple((cx + c * (x - cx) - s * (y - cy), cy + s * (x - cx) + c * (y - cy)) for x, y in points)
+
+
+def area(points) -> float:
+    """Signed shoelace area: positive for counter-clockwise vertices."""
+    n = len(points)
+    return 0.5 * sum(points[i][0] * points[(i + 1) % n][1] - points[(i + 1) % n][0] * points[i][1]
+                     for i in range(n))
+
+
+def _axes(points):
+    n = len(points)
+    for i in range(n):
+        (x0, y0), (x1, y1) = points[i], points[(i + 1) % n]
+        length = math.hypot(x1 - x0, y1 - y0)
+        if length > 1e-12:
+            yield (y1 - y0) / length, (x0 - x1) / length
+
+
+def separation(a, b) -> float:
+    """Largest gap between the projections of two convex polygons on any of their edge normals.
+
+    Positive: they are at least that far apart; zero: they touch; negative: they overlap (by at
+    least that much along every axis). A lower bound of their distance.
+    """
+    best = -math.inf
+    for axes_of in (a, b):
+        for nx, ny in _axes(axes_of):
+            pa = [x * nx + y * ny for x, y in a]
+            pb = [x * nx + y * ny for x, y in b]
+            best = max(best, min(pb) - max(pa), min(pa) - max(pb))
+    return best
+
+
+def apart(a, b, gap: float) -> bool:
+    """Whether `separation` of the two polygons is at least ``gap`` (stops at the first axis that shows it)."""
+    for axes_of in (a, b):
+        for nx, ny in _axes(axes_of):
+            pa = [x * nx + y * ny for x, y in a]
+            pb = [x * nx + y * ny for x, y in b]
+            if min(pb) - max(pa) >= gap or min(pa) - max(pb) >= gap:
+                return True
+    return False
+
+
+def clip(subject, window) -> tuple[Point, ...]:
+    """The part of a convex polygon inside a convex counter-clockwise window (Sutherland-Hodgman)."""
+    out = list(subject)
+    n = len(window)
+    for i in range(n):
+        if not out:
+            break
+        (ax, ay), (bx, by) = window[i], window[(i + 1) % n]
+
+        def side(p, ax=ax, ay=ay, bx=bx, by=by):
+            return (bx - ax) * (p[1] - ay) - (by - ay) * (p[0] - ax)
+
+        points, out = out, []
+        for j, p in enumerate(points):
+            q = points[(j + 1) % len(points)]
+            sp, sq = side(p), side(q)
+            if sp >= 0:
+                out.append(p)
+            if (sp >= 0) != (sq >= 0):
+                t = sp / (sp - sq)
+                out.append((p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])))
+    return tuple(out)
+
+
+def overlap_area(a, b) -> float:
+    """Area shared by two convex counter-clockwise polygons."""
+    shared = clip(a, b)
+    return area(shared) if len(shared) >= 3 else 0.0
+
+
+def inside(points, window, tolerance: float = 1e-6) -> bool:
+    """Whether every point lies in the convex counter-clockwise window (or within ``tolerance`` of it)."""
+    n = len(window)
+    for i in range(n):
+        (ax, ay), (bx, by) = window[i], window[(i + 1) % n]
+        length = math.hypot(bx - ax, by - ay)
+        if length <= 1e-12:
+            continue
+        for x, y in points:
+            if ((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / length < -tolerance:
+                return False
+    return True
+
+
+def oriented_rect(cx: float, cy: float, along: float, across: float, degrees: float) -> tuple[Point, ...]:
+    """A rectangle centred on (cx, cy), ``along`` long in the direction ``degrees`` and ``across`` wide."""
+    u, v = along / 2.0, across / 2.0
+    return rotate(((cx - u, cy - v), (cx + u, cy - v), (cx + u, cy + v), (cx - u, cy + v)), cx, cy, degrees)
+
+
+def strip(x0: float, y0: float, x1: float, y1: float, width: float, extend: float = 0.0) -> tuple[Point, ...]:
+    """The quad of a straight road ``width`` wide from (x0, y0) to (x1, y1), lengthened by ``extend`` at both ends."""
+    length = math.hypot(x1 - x0, y1 - y0)
+    dx, dy = (x1 - x0) / length, (y1 - y0) / length
+    nx, ny = -dy * width / 2.0, dx * width / 2.0
+    ax, ay, bx, by = x0 - dx * extend, y0 - dy * extend, x1 + dx * extend, y1 + dy * extend
+    return ((ax - nx, ay - ny), (bx - nx, by - ny), (bx + nx, by + ny), (ax + nx, ay + ny))
