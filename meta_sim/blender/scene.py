@@ -37,7 +37,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from ..core.errors import MetaSimError
-from ..sim import meshes
+from ..sim import meshes, surfaces
 from ..sim.quality import RenderPreset
 
 LABEL_ATTRIBUTE = "label"
@@ -125,6 +125,17 @@ def _noise_image(name: str, colour, amount: float, seed: int, key: str, size: in
     rgba = np.ones((size, size, 4), dtype=np.float32)
     rgba[..., :3] = np.clip(base * (1.0 + noise), 0.0, 1.0)
     image = _tagged(bpy.data.images.new(name, size, size, float_buffer=True), key)
+    image.pixels.foreach_set(rgba.ravel())
+    image.pack()
+    return image
+
+
+def _rgb_image(name: str, rgb: np.ndarray, key: str) -> bpy.types.Image:
+    """A packed float image of a linear RGB array (row 0 at v = 0, as Blender stores images)."""
+    h, w = rgb.shape[:2]
+    rgba = np.ones((h, w, 4), dtype=np.float32)
+    rgba[..., :3] = rgb
+    image = _tagged(bpy.data.images.new(name, w, h, float_buffer=True), key)
     image.pixels.foreach_set(rgba.ravel())
     image.pack()
     return image
@@ -291,8 +302,11 @@ class CityScene:
             ground = _image_material("ground", self._ground_image(region, seed + 1), key)
         else:
             ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1, key), key)
-        road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
-        tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3, key), key)
+        params = lay.params
+        if params.street_details:
+            road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(seed + 2), key), key)
+        else:
+            road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
         self.buildings_obj = None
         if building_arrays.n_polygons:
@@ -304,23 +318,56 @@ class CityScene:
         _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(self.ground_mix)),
                          [ground], self.collection, key)
         if roads:
-            _new_mesh_object(meshes.road_mesh(roads), [road], self.collection, key)
-        if trees:
+            repeat = surfaces.ASPHALT_REPEAT_M if params.street_details else 1.0
+            _new_mesh_object(meshes.road_mesh(roads, repeat_m=repeat), [road], self.collection, key)
+        foliage = None
+        if params.tree_size == "real" or params.shrub_density > 0:
+            foliage = _image_material("foliage", _rgb_image("foliage", surfaces.foliage_atlas(seed + 3), key), key)
+        if trees and params.tree_size == "real":
+            _new_mesh_object(meshes.crown_mesh(trees), [foliage], self.collection, key)
+        elif trees:
+            tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3, key), key)
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
+        self._build_clutter(margin, len(roads), seed, foliage)
+
+    def _build_clutter(self, margin: float, n_roads: int, seed: int, foliage) -> None:
+        """Pavings, pools and markings (flat, so only what the tiles show), cars and shrubs (and their shadows)."""
+        lay, key = self.layout, self.key
+        flat = {name: self._visible(lambda *r, name=name: lay.details_in_rect(name, *r), 0.0)
+                for name in ("pavings", "pools", "markings")}
+        cars = self._visible(lambda *r: lay.details_in_rect("cars", *r), margin)
+        shrubs = self._visible(lambda *r: lay.details_in_rect("shrubs", *r), margin)
+        self.n_details = {"cars": len(cars), "shrubs": len(shrubs), **{k: len(v) for k, v in flat.items()}}
+        if any(flat.values()):
+            materials = [None] * 5
+            materials[meshes.CONCRETE] = _image_material(
+                "concrete", _rgb_image("concrete", surfaces.concrete_image(seed + 4), key), key)
+            materials[meshes.ASPHALT] = _image_material(
+                "parking", _rgb_image("parking", surfaces.asphalt_image(seed + 5), key), key)
+            materials[meshes.PAINT] = _image_material(
+                "paint", _noise_image("paint", surfaces.ROAD_PAINT, 0.08, seed + 6, key), key)
+            materials[meshes.WATER] = _image_material(
+                "water", _rgb_image("water", surfaces.water_image(seed + 7), key), key, roughness=0.1)
+            materials[meshes.COPING] = _image_material(
+                "coping", _noise_image("coping", surfaces.COPING, 0.06, seed + 8, key), key)
+            arrays = meshes.detail_mesh(flat["pavings"], flat["pools"], flat["markings"],
+                                        meshes.road_top(n_roads) + 0.005)
+            _new_mesh_object(arrays, materials, self.collection, key)
+        if cars:
+            paints = [_image_material(f"car-{name}", _noise_image(f"car-{name}", colour, 0.03, seed + 9, key), key, 0.4)
+                      for name, colour in surfaces.CAR_PAINT.items()]
+            glass = _image_material("glass", _noise_image("glass", surfaces.GLASS, 0.05, seed + 10, key), key, 0.1)
+            _new_mesh_object(meshes.car_mesh(cars), [*paints, glass], self.collection, key)
+        if shrubs:
+            _new_mesh_object(meshes.shrub_mesh(shrubs), [foliage], self.collection, key)
 
     def _ground_image(self, region: Rect, seed: int) -> bpy.types.Image:
         """The region's ground cover (``sim.ground``) as one image spanning the ground quad."""
         from ..sim.ground import ground_image
 
         rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix)
-        h, w = rgb.shape[:2]
-        rgba = np.ones((h, w, 4), dtype=np.float32)
-        rgba[..., :3] = rgb  # row 0 at the quad's south edge (v = 0), as Blender stores images
-        image = _tagged(bpy.data.images.new("ground-cover", w, h, float_buffer=True), self.key)
-        image.pixels.foreach_set(rgba.ravel())
-        image.pack()
-        return image
+        return _rgb_image("ground-cover", rgb, self.key)  # row 0 at the quad's south edge
 
     def _add_camera_and_sun(self) -> None:
         camera = _tagged(bpy.data.cameras.new("nadir"), self.key)

@@ -18,6 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import surfaces
+from .clutter import CAR_COLOURS
+
 WALL, FLAT_ROOF, SLOPED_ROOF = 0, 1, 2
 
 
@@ -150,14 +153,23 @@ def building_mesh(buildings) -> MeshArrays:
     return mesh
 
 
-def road_mesh(roads, z: float = 0.03) -> MeshArrays:
-    """Road rectangles; crossing roads overlap, so each sits a millimetre above the last."""
+def road_mesh(roads, z: float = 0.03, repeat_m: float = 1.0) -> MeshArrays:
+    """Road rectangles; crossing roads overlap, so each sits a millimetre above the last.
+
+    UVs are metres divided by ``repeat_m``, the size one repeat of the road image covers.
+    """
     mesh = MeshArrays("roads")
     background = label_color(0, 0)
     for k, road in enumerate(roads):
         pts = _ccw([tuple(p) for p in road.polygon])
-        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], 0, pts, background)
+        uv = pts if repeat_m == 1.0 else [(x / repeat_m, y / repeat_m) for x, y in pts]
+        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], 0, uv, background)
     return mesh
+
+
+def road_top(n_roads: int, z: float = 0.03) -> float:
+    """The height of the highest of `n_roads` roads of ``road_mesh``."""
+    return z + 0.001 * max(n_roads - 1, 0)
 
 
 def ground_mesh(x0: float, y0: float, x1: float, y1: float, whole_image: bool = False) -> MeshArrays:
@@ -187,4 +199,160 @@ def tree_mesh(trees, segments: int = 10) -> MeshArrays:
             mesh.add([quad[0], quad[1], quad[3], quad[2]], 0, [(p[0], p[1]) for p in quad], background)
             tri = [ring_hi[k], ring_hi[j], top]
             mesh.add(tri, 0, [(p[0], p[1]) for p in tri], background)
+    return mesh
+
+
+# ---------------------------------------------------------------- clutter (sim/clutter.py)
+
+CONCRETE, ASPHALT, PAINT, WATER, COPING = range(5)  # material slots of ``detail_mesh``
+GLASS = len(CAR_COLOURS)  # material slot of car windows; slots before it are the colours of CAR_COLOURS
+
+
+def _item_rng(*values: float) -> np.random.Generator:
+    """A generator fixed by an item's position, so its random shape is the same in every build."""
+    return np.random.default_rng([int(round(abs(v) * 1000.0)) for v in values])
+
+
+def _atlas_window(rng: np.random.Generator, cell: int, size_m: float):
+    """UV mapping (metres from a window's corner -> atlas UV) of a random window of one atlas cell."""
+    row, col = divmod(cell, surfaces.ATLAS_CELLS)
+    span = min(size_m / surfaces.CELL_M, 1.0)
+    ou, ov = rng.uniform(0.0, 1.0 - span, 2)
+
+    def uv(dx: float, dy: float) -> tuple[float, float]:
+        return ((col + ou + dx / surfaces.CELL_M) / surfaces.ATLAS_CELLS,
+                (row + ov + dy / surfaces.CELL_M) / surfaces.ATLAS_CELLS)
+    return uv
+
+
+def _dome(mesh: MeshArrays, cx: float, cy: float, radius: float, top: float, wobble, uv, label,
+          segments: int = 8) -> None:
+    """One lobe of a crown: a wobbly dome from a waist ring up to a point, its outline within `radius`."""
+    angles = [2 * math.pi * k / segments for k in range(segments)]
+    rings = []
+    for share, drop in ((0.7, 1.1), (1.0, 0.55), (0.6, 0.2)):
+        rings.append([(cx + share * radius * w * math.cos(a), cy + share * radius * w * math.sin(a),
+                       top - drop * radius) for a, w in zip(angles, wobble)])
+    apex = (cx, cy, top)
+    for lo, hi in zip(rings, rings[1:]):
+        for k in range(segments):
+            j = (k + 1) % segments
+            quad = [lo[k], lo[j], hi[j], hi[k]]
+            mesh.add(quad, 0, [uv(p[0], p[1]) for p in quad], label)
+    for k in range(segments):
+        tri = [rings[-1][k], rings[-1][(k + 1) % segments], apex]
+        mesh.add(tri, 0, [uv(p[0], p[1]) for p in tri], label)
+
+
+def crown_mesh(trees) -> MeshArrays:
+    """Real-sized crowns as a few overlapping wobbly lobes inside each crown's radius, textured
+    with a window of one tree cell of ``surfaces.foliage_atlas`` (per-tree tint and clumps)."""
+    mesh = MeshArrays("crowns")
+    background = label_color(0, 0)
+    for t in trees:
+        rng = _item_rng(t.x, t.y)
+        R = t.radius_m
+        window = _atlas_window(rng, int(rng.integers(surfaces.TREE_CELLS)), 2 * R)
+
+        def uv(x, y, x0=t.x - R, y0=t.y - R, window=window):
+            return window(x - x0, y - y0)
+        lobes = [(t.x, t.y, rng.uniform(0.55, 0.7) * R, t.height_m)]
+        for _ in range(int(rng.integers(2, 6 if R > 3.0 else 4))):
+            r = rng.uniform(0.35, 0.55) * R
+            a, d = rng.uniform(0, 2 * math.pi), rng.uniform(0.5, 1.0) * (R - r)
+            lobes.append((t.x + d * math.cos(a), t.y + d * math.sin(a), r, t.height_m * rng.uniform(0.82, 0.97)))
+        for cx, cy, r, top in lobes:
+            _dome(mesh, cx, cy, r, top, 1.0 - 0.18 * rng.random(8), uv, background)
+    return mesh
+
+
+def _box(mesh: MeshArrays, corners, z0: float, z1: float, slot: int, uv, label, top_corners=None,
+         top_slot: int | None = None, side_slots=None, lid: bool = True) -> None:
+    """A prism from the outline `corners` (CCW) at z0 to `top_corners` (default the same) at z1,
+    closed by a lid unless another prism sits on it."""
+    top = top_corners or corners
+    n = len(corners)
+    for k in range(n):
+        j = (k + 1) % n
+        quad = [(*corners[k], z0), (*corners[j], z0), (*top[j], z1), (*top[k], z1)]
+        mesh.add(quad, slot if side_slots is None else side_slots[k], [uv(p[0], p[1]) for p in quad], label)
+    if lid:
+        mesh.add([(*p, z1) for p in top], slot if top_slot is None else top_slot, [uv(*p) for p in top], label)
+
+
+def shrub_mesh(shrubs) -> MeshArrays:
+    """Hedge pieces as boxes with a rounded-off top, bushes (about as wide as long) as wobbly domes;
+    textured with the shrub cells of the foliage atlas."""
+    mesh = MeshArrays("shrubs")
+    background = label_color(0, 0)
+    shrub_cells = surfaces.ATLAS_CELLS ** 2 - surfaces.TREE_CELLS
+    for s in shrubs:
+        x0, y0, x1, y1 = s.bbox
+        rng = _item_rng(x0, y0, x1)
+        window = _atlas_window(rng, surfaces.TREE_CELLS + int(rng.integers(shrub_cells)), max(x1 - x0, y1 - y0))
+
+        def uv(x, y, x0=x0, y0=y0, window=window):
+            return window(x - x0, y - y0)
+        if max(x1 - x0, y1 - y0) < 1.5 * min(x1 - x0, y1 - y0):
+            r = min(x1 - x0, y1 - y0) / 2
+            _dome(mesh, (x0 + x1) / 2, (y0 + y1) / 2, r, s.height_m, 1.0 - 0.2 * rng.random(6), uv, background,
+                  segments=6)
+            continue
+        inset = 0.25 * min(x1 - x0, y1 - y0)
+        ground = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        waist = 0.65 * s.height_m
+        _box(mesh, ground, 0.02, waist, 0, uv, background, lid=False)
+        top = [(x0 + inset, y0 + inset), (x1 - inset, y0 + inset), (x1 - inset, y1 - inset), (x0 + inset, y1 - inset)]
+        _box(mesh, ground, waist, s.height_m, 0, uv, background, top_corners=top)
+    return mesh
+
+
+def car_mesh(cars) -> MeshArrays:
+    """Each car a body box with a cabin on top: windscreens and side windows dark glass, roof in the
+    body colour. Material slot = the colour's index in CAR_COLOURS; windows use slot GLASS."""
+    mesh = MeshArrays("cars")
+    background = label_color(0, 0)
+    colours = list(CAR_COLOURS)
+    for c in cars:
+        a = math.radians(c.heading_deg)
+        fx, fy, sx, sy = math.cos(a), math.sin(a), -math.sin(a), math.cos(a)
+
+        def outline(back: float, front: float, half: float, c=c, fx=fx, fy=fy, sx=sx, sy=sy):
+            return [(c.x + u * fx + v * sx, c.y + u * fy + v * sy)
+                    for u, v in ((back, -half), (front, -half), (front, half), (back, half))]
+        slot = colours.index(c.colour)
+        L, W = c.length_m, c.width_m
+
+        def uv(x, y):
+            return (x, y)
+        _box(mesh, outline(-L / 2, L / 2, W / 2), 0.25, 0.85, slot, uv, background)
+        # Cabin sides in order: right, front (windscreen), left, rear window.
+        _box(mesh, outline(-0.30 * L, 0.22 * L, 0.46 * W), 0.85, 1.42, slot, uv, background,
+             top_corners=outline(-0.22 * L, 0.06 * L, 0.44 * W), top_slot=slot, side_slots=[slot, GLASS, slot, GLASS])
+    return mesh
+
+
+def detail_mesh(pavings, pools, markings, paint_z: float) -> MeshArrays:
+    """Pavings, pools and painted lines as flat quads just above the ground; lines at `paint_z`
+    (above every road). UVs are metres over each surface's repeat (``surfaces``)."""
+    mesh = MeshArrays("details")
+    background = label_color(0, 0)
+
+    def quad(rect, z, slot, repeat):
+        x0, y0, x1, y1 = rect
+        pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        mesh.add([(x, y, z) for x, y in pts], slot, [(x / repeat, y / repeat) for x, y in pts], background)
+
+    z_of = {"sidewalk": 0.015, "kerb": 0.018, "parking": 0.015, "driveway": 0.021}
+    for p in pavings:
+        slot = ASPHALT if p.kind == "parking" else CONCRETE
+        quad(p.bbox, z_of[p.kind], slot,
+             surfaces.ASPHALT_REPEAT_M if slot == ASPHALT else surfaces.CONCRETE_REPEAT_M)
+    for pool in pools:
+        x0, y0, x1, y1 = pool.bbox
+        c = pool.coping_m
+        quad((x0, y0, x1, y1), 0.03, COPING, surfaces.CONCRETE_REPEAT_M)
+        quad((x0 + c, y0 + c, x1 - c, y1 - c), 0.035, WATER, surfaces.WATER_REPEAT_M)
+    for m in markings:
+        quad(m.bbox, paint_z, PAINT, 1.0)
     return mesh
