@@ -385,7 +385,7 @@ def _kerb_cars(rng: np.random.Generator, roads: Sequence[Rect], mouths: Sequence
                         and m[k] < hi and m[k + 2] > lo]
             cuts = [(a - 6.0, b + 6.0) for a, b in _junctions(road, roads)]
             cuts += [(m[k] - 0.8, m[k + 2] + 0.8) for m in touching]
-            across = edge - side * (0.25 + CAR_WIDTH_M[1] / 2)
+            across = edge - side * (0.4 + CAR_WIDTH_M[1] / 2)  # room for a slight slant
             heading = (0.0 if side < 0 else 180.0) + (90.0 if k == 1 else 0.0)
             for a0, a1 in _subtract(lo, hi, cuts):
                 pos = a0 + rng.uniform(0.0, 3.0)
@@ -471,11 +471,11 @@ def _parking_lot(rng: np.random.Generator, car_rng: np.random.Generator, frame: 
             if car_rng.random() >= density:
                 continue
             along = start + (i + 0.5) * STALL_M[0] + car_rng.uniform(-0.15, 0.15)
-            across = (near + far) / 2 + car_rng.uniform(-0.2, 0.2)
+            across = (near + far) / 2  # a 4.9 m car all but fills a 5 m stall
             nose_in = car_rng.random() < 0.8
             heading = (90.0 if k == 0 else 0.0) + (0.0 if (facing > 0) == nose_in else 180.0)
             x, y = (along, across) if k == 0 else (across, along)
-            cars.append(_car(car_rng, x, y, heading + car_rng.uniform(-3.0, 3.0)))
+            cars.append(_car(car_rng, x, y, heading + car_rng.uniform(-1.5, 1.5)))
     return pavings, markings, cars
 
 
