@@ -225,64 +225,90 @@ def _atlas_window(rng: np.random.Generator, cell: int, size_m: float):
     return uv
 
 
-def _dome(mesh: MeshArrays, cx: float, cy: float, radius: float, top: float, wobble, uv, label,
-          segments: int = 8) -> None:
-    """One lobe of a crown: a wobbly dome from a waist ring up to a point, its outline within `radius`."""
-    angles = [2 * math.pi * k / segments for k in range(segments)]
-    rings = []
-    for share, drop in ((0.7, 1.1), (1.0, 0.55), (0.6, 0.2)):
-        rings.append([(cx + share * radius * w * math.cos(a), cy + share * radius * w * math.sin(a),
-                       top - drop * radius) for a, w in zip(angles, wobble)])
-    apex = (cx, cy, top)
+def _crown_outline(cx: float, cy: float, lobes, angles) -> list[float]:
+    """Distance from a crown's centre to the edge of the union of its lobes (circles) along each angle."""
+    out = []
+    for a in angles:
+        dx, dy = math.cos(a), math.sin(a)
+        best = 0.0
+        for lx, ly, r in lobes:
+            ox, oy = lx - cx, ly - cy
+            along = ox * dx + oy * dy
+            disc = r * r - (ox * ox + oy * oy - along * along)
+            if disc >= 0.0:
+                best = max(best, along + math.sqrt(disc))
+        out.append(best)
+    return out
+
+
+def _shell(mesh: MeshArrays, rings, apex, uv, label) -> None:
+    """A closed crown-like shell: a bottom cap, bands between rings (bottom first), a fan to the apex.
+
+    Closed shells keep the mesh manifold, which Workbench's shadows draw much faster.
+    """
+    n = len(rings[0])
+    bottom = list(reversed(rings[0]))
+    mesh.add(bottom, 0, [uv(p[0], p[1]) for p in bottom], label)
     for lo, hi in zip(rings, rings[1:]):
-        for k in range(segments):
-            j = (k + 1) % segments
+        for k in range(n):
+            j = (k + 1) % n
             quad = [lo[k], lo[j], hi[j], hi[k]]
             mesh.add(quad, 0, [uv(p[0], p[1]) for p in quad], label)
-    for k in range(segments):
-        tri = [rings[-1][k], rings[-1][(k + 1) % segments], apex]
+    for k in range(n):
+        tri = [rings[-1][k], rings[-1][(k + 1) % n], apex]
         mesh.add(tri, 0, [uv(p[0], p[1]) for p in tri], label)
 
 
-def crown_mesh(trees) -> MeshArrays:
-    """Real-sized crowns as a few overlapping wobbly lobes inside each crown's radius, textured
-    with a window of one tree cell of ``surfaces.foliage_atlas`` (per-tree tint and clumps)."""
+def crown_mesh(trees, segments: int = 8) -> MeshArrays:
+    """Real-sized crowns: one closed shell per tree whose outline is the union of a few overlapping
+    lobes inside the crown radius (a lumpy, irregular edge), bulging up where the lobes are;
+    textured with a window of one tree cell of ``surfaces.foliage_atlas`` (per-tree tint and clumps).
+    Few polygons: Workbench's shadow cost grows with every silhouette edge."""
     mesh = MeshArrays("crowns")
     background = label_color(0, 0)
+    angles = [2 * math.pi * (k + 0.5) / segments for k in range(segments)]
     for t in trees:
         rng = _item_rng(t.x, t.y)
-        R = t.radius_m
+        R, h = t.radius_m, t.height_m
         window = _atlas_window(rng, int(rng.integers(surfaces.TREE_CELLS)), 2 * R)
 
         def uv(x, y, x0=t.x - R, y0=t.y - R, window=window):
             return window(x - x0, y - y0)
-        lobes = [(t.x, t.y, rng.uniform(0.55, 0.7) * R, t.height_m)]
+        lobes = [(t.x, t.y, rng.uniform(0.55, 0.7) * R)]
         for _ in range(int(rng.integers(2, 6 if R > 3.0 else 4))):
             r = rng.uniform(0.35, 0.55) * R
             a, d = rng.uniform(0, 2 * math.pi), rng.uniform(0.5, 1.0) * (R - r)
-            lobes.append((t.x + d * math.cos(a), t.y + d * math.sin(a), r, t.height_m * rng.uniform(0.82, 0.97)))
-        for cx, cy, r, top in lobes:
-            _dome(mesh, cx, cy, r, top, 1.0 - 0.18 * rng.random(8), uv, background)
+            lobes.append((t.x + d * math.cos(a), t.y + d * math.sin(a), r))
+        edge = _crown_outline(t.x, t.y, lobes, angles)
+        lump = rng.uniform(0.9, 1.0, segments)
+        rings = []
+        for share, rise in ((1.0, 0.55), (0.6, 0.85)):
+            rings.append([(t.x + share * e * math.cos(a), t.y + share * e * math.sin(a),
+                           h * (rise + (1.0 - rise) * 0.5 * (e / R - 0.5)) * (lump[k] if rise > 0.6 else 1.0))
+                          for k, (a, e) in enumerate(zip(angles, edge))])
+        _shell(mesh, rings, (t.x, t.y, h), uv, background)
     return mesh
 
 
 def _box(mesh: MeshArrays, corners, z0: float, z1: float, slot: int, uv, label, top_corners=None,
-         top_slot: int | None = None, side_slots=None, lid: bool = True) -> None:
+         top_slot: int | None = None, side_slots=None, floor: bool = False) -> None:
     """A prism from the outline `corners` (CCW) at z0 to `top_corners` (default the same) at z1,
-    closed by a lid unless another prism sits on it."""
+    closed by a lid and, with `floor`, a floor (a closed shell keeps Workbench's shadows fast)."""
     top = top_corners or corners
     n = len(corners)
+    if floor:
+        under = list(reversed(corners))
+        mesh.add([(*p, z0) for p in under], slot, [uv(*p) for p in under], label)
     for k in range(n):
         j = (k + 1) % n
         quad = [(*corners[k], z0), (*corners[j], z0), (*top[j], z1), (*top[k], z1)]
         mesh.add(quad, slot if side_slots is None else side_slots[k], [uv(p[0], p[1]) for p in quad], label)
-    if lid:
-        mesh.add([(*p, z1) for p in top], slot if top_slot is None else top_slot, [uv(*p) for p in top], label)
+    mesh.add([(*p, z1) for p in top], slot if top_slot is None else top_slot, [uv(*p) for p in top], label)
 
 
 def shrub_mesh(shrubs) -> MeshArrays:
-    """Hedge pieces as boxes with a rounded-off top, bushes (about as wide as long) as wobbly domes;
-    textured with the shrub cells of the foliage atlas."""
+    """Hedge pieces as closed boxes narrowing to a rounded-off top, bushes (about as wide as long) as
+    small lumpy shells; textured with the shrub cells of the foliage atlas."""
     mesh = MeshArrays("shrubs")
     background = label_color(0, 0)
     shrub_cells = surfaces.ATLAS_CELLS ** 2 - surfaces.TREE_CELLS
@@ -293,23 +319,24 @@ def shrub_mesh(shrubs) -> MeshArrays:
 
         def uv(x, y, x0=x0, y0=y0, window=window):
             return window(x - x0, y - y0)
+        cx, cy, h = (x0 + x1) / 2, (y0 + y1) / 2, s.height_m
         if max(x1 - x0, y1 - y0) < 1.5 * min(x1 - x0, y1 - y0):
             r = min(x1 - x0, y1 - y0) / 2
-            _dome(mesh, (x0 + x1) / 2, (y0 + y1) / 2, r, s.height_m, 1.0 - 0.2 * rng.random(6), uv, background,
-                  segments=6)
+            angles = [2 * math.pi * (k + rng.random() * 0.5) / 5 for k in range(5)]
+            edge = r * (1.0 - 0.2 * rng.random(5))
+            rings = [[(cx + e * math.cos(a), cy + e * math.sin(a), h * 0.45) for a, e in zip(angles, edge)]]
+            _shell(mesh, rings, (cx, cy, h), uv, background)
             continue
         inset = 0.25 * min(x1 - x0, y1 - y0)
         ground = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-        waist = 0.65 * s.height_m
-        _box(mesh, ground, 0.02, waist, 0, uv, background, lid=False)
         top = [(x0 + inset, y0 + inset), (x1 - inset, y0 + inset), (x1 - inset, y1 - inset), (x0 + inset, y1 - inset)]
-        _box(mesh, ground, waist, s.height_m, 0, uv, background, top_corners=top)
+        _box(mesh, ground, 0.02, h, 0, uv, background, top_corners=top, floor=True)
     return mesh
 
 
 def car_mesh(cars) -> MeshArrays:
-    """Each car a body box with a cabin on top: windscreens and side windows dark glass, roof in the
-    body colour. Material slot = the colour's index in CAR_COLOURS; windows use slot GLASS."""
+    """Each car a box in its body colour with a dark windscreen and rear window on top. Material
+    slot = the colour's index in CAR_COLOURS; windows use slot GLASS."""
     mesh = MeshArrays("cars")
     background = label_color(0, 0)
     colours = list(CAR_COLOURS)
@@ -325,10 +352,10 @@ def car_mesh(cars) -> MeshArrays:
 
         def uv(x, y):
             return (x, y)
-        _box(mesh, outline(-L / 2, L / 2, W / 2), 0.25, 0.85, slot, uv, background)
-        # Cabin sides in order: right, front (windscreen), left, rear window.
-        _box(mesh, outline(-0.30 * L, 0.22 * L, 0.46 * W), 0.85, 1.42, slot, uv, background,
-             top_corners=outline(-0.22 * L, 0.06 * L, 0.44 * W), top_slot=slot, side_slots=[slot, GLASS, slot, GLASS])
+        _box(mesh, outline(-L / 2, L / 2, W / 2), 0.25, 1.4, slot, uv, background, floor=True)
+        # Windscreen and rear window as dark panes on the roof: one closed box per car keeps shadows cheap.
+        for back, front in ((0.05 * L, 0.22 * L), (-0.32 * L, -0.24 * L)):
+            mesh.add([(*p, 1.41) for p in outline(back, front, 0.44 * W)], GLASS, [(0, 0)] * 4, background)
     return mesh
 
 
