@@ -38,6 +38,7 @@ import OpenImageIO as oiio
 
 from ..core.errors import MetaSimError
 from ..sim import meshes, surfaces
+from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.quality import RenderPreset
 
 LABEL_ATTRIBUTE = "label"
@@ -73,7 +74,8 @@ def _tagged(datablock, key: str):
     return datablock
 
 
-def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str) -> bpy.types.Object:
+def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str,
+                     closed: bool = False, smooth: bool = False) -> bpy.types.Object:
     data = arrays.arrays()
     mesh = bpy.data.meshes.new(arrays.name)
     mesh.vertices.add(len(data["vertices"]))
@@ -92,6 +94,18 @@ def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str)
     mesh.color_attributes.active_color = label
     mesh.update(calc_edges=True)
     mesh.validate(verbose=False)
+    if closed:
+        import bmesh  # importable only once bpy is loaded
+
+        # MeshArrays gives every polygon its own corners: weld them, so each shell is closed (Workbench
+        # draws the shadows of manifold meshes far faster) and smooth normals can round the foliage.
+        shells = bmesh.new()
+        shells.from_mesh(mesh)
+        bmesh.ops.remove_doubles(shells, verts=shells.verts, dist=1e-4)
+        shells.to_mesh(mesh)
+        shells.free()
+    if smooth:
+        mesh.shade_smooth()
     for material in materials:
         mesh.materials.append(material)
     obj = bpy.data.objects.new(arrays.name, mesh)
@@ -270,6 +284,10 @@ class CityScene:
             self.key = key or collection.name
             _tagged(collection, self.key)
         self._tmp = tempfile.mkdtemp(prefix="meta-sim-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+        # Sun direction from the city seed: elevation 45 +- 15 degrees (Synthinel rules).
+        rng = np.random.default_rng([int(self.layout.seed), 7])
+        self._elevation = math.radians(float(rng.uniform(30.0, 60.0)))
+        self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
         self._build(shadow_margin_m)
         self._add_camera_and_sun()
 
@@ -288,7 +306,10 @@ class CityScene:
         lay = self.layout
         self.buildings = sorted(self._visible(lay.buildings_in_rect, margin), key=lambda b: b.id)
         roads = self._visible(lay.roads_in_rect, 0.0)
-        trees = self._visible(lay.trees_in_rect, margin)
+        if lay.params.tree_size == "real":  # only trees whose shadow can reach the tiles: fewer shadow volumes
+            trees = self._visible(lay.trees_in_rect, min(margin, self._shadow_reach(TREE_HEIGHT_M[1])))
+        else:
+            trees = self._visible(lay.trees_in_rect, margin)
         region = bounding_rect(self.rects).grown(margin)
         seed, key = int(lay.seed), self.key
         grey = _image_material("wall", _noise_image("wall", (0.45, 0.43, 0.40), 0.05, seed, key), key, 0.9)
@@ -304,7 +325,7 @@ class CityScene:
             ground = _image_material("ground", _noise_image("ground", (0.20, 0.26, 0.12), 0.25, seed + 1, key), key)
         params = lay.params
         if params.street_details:
-            road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(seed + 2), key), key)
+            road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(), key), key)
         else:
             road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
@@ -322,45 +343,50 @@ class CityScene:
             _new_mesh_object(meshes.road_mesh(roads, repeat_m=repeat), [road], self.collection, key)
         foliage = None
         if params.tree_size == "real" or params.shrub_density > 0:
-            foliage = _image_material("foliage", _rgb_image("foliage", surfaces.foliage_atlas(seed + 3), key), key)
+            foliage = _image_material("foliage", _rgb_image("foliage", surfaces.foliage_atlas(), key), key)
         if trees and params.tree_size == "real":
-            _new_mesh_object(meshes.crown_mesh(trees), [foliage], self.collection, key)
+            _new_mesh_object(meshes.crown_mesh(trees), [foliage], self.collection, key, closed=True, smooth=True)
         elif trees:
             tree = _image_material("tree", _noise_image("tree", (0.05, 0.13, 0.035), 0.35, seed + 3, key), key)
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
-        self._build_clutter(margin, len(roads), seed, foliage)
+        self._build_clutter(margin, len(roads), road, foliage)
 
-    def _build_clutter(self, margin: float, n_roads: int, seed: int, foliage) -> None:
-        """Pavings, pools and markings (flat, so only what the tiles show), cars and shrubs (and their shadows)."""
+    def _shadow_reach(self, height_m: float) -> float:
+        """How far from its foot the shadow of something `height_m` tall falls in this city's sun."""
+        return height_m / math.tan(self._elevation) + 0.5
+
+    def _build_clutter(self, margin: float, n_roads: int, road, foliage) -> None:
+        """Pavings, pools and markings (flat, so only what the tiles show), cars and shrubs (and what
+        of them casts a shadow into the tiles)."""
         lay, key = self.layout, self.key
         flat = {name: self._visible(lambda *r, name=name: lay.details_in_rect(name, *r), 0.0)
                 for name in ("pavings", "pools", "markings")}
-        cars = self._visible(lambda *r: lay.details_in_rect("cars", *r), margin)
-        shrubs = self._visible(lambda *r: lay.details_in_rect("shrubs", *r), margin)
+        low = min(margin, self._shadow_reach(2.0))
+        cars = self._visible(lambda *r: lay.details_in_rect("cars", *r), low)
+        shrubs = self._visible(lambda *r: lay.details_in_rect("shrubs", *r), low)
         self.n_details = {"cars": len(cars), "shrubs": len(shrubs), **{k: len(v) for k, v in flat.items()}}
         if any(flat.values()):
             materials = [None] * 5
             materials[meshes.CONCRETE] = _image_material(
-                "concrete", _rgb_image("concrete", surfaces.concrete_image(seed + 4), key), key)
-            materials[meshes.ASPHALT] = _image_material(
-                "parking", _rgb_image("parking", surfaces.asphalt_image(seed + 5), key), key)
+                "concrete", _rgb_image("concrete", surfaces.concrete_image(), key), key)
+            materials[meshes.ASPHALT] = road  # parking lots: the streets' asphalt
             materials[meshes.PAINT] = _image_material(
-                "paint", _noise_image("paint", surfaces.ROAD_PAINT, 0.08, seed + 6, key), key)
+                "paint", _noise_image("paint", surfaces.ROAD_PAINT, 0.08, 6, key), key)
             materials[meshes.WATER] = _image_material(
-                "water", _rgb_image("water", surfaces.water_image(seed + 7), key), key, roughness=0.1)
+                "water", _rgb_image("water", surfaces.water_image(), key), key, roughness=0.1)
             materials[meshes.COPING] = _image_material(
-                "coping", _noise_image("coping", surfaces.COPING, 0.06, seed + 8, key), key)
+                "coping", _noise_image("coping", surfaces.COPING, 0.06, 8, key), key)
             arrays = meshes.detail_mesh(flat["pavings"], flat["pools"], flat["markings"],
                                         meshes.road_top(n_roads) + 0.005)
             _new_mesh_object(arrays, materials, self.collection, key)
         if cars:
-            paints = [_image_material(f"car-{name}", _noise_image(f"car-{name}", colour, 0.03, seed + 9, key), key, 0.4)
+            paints = [_image_material(f"car-{name}", _noise_image(f"car-{name}", colour, 0.03, 9, key), key, 0.4)
                       for name, colour in surfaces.CAR_PAINT.items()]
-            glass = _image_material("glass", _noise_image("glass", surfaces.GLASS, 0.05, seed + 10, key), key, 0.1)
-            _new_mesh_object(meshes.car_mesh(cars), [*paints, glass], self.collection, key)
+            glass = _image_material("glass", _noise_image("glass", surfaces.GLASS, 0.05, 10, key), key, 0.1)
+            _new_mesh_object(meshes.car_mesh(cars), [*paints, glass], self.collection, key, closed=True)
         if shrubs:
-            _new_mesh_object(meshes.shrub_mesh(shrubs), [foliage], self.collection, key)
+            _new_mesh_object(meshes.shrub_mesh(shrubs), [foliage], self.collection, key, closed=True, smooth=True)
 
     def _ground_image(self, region: Rect, seed: int) -> bpy.types.Image:
         """The region's ground cover (``sim.ground``) as one image spanning the ground quad."""
@@ -375,10 +401,6 @@ class CityScene:
         camera.clip_start, camera.clip_end = 1.0, 2000.0
         self.camera = _tagged(bpy.data.objects.new("nadir", camera), self.key)
         self.collection.objects.link(self.camera)
-        # Sun direction from the city seed: elevation 45 +- 15 degrees (Synthinel rules).
-        rng = np.random.default_rng([int(self.layout.seed), 7])
-        self._elevation = math.radians(float(rng.uniform(30.0, 60.0)))
-        self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
         sun = _tagged(bpy.data.lights.new("sun", "SUN"), self.key)
         sun.energy = 4.0
         sun.angle = math.radians(0.5)

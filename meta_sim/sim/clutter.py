@@ -514,7 +514,7 @@ def _shrubs(rng: np.random.Generator, frame: _Frame, roof: Rect | None, density:
         length = f if edge in ("front", "back") else d
         pos = 0.1
         while pos < length - 0.6:
-            piece = min(rng.uniform(1.5, 4.0), length - 0.1 - pos)
+            piece = min(rng.uniform(3.0, 8.0), length - 0.1 - pos)
             u_or_v = (pos, pos + piece)
             if edge == "front":
                 rect = frame.world(*u_or_v, 0.1, 0.1 + thick)
@@ -680,12 +680,13 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
         groups = rng.poisson(density * area / (250.0 if built else 120.0))
         for _ in range(groups):
             cx, cy = rng.uniform(x0, x1), rng.uniform(y0, y1)
-            d0, spread = _diameter(rng), rng.uniform(2.0, 5.0)
+            d0 = _diameter(rng)
+            spread = d0 * rng.uniform(0.3, 0.6)  # neighbours' crowns touch and merge into one canopy
             for _ in range(1 + rng.poisson(1.5 if built else 3.0)):
                 for attempt in range(4):  # a crown too big for a yard is tried smaller
                     d = float(np.clip(d0 * rng.uniform(0.75, 1.25) * 0.8 ** attempt, *TREE_DIAMETER_M))
                     x, y = cx + rng.normal(0.0, spread), cy + rng.normal(0.0, spread)
-                    if x0 < x < x1 and y0 < y < y1 and stand.fits(x, y, d / 2, 0.5):
+                    if x0 < x < x1 and y0 < y < y1 and stand.fits(x, y, d / 2, 0.35):
                         stand.add(rng, x, y, d)
                         break
     return stand.trees

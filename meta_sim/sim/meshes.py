@@ -274,9 +274,9 @@ def crown_mesh(trees, segments: int = 8) -> MeshArrays:
 
         def uv(x, y, x0=t.x - R, y0=t.y - R, window=window):
             return window(x - x0, y - y0)
-        lobes = [(t.x, t.y, rng.uniform(0.55, 0.7) * R)]
-        for _ in range(int(rng.integers(2, 6 if R > 3.0 else 4))):
-            r = rng.uniform(0.35, 0.55) * R
+        lobes = [(t.x, t.y, rng.uniform(0.5, 0.65) * R)]
+        for _ in range(int(rng.integers(3, 7 if R > 3.0 else 5))):
+            r = rng.uniform(0.3, 0.5) * R
             a, d = rng.uniform(0, 2 * math.pi), rng.uniform(0.5, 1.0) * (R - r)
             lobes.append((t.x + d * math.cos(a), t.y + d * math.sin(a), r))
         edge = _crown_outline(t.x, t.y, lobes, angles)

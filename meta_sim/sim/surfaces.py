@@ -5,7 +5,9 @@ procedural shader nodes, so every pattern is baked here into an image the
 renderer wraps in a plain image material. Images are linear RGB, float32,
 row 0 at v = 0 (Blender's order). Asphalt, concrete and water tile seamlessly
 (their noise is filtered in the Fourier domain, which is periodic); each
-repeats every ``*_REPEAT_M`` metres of the metre UVs of ``meshes``.
+repeats every ``*_REPEAT_M`` metres of the metre UVs of ``meshes``. Every city
+uses the images of seed 0 (cached, read-only); per-tree variety comes from the
+atlas cells.
 
 The foliage atlas is a grid of ``ATLAS_CELLS`` x ``ATLAS_CELLS`` cells, each
 ``CELL_M`` metres of leaf clumps (cellular noise: bright domes, dark gaps) in
@@ -15,6 +17,8 @@ metres and neighbouring trees differ in shade.
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 
@@ -26,9 +30,20 @@ ASPHALT_REPEAT_M = 25.6
 CONCRETE_REPEAT_M = 6.4
 WATER_REPEAT_M = 4.8
 
-_TREE_GREENS = ((0.045, 0.10, 0.030), (0.060, 0.12, 0.035), (0.080, 0.125, 0.040), (0.035, 0.085, 0.035),
-                (0.090, 0.11, 0.045), (0.050, 0.095, 0.050))
+_TREE_GREENS = ((0.060, 0.13, 0.035), (0.080, 0.15, 0.040), (0.105, 0.16, 0.045), (0.045, 0.11, 0.040),
+                (0.120, 0.145, 0.050), (0.065, 0.125, 0.060))
 _SHRUB_GREENS = ((0.085, 0.15, 0.045), (0.11, 0.16, 0.055), (0.07, 0.13, 0.05))
+
+
+def _frozen(make):
+    """Cache an image maker and hand out read-only arrays: a render worker builds many cities with the same images."""
+    @lru_cache(maxsize=8)
+    def cached(*args, **kwargs):
+        image = make(*args, **kwargs)
+        image.flags.writeable = False
+        return image
+    cached.__doc__ = make.__doc__
+    return cached
 
 
 def _periodic_field(rng: np.random.Generator, n: int, wavelength_px: float) -> np.ndarray:
@@ -61,10 +76,11 @@ def _clumps(rng: np.random.Generator, n: int, spacing: float) -> np.ndarray:
     f1, f2 = _cellular(rng, n, n, spacing)
     dome = np.sqrt(np.clip(1.0 - f1 / (0.9 * spacing), 0.0, 1.0))
     gap = np.clip((f2 - f1) / (0.35 * spacing), 0.0, 1.0)
-    return 0.35 + 0.9 * dome * (0.35 + 0.65 * gap)
+    return 0.3 + 1.1 * dome * (0.6 + 0.4 * gap)
 
 
-def foliage_atlas(seed: int) -> np.ndarray:
+@_frozen
+def foliage_atlas(seed: int = 0) -> np.ndarray:
     """The foliage atlas (see the module docstring): (ATLAS_CELLS * CELL_PX) square, linear RGB."""
     rng = np.random.default_rng([int(seed), 31])
     size = ATLAS_CELLS * CELL_PX
@@ -76,7 +92,8 @@ def foliage_atlas(seed: int) -> np.ndarray:
         palette = _TREE_GREENS if tree else _SHRUB_GREENS
         tint = np.asarray(palette[cell % len(palette)]) * rng.uniform(0.8, 1.2)
         tint = tint * (1.0 + rng.normal(0.0, 0.06, 3))  # a slight hue shift per cell
-        shade = 0.7 * _clumps(rng, CELL_PX, (1.2 if tree else 0.7) * px_m) + 0.3 * _clumps(rng, CELL_PX, 0.5 * px_m)
+        shade = (0.5 * _clumps(rng, CELL_PX, (1.8 if tree else 0.8) * px_m) + 0.3 * _clumps(rng, CELL_PX, 0.9 * px_m)
+                 + 0.2 * _clumps(rng, CELL_PX, 0.5 * px_m))
         drift = 1.0 + 0.12 * _periodic_field(rng, CELL_PX, 24.0)
         grain = 1.0 + 0.08 * rng.standard_normal((CELL_PX, CELL_PX))
         rgb = tint[None, None, :] * (shade * drift * grain)[..., None]
@@ -84,7 +101,8 @@ def foliage_atlas(seed: int) -> np.ndarray:
     return out
 
 
-def asphalt_image(seed: int, n: int = 256) -> np.ndarray:
+@_frozen
+def asphalt_image(seed: int = 0, n: int = 256) -> np.ndarray:
     """Tileable asphalt of ``ASPHALT_REPEAT_M``: fine grain, darker repair patches, faded areas, cracks."""
     rng = np.random.default_rng([int(seed), 37])
     px_m = n / ASPHALT_REPEAT_M
@@ -101,7 +119,8 @@ def asphalt_image(seed: int, n: int = 256) -> np.ndarray:
     return np.clip(value[..., None] * tint, 0.0, 1.0).astype(np.float32)
 
 
-def concrete_image(seed: int, n: int = 128) -> np.ndarray:
+@_frozen
+def concrete_image(seed: int = 0, n: int = 128) -> np.ndarray:
     """Tileable light concrete of ``CONCRETE_REPEAT_M``: grain, stains and joints every 1.6 m."""
     rng = np.random.default_rng([int(seed), 41])
     px_m = n / CONCRETE_REPEAT_M
@@ -115,7 +134,8 @@ def concrete_image(seed: int, n: int = 128) -> np.ndarray:
     return np.clip(value[..., None] * tint, 0.0, 1.0).astype(np.float32)
 
 
-def water_image(seed: int, n: int = 64) -> np.ndarray:
+@_frozen
+def water_image(seed: int = 0, n: int = 64) -> np.ndarray:
     """Tileable pool water of ``WATER_REPEAT_M``: turquoise with bright caustic ripples."""
     rng = np.random.default_rng([int(seed), 43])
     ripple = np.abs(_periodic_field(rng, n, 0.08 * n)) < 0.25
