@@ -367,10 +367,12 @@ class CityScene:
         shrubs = self._visible(lambda *r: lay.details_in_rect("shrubs", *r), low)
         self.n_details = {"cars": len(cars), "shrubs": len(shrubs), **{k: len(v) for k, v in flat.items()}}
         if any(flat.values()):
-            materials = [None] * 5
+            materials = [None] * 6
             materials[meshes.CONCRETE] = _image_material(
                 "concrete", _rgb_image("concrete", surfaces.concrete_image(), key), key)
             materials[meshes.ASPHALT] = road  # parking lots: the streets' asphalt
+            materials[meshes.YARD] = _image_material(
+                "yard", _rgb_image("yard", surfaces.concrete_image() * np.float32(surfaces.YARD_SHADE), key), key)
             materials[meshes.PAINT] = _image_material(
                 "paint", _noise_image("paint", surfaces.ROAD_PAINT, 0.08, 6, key), key)
             materials[meshes.WATER] = _image_material(

@@ -5,7 +5,8 @@ more than today's city (all of them are off by default):
 
 * street details: a kerb and a concrete sidewalk inside the verge along every
   street side of a block, a driveway from each house's front to the street,
-  paved parking lots with painted stalls on commercial and industrial lots,
+  paved yards (the whole lot) on commercial and industrial lots, with
+  asphalt parking lots and painted stalls beside their buildings,
   and lane markings on the roads (a dashed centre line on streets; a double
   centre line and dashed lane lines on avenues), stopping short of junctions;
 * cars parked along the kerbs, on driveways and in parking lots;
@@ -37,7 +38,8 @@ Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
 
 TREE_SIZES = ("small", "real")
 CAR_COLOURS = {"white": 0.27, "silver": 0.17, "grey": 0.17, "black": 0.23, "red": 0.08, "blue": 0.08}
-PAVING_KINDS = ("kerb", "sidewalk", "driveway", "parking")
+PAVING_KINDS = ("kerb", "sidewalk", "driveway", "parking", "yard")
+PAVED_LOTS = ("office", "industrial", "highrise")  # their lots are paved all over (a "yard")
 CAR_LENGTH_M = (4.2, 4.9)
 CAR_WIDTH_M = (1.75, 1.9)
 KERB_M = 0.3
@@ -47,6 +49,8 @@ STALL_M = (2.5, 5.0)  # width, depth of a parking stall
 AISLE_M = 6.0
 LINE_M = 0.3  # painted line width: wider than real paint, so a 0.3 m pixel never falls between its edges
 DASH_M = (3.0, 6.0)  # dash, gap of a dashed line
+ZEBRA_M = (0.5, 0.6)  # bar, gap of a zebra crossing
+ZEBRA_DEPTH_M = 3.0  # length of its bars along the road
 TREE_DIAMETER_M = (4.0, 15.0)
 STREET_TREE_DIAMETER_M = 10.0  # a verge tree wider than this would shade half the street
 TREE_HEIGHT_M = (5.0, 20.0)
@@ -89,7 +93,8 @@ def _grow(rect: Rect, margin: float) -> Rect:
 
 @dataclass(frozen=True)
 class Paving:
-    """A paved ground rectangle: kerb, sidewalk, driveway (concrete) or parking lot (asphalt)."""
+    """A paved ground rectangle: kerb, sidewalk, driveway, yard (concrete; a yard is a whole paved
+    commercial or industrial lot, under its building) or parking lot (asphalt, off every roof)."""
 
     polygon: Polygon
     kind: str
@@ -324,15 +329,32 @@ def _dashes(a0: float, a1: float, phase: float) -> list[tuple[float, float]]:
     return out
 
 
-def _road_markings(roads: Sequence[Rect], road_width: float) -> list[Marking]:
-    """A dashed centre line on streets; a double centre line and two dashed lane lines on avenues."""
+def _crosswalk(road: Rect, a0: float, a1: float) -> list[Marking]:
+    """Zebra stripes across a road between along-axis a0 and a1: bars along the traffic, 1 m apart."""
+    k = _axis(road)
+    c_lo, c_hi = road[1 - k], road[3 - k]
+    bars = np.arange(c_lo + 0.6, c_hi - 0.6 - ZEBRA_M[0] + 1e-9, ZEBRA_M[0] + ZEBRA_M[1])
+    return [Marking(_rect_polygon(*_strip(road, a0, a1, c, c + ZEBRA_M[0]))) for c in bars]
+
+
+def _road_markings(rng: np.random.Generator, roads: Sequence[Rect], road_width: float) -> list[Marking]:
+    """A dashed centre line on streets; a double centre line and two dashed lane lines on avenues;
+    zebra crossings at some junctions, where the lines stop short."""
     out = []
     for road in roads:
         k = _axis(road)
         lo, hi = road[k], road[k + 2]
         c_lo, c_hi = road[1 - k], road[3 - k]
         centre, width = (c_lo + c_hi) / 2, c_hi - c_lo
-        cuts = [(a - 1.5, b + 1.5) for a, b in _junctions(road, roads)]
+        cuts = []
+        for a, b in _junctions(road, roads):
+            if rng.random() < 0.5:
+                for z0, z1 in ((a - 1.0 - ZEBRA_DEPTH_M, a - 1.0), (b + 1.0, b + 1.0 + ZEBRA_DEPTH_M)):
+                    if lo <= z0 and z1 <= hi:
+                        out += _crosswalk(road, z0, z1)
+                cuts.append((a - 2.0 - ZEBRA_DEPTH_M, b + 2.0 + ZEBRA_DEPTH_M))
+            else:
+                cuts.append((a - 1.5, b + 1.5))
         for a0, a1 in _subtract(lo + 1.0, hi - 1.0, cuts):
             if a1 - a0 < DASH_M[0]:
                 continue
@@ -560,7 +582,7 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
     taken: dict[int, list[Rect]] = {}
     if params.street_details:
         pavings += _sidewalks(street_rng, blocks, verge_m)
-        markings += _road_markings(roads, road_width_m)
+        markings += _road_markings(street_rng, roads, road_width_m)
     for index, (rect, block_index) in enumerate(lots):
         building = by_lot.get(index)
         if building is None:
@@ -581,6 +603,12 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
         if not lot_pavings and building.kind in ("residential", "apartment"):
             drive, lot_cars = _driveway(street_rng, car_rng, frame, roof, verge_m, params.car_density)
             lot_pavings = [Paving(_rect_polygon(*drive), "driveway")]
+        if building.kind in PAVED_LOTS:
+            if not any(p.kind == "driveway" for p in lot_pavings):  # an entrance from the street
+                width = min(6.0, frame.frontage - 1.0)
+                a = street_rng.uniform(0.5, frame.frontage - 0.5 - width)
+                lot_pavings.append(Paving(_rect_polygon(*frame.world(a, a + width, -verge_m, 0.0)), "driveway"))
+            lot_pavings.insert(0, Paving(_rect_polygon(*rect), "yard"))
         here += [p.bbox for p in lot_pavings]
         if params.street_details:
             pavings += lot_pavings

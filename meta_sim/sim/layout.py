@@ -167,8 +167,8 @@ class LayoutParams:
         parks; the renderer draws them as lumpy, textured, per-tree tinted
         crowns).
     street_details: kerbs and sidewalks in the verges, driveways to houses,
-        parking lots with painted stalls on commercial and industrial lots,
-        lane markings on the roads.
+        paved commercial and industrial lots with parking lots and painted
+        stalls, lane markings on the roads.
     car_density: 0..1, share of kerb parking spots (times 0.6), driveway and
         parking-lot stalls taken by a car; cars stand on driveways and in
         parking lots only with `street_details`.

@@ -204,7 +204,7 @@ def tree_mesh(trees, segments: int = 10) -> MeshArrays:
 
 # ---------------------------------------------------------------- clutter (sim/clutter.py)
 
-CONCRETE, ASPHALT, PAINT, WATER, COPING = range(5)  # material slots of ``detail_mesh``
+CONCRETE, ASPHALT, PAINT, WATER, COPING, YARD = range(6)  # material slots of ``detail_mesh``
 GLASS = len(CAR_COLOURS)  # material slot of car windows; slots before it are the colours of CAR_COLOURS
 
 
@@ -370,9 +370,9 @@ def detail_mesh(pavings, pools, markings, paint_z: float) -> MeshArrays:
         pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
         mesh.add([(x, y, z) for x, y in pts], slot, [(x / repeat, y / repeat) for x, y in pts], background)
 
-    z_of = {"sidewalk": 0.015, "kerb": 0.018, "parking": 0.015, "driveway": 0.021}
+    z_of = {"yard": 0.01, "sidewalk": 0.015, "kerb": 0.018, "parking": 0.015, "driveway": 0.021}
     for p in pavings:
-        slot = ASPHALT if p.kind == "parking" else CONCRETE
+        slot = {"parking": ASPHALT, "yard": YARD}.get(p.kind, CONCRETE)
         quad(p.bbox, z_of[p.kind], slot,
              surfaces.ASPHALT_REPEAT_M if slot == ASPHALT else surfaces.CONCRETE_REPEAT_M)
     for pool in pools:

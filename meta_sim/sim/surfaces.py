@@ -151,3 +151,4 @@ CAR_PAINT = {"white": (0.72, 0.72, 0.70), "silver": (0.42, 0.43, 0.44), "grey": 
 GLASS = (0.02, 0.025, 0.03)
 ROAD_PAINT = (0.62, 0.62, 0.60)
 COPING = (0.55, 0.53, 0.50)
+YARD_SHADE = 0.6  # paved commercial and industrial lots: concrete, weathered darker than sidewalks

@@ -63,7 +63,7 @@ def test_same_seed_same_clutter_and_the_first_stages_are_untouched(city):
 
 def test_every_kind_of_item_is_there(city):
     kinds = {p.kind for p in city.pavings}
-    assert kinds == {"kerb", "sidewalk", "driveway", "parking"}
+    assert kinds == {"kerb", "sidewalk", "driveway", "parking", "yard"}
     assert len(city.cars) > 50 and len(city.pools) > 3 and len(city.shrubs) > 50 and len(city.markings) > 50
     assert {c.colour for c in city.cars} == set(CAR_COLOURS)
 
