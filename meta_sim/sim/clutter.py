@@ -9,7 +9,8 @@ more than today's city (all of them are off by default):
   asphalt parking lots and painted stalls beside their buildings,
   and lane markings on the roads (a dashed centre line on streets; a double
   centre line and dashed lane lines on avenues), stopping short of junctions;
-* cars parked along the kerbs, on driveways and in parking lots;
+* cars parked along the kerbs, on driveways and in parking lots, and a few
+  driving in the lanes;
 * swimming pools in the back yards of houses whose lot has room;
 * shrubs: hedges along lot edges and bushes around houses;
 * trees of real sizes (``tree_size="real"``): rows along the verges and
@@ -46,6 +47,7 @@ KERB_M = 0.3
 SIDEWALK_M = (1.5, 2.0)
 DRIVEWAY_M = (2.8, 3.4)
 STALL_M = (2.5, 5.0)  # width, depth of a parking stall
+TRAFFIC_PER_100M = 1.5  # cars driving per lane and 100 m of road at car_density 1
 AISLE_M = 6.0
 LINE_M = 0.3  # painted line width: wider than real paint, so a 0.3 m pixel never falls between its edges
 DASH_M = (3.0, 6.0)  # dash, gap of a dashed line
@@ -422,6 +424,37 @@ def _kerb_cars(rng: np.random.Generator, roads: Sequence[Rect], mouths: Sequence
     return out
 
 
+def _traffic(rng: np.random.Generator, roads: Sequence[Rect], parked: Sequence[Car], road_width: float,
+             density: float) -> list[Car]:
+    """Cars driving in the lanes (right-hand traffic), clear of junctions and of the parked cars."""
+    out: list[Car] = []
+    for road in roads:
+        k = _axis(road)
+        lo, hi = road[k], road[k + 2]
+        c_lo, c_hi = road[1 - k], road[3 - k]
+        centre, width = (c_lo + c_hi) / 2, c_hi - c_lo
+        if width > 1.4 * road_width:
+            lanes = (-width / 8, -(width / 4 + 1.1), width / 8, width / 4 + 1.1)
+        else:
+            lanes = (-1.6, 1.6) if width >= 7.0 else (0.0,)
+        junctions = [(a - 1.0, b + 1.0) for a, b in _junctions(road, roads)]
+        taken = [_grow(c.bbox, 0.3) for c in parked if _overlaps(c.bbox, road)]
+        for offset in lanes:
+            forward = offset < 0 if offset else rng.random() < 0.5
+            heading = (0.0 if forward else 180.0) + (90.0 if k == 1 else 0.0)
+            for _ in range(rng.poisson(density * TRAFFIC_PER_100M * (hi - lo) / 100.0)):
+                along = rng.uniform(lo + 3.0, hi - 3.0) if hi - lo > 6.0 else (lo + hi) / 2
+                across = centre + offset
+                car = _car(rng, *((along, across) if k == 0 else (across, along)), heading + rng.uniform(-1.0, 1.0))
+                box = car.bbox
+                on_road = box[0] >= road[0] and box[1] >= road[1] and box[2] <= road[2] and box[3] <= road[3]
+                free = not any(a < along < b for a, b in junctions) and not any(_overlaps(box, t) for t in taken)
+                if on_road and free:
+                    out.append(car)
+                    taken.append(_grow(box, 0.3))
+    return out
+
+
 # ---------------------------------------------------------------- lots
 
 
@@ -623,7 +656,8 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
         no_trunks += here
     if params.car_density > 0:
         mouths = [p.bbox for p in pavings if p.kind == "driveway"]
-        cars += _kerb_cars(car_rng, roads, mouths, 0.6 * params.car_density)
+        parked = _kerb_cars(car_rng, roads, mouths, 0.6 * params.car_density)
+        cars += parked + _traffic(car_rng, roads, cars + parked, road_width_m, params.car_density)
     if params.shrub_density > 0:
         for index, (rect, block_index) in enumerate(lots):
             building = by_lot.get(index)

@@ -170,7 +170,8 @@ class LayoutParams:
         paved commercial and industrial lots with parking lots and painted
         stalls, lane markings on the roads.
     car_density: 0..1, share of kerb parking spots (times 0.6), driveway and
-        parking-lot stalls taken by a car; cars stand on driveways and in
+        parking-lot stalls taken by a car, and traffic in the lanes (cars
+        per 100 m of lane: 1.5 times it); cars stand on driveways and in
         parking lots only with `street_details`.
     pool_share: 0..1, share of houses with a pool in the back yard (where the
         lot has room behind the house).

@@ -66,6 +66,14 @@ def test_every_kind_of_item_is_there(city):
     assert kinds == {"kerb", "sidewalk", "driveway", "parking", "yard"}
     assert len(city.cars) > 50 and len(city.pools) > 3 and len(city.shrubs) > 50 and len(city.markings) > 50
     assert {c.colour for c in city.cars} == set(CAR_COLOURS)
+    roads = _boxes(city.roads)
+
+    def in_lane(c):  # on a road, away from both its kerbs: driving, not parked
+        for x0, y0, x1, y1 in roads:
+            if x0 < c.x < x1 and y0 < c.y < y1:
+                return min(c.x - x0, x1 - c.x) > 2.5 if x1 - x0 < y1 - y0 else min(c.y - y0, y1 - c.y) > 2.5
+        return False
+    assert sum(map(in_lane, city.cars)) > 5
 
 
 def test_real_trees_have_real_sizes_and_stay_off_roofs(city):
