@@ -428,6 +428,7 @@ def _traffic(rng: np.random.Generator, roads: Sequence[Rect], parked: Sequence[C
              density: float) -> list[Car]:
     """Cars driving in the lanes (right-hand traffic), clear of junctions and of the parked cars."""
     out: list[Car] = []
+    parked_boxes = [_grow(c.bbox, 0.3) for c in parked]
     for road in roads:
         k = _axis(road)
         lo, hi = road[k], road[k + 2]
@@ -438,7 +439,7 @@ def _traffic(rng: np.random.Generator, roads: Sequence[Rect], parked: Sequence[C
         else:
             lanes = (-1.6, 1.6) if width >= 7.0 else (0.0,)
         junctions = [(a - 1.0, b + 1.0) for a, b in _junctions(road, roads)]
-        taken = [_grow(c.bbox, 0.3) for c in parked if _overlaps(c.bbox, road)]
+        taken = [box for box in parked_boxes if _overlaps(box, road)]
         for offset in lanes:
             forward = offset < 0 if offset else rng.random() < 0.5
             heading = (0.0 if forward else 180.0) + (90.0 if k == 1 else 0.0)
@@ -681,24 +682,52 @@ def _height(rng: np.random.Generator, diameter: float) -> float:
     return float(np.clip(1.2 * diameter + 1.5 + rng.normal(0.0, 1.2), *TREE_HEIGHT_M))
 
 
+class _Buckets:
+    """Boxes filed by the grid cells they touch, so a query looks at the few boxes near a point."""
+
+    CELL_M = 40.0
+
+    def __init__(self, boxes: np.ndarray):
+        self.boxes = boxes
+        self.cells: dict[tuple[int, int], list[int]] = {}
+        for i, (x0, y0, x1, y1) in enumerate(boxes):
+            for cx in range(int(x0 // self.CELL_M), int(x1 // self.CELL_M) + 1):
+                for cy in range(int(y0 // self.CELL_M), int(y1 // self.CELL_M) + 1):
+                    self.cells.setdefault((cx, cy), []).append(i)
+
+    def near(self, x: float, y: float, reach: float) -> np.ndarray:
+        """The boxes of the cells within `reach` of (x, y)."""
+        found: set[int] = set()
+        for cx in range(int((x - reach) // self.CELL_M), int((x + reach) // self.CELL_M) + 1):
+            for cy in range(int((y - reach) // self.CELL_M), int((y + reach) // self.CELL_M) + 1):
+                found.update(self.cells.get((cx, cy), ()))
+        return self.boxes[sorted(found)].reshape(-1, 4)
+
+
 class _Stand:
     """The trees placed so far, and the test a new crown must pass."""
 
     def __init__(self, roofs: np.ndarray, no_trunks: np.ndarray, width: float, height: float):
-        self.roofs, self.no_trunks, self.width, self.height = roofs, no_trunks, width, height
-        self.xyr = np.zeros((0, 3))
+        self.roofs, self.no_trunks = _Buckets(roofs), _Buckets(no_trunks)
+        self.width, self.height = width, height
+        self._xyr = np.zeros((64, 3))  # grown by doubling; the first len(self.trees) rows are placed
         self.trees: list[tuple[float, float, float, float]] = []
+
+    @property
+    def xyr(self) -> np.ndarray:
+        return self._xyr[:len(self.trees)]
 
     def fits(self, x: float, y: float, r: float, overlap: float) -> bool:
         if x - r < 0 or y - r < 0 or x + r > self.width or y + r > self.height:
             return False
-        if len(self.roofs):
-            dx = np.maximum(np.maximum(self.roofs[:, 0] - x, x - self.roofs[:, 2]), 0.0)
-            dy = np.maximum(np.maximum(self.roofs[:, 1] - y, y - self.roofs[:, 3]), 0.0)
+        roofs = self.roofs.near(x, y, r + CLEARANCE_M)
+        if len(roofs):
+            dx = np.maximum(np.maximum(roofs[:, 0] - x, x - roofs[:, 2]), 0.0)
+            dy = np.maximum(np.maximum(roofs[:, 1] - y, y - roofs[:, 3]), 0.0)
             if np.min(np.hypot(dx, dy)) < r + CLEARANCE_M:
                 return False
-        if len(self.no_trunks):
-            t = self.no_trunks
+        t = self.no_trunks.near(x, y, 0.5)
+        if len(t):
             if np.any((t[:, 0] - 0.5 < x) & (x < t[:, 2] + 0.5) & (t[:, 1] - 0.5 < y) & (y < t[:, 3] + 0.5)):
                 return False
         if len(self.xyr):
@@ -708,9 +737,10 @@ class _Stand:
         return True
 
     def add(self, rng: np.random.Generator, x: float, y: float, diameter: float) -> None:
-        r = diameter / 2
-        self.xyr = np.vstack([self.xyr, [x, y, r]])
-        self.trees.append((_r(x), _r(y), _r(r), _r(_height(rng, diameter))))
+        if len(self.trees) == len(self._xyr):
+            self._xyr = np.vstack([self._xyr, np.zeros_like(self._xyr)])
+        self._xyr[len(self.trees)] = (x, y, diameter / 2)
+        self.trees.append((_r(x), _r(y), _r(diameter / 2), _r(_height(rng, diameter))))
 
 
 def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Sequence[Rect], no_trunks,

@@ -222,3 +222,11 @@ def test_damaged_clutter_in_a_layout_file_is_rejected(city):
     data["pools"][0]["polygon"] = [[0, 0], [1, 1]]
     with pytest.raises(MetaSimError, match="rectangle"):
         CityLayout.from_dict(data)
+
+
+def test_speed_with_everything_on():
+    import time
+
+    start = time.perf_counter()
+    generate_layout(0, 1000.0, 1000.0, ALL_ON)
+    assert time.perf_counter() - start < 3.0
