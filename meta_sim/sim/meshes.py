@@ -373,7 +373,11 @@ def detail_mesh(pavings, pools, markings, paint_z: float) -> MeshArrays:
     z_of = {"yard": 0.01, "sidewalk": 0.015, "kerb": 0.018, "parking": 0.015, "driveway": 0.021}
     for p in pavings:
         slot = {"parking": ASPHALT, "yard": YARD}.get(p.kind, CONCRETE)
-        quad(p.bbox, z_of[p.kind], slot,
+        x0, y0, x1, y1 = p.bbox
+        # Strips along y cross those along x at block corners: a millimetre apart, never coplanar (a path
+        # tracer's shadow rays would hit the twin face and paint the overlap black).
+        lift = 0.001 if p.kind in ("sidewalk", "kerb") and y1 - y0 > x1 - x0 else 0.0
+        quad(p.bbox, z_of[p.kind] + lift, slot,
              surfaces.ASPHALT_REPEAT_M if slot == ASPHALT else surfaces.CONCRETE_REPEAT_M)
     for pool in pools:
         x0, y0, x1, y1 = pool.bbox
