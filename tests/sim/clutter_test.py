@@ -230,3 +230,10 @@ def test_speed_with_everything_on():
     start = time.perf_counter()
     generate_layout(0, 1000.0, 1000.0, ALL_ON)
     assert time.perf_counter() - start < 3.0
+
+
+def test_a_sixth_stage_stream_leaves_the_first_five_as_they_were():
+    from meta_sim.sim.layout import stage_generators
+
+    five = [g.random(4).tolist() for g in stage_generators(11, 5)]
+    assert [g.random(4).tolist() for g in stage_generators(11, 6)][:5] == five
