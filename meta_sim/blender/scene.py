@@ -37,8 +37,9 @@ import numpy as np
 import OpenImageIO as oiio
 
 from ..core.errors import MetaSimError
-from ..sim import meshes
+from ..sim import meshes, surfaces
 from ..sim.appearance import vegetation_colour
+from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.ground import COVERS, ground_image
 from ..sim.quality import RenderPreset
 
@@ -75,7 +76,8 @@ def _tagged(datablock, key: str):
     return datablock
 
 
-def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str) -> bpy.types.Object:
+def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str,
+                     closed: bool = False, smooth: bool = False) -> bpy.types.Object:
     data = arrays.arrays()
     mesh = bpy.data.meshes.new(arrays.name)
     mesh.vertices.add(len(data["vertices"]))
@@ -94,6 +96,18 @@ def _new_mesh_object(arrays: meshes.MeshArrays, materials, collection, key: str)
     mesh.color_attributes.active_color = label
     mesh.update(calc_edges=True)
     mesh.validate(verbose=False)
+    if closed:
+        import bmesh  # importable only once bpy is loaded
+
+        # MeshArrays gives every polygon its own corners: weld them, so each shell is closed (Workbench
+        # draws the shadows of manifold meshes far faster) and smooth normals can round the foliage.
+        shells = bmesh.new()
+        shells.from_mesh(mesh)
+        bmesh.ops.remove_doubles(shells, verts=shells.verts, dist=1e-4)
+        shells.to_mesh(mesh)
+        shells.free()
+    if smooth:
+        mesh.shade_smooth()
     for material in materials:
         mesh.materials.append(material)
     obj = bpy.data.objects.new(arrays.name, mesh)
@@ -127,6 +141,17 @@ def _noise_image(name: str, colour, amount: float, seed: int, key: str, size: in
     rgba = np.ones((size, size, 4), dtype=np.float32)
     rgba[..., :3] = np.clip(base * (1.0 + noise), 0.0, 1.0)
     image = _tagged(bpy.data.images.new(name, size, size, float_buffer=True), key)
+    image.pixels.foreach_set(rgba.ravel())
+    image.pack()
+    return image
+
+
+def _rgb_image(name: str, rgb: np.ndarray, key: str) -> bpy.types.Image:
+    """A packed float image of a linear RGB array (row 0 at v = 0, as Blender stores images)."""
+    h, w = rgb.shape[:2]
+    rgba = np.ones((h, w, 4), dtype=np.float32)
+    rgba[..., :3] = rgb
+    image = _tagged(bpy.data.images.new(name, w, h, float_buffer=True), key)
     image.pixels.foreach_set(rgba.ravel())
     image.pack()
     return image
@@ -264,6 +289,12 @@ class CityScene:
             self.key = key or collection.name
             _tagged(collection, self.key)
         self._tmp = tempfile.mkdtemp(prefix="meta-sim-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+        # Sun direction from the city seed: elevation 45 +- 15 degrees (Synthinel rules).
+        rng = np.random.default_rng([int(self.layout.seed), 7])
+        self._elevation = math.radians(float(rng.uniform(30.0, 60.0)))
+        self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
+        if self.sun_elevation_deg is not None:  # a design's sun; the azimuth stays the city's
+            self._elevation = math.radians(float(self.sun_elevation_deg))
         self._build(shadow_margin_m)
         self._add_camera_and_sun()
 
@@ -283,7 +314,10 @@ class CityScene:
         self.buildings = sorted(self._visible(lay.buildings_in_rect, margin), key=lambda b: b.id)
         roads = self._visible(lay.roads_in_rect, 0.0)
         paved = [lot for lot in self._visible(lay.lots_in_rect, 0.0) if lot.surface == "paved"]
-        trees = self._visible(lay.trees_in_rect, margin)
+        if lay.params.tree_size == "real":  # only trees whose shadow can reach the tiles: fewer shadow volumes
+            trees = self._visible(lay.trees_in_rect, min(margin, self._shadow_reach(TREE_HEIGHT_M[1])))
+        else:
+            trees = self._visible(lay.trees_in_rect, margin)
         region = bounding_rect(self.rects).grown(margin)
         seed, key = int(lay.seed), self.key
         grey = _image_material("wall", _noise_image("wall", (0.45, 0.43, 0.40), 0.05, seed, key), key, 0.9)
@@ -298,10 +332,12 @@ class CityScene:
             ground = _image_material("ground", self._ground_image(region, seed + 1, lawn), key)
         else:
             ground = _image_material("ground", _noise_image("ground", lawn, 0.25, seed + 1, key), key)
-        road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
+        params = lay.params
+        if params.street_details:
+            road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(), key), key)
+        else:
+            road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
         dirt = _image_material("dirt", _noise_image("dirt", (0.30, 0.22, 0.15), 0.18, seed + 4, key), key)
-        leaves = vegetation_colour("tree", self.greenness, (0.05, 0.13, 0.035))
-        tree = _image_material("tree", _noise_image("tree", leaves, 0.35, seed + 3, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
         self.buildings_obj = None
         if building_arrays.n_polygons:
@@ -313,25 +349,66 @@ class CityScene:
         _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(self.ground_mix)),
                          [ground], self.collection, key)
         if roads:
-            _new_mesh_object(meshes.road_mesh(roads), [road, dirt], self.collection, key)
+            repeat = surfaces.ASPHALT_REPEAT_M if params.street_details else 1.0
+            _new_mesh_object(meshes.road_mesh(roads, repeat_m=repeat), [road, dirt], self.collection, key)
         if paved:
             concrete = _image_material("paved", _noise_image("paved", (0.36, 0.36, 0.35), 0.08, seed + 5, key), key)
             _new_mesh_object(meshes.lot_mesh(paved), [concrete], self.collection, key)
-        if trees:
+        foliage = None
+        if params.tree_size == "real" or params.shrub_density > 0:
+            foliage = _image_material("foliage", _rgb_image("foliage", surfaces.foliage_atlas(), key), key)
+        if trees and params.tree_size == "real":
+            _new_mesh_object(meshes.crown_mesh(trees), [foliage], self.collection, key, closed=True, smooth=True)
+        elif trees:
+            leaves = vegetation_colour("tree", self.greenness, (0.05, 0.13, 0.035))
+            tree = _image_material("tree", _noise_image("tree", leaves, 0.35, seed + 3, key), key)
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
+        self._build_clutter(margin, len(roads), road, foliage)
+
+    def _shadow_reach(self, height_m: float) -> float:
+        """How far from its foot the shadow of something `height_m` tall falls in this city's sun."""
+        return height_m / math.tan(self._elevation) + 0.5
+
+    def _build_clutter(self, margin: float, n_roads: int, road, foliage) -> None:
+        """Pavings, pools and markings (flat, so only what the tiles show), cars and shrubs (and what
+        of them casts a shadow into the tiles)."""
+        lay, key = self.layout, self.key
+        flat = {name: self._visible(lambda *r, name=name: lay.details_in_rect(name, *r), 0.0)
+                for name in ("pavings", "pools", "markings")}
+        low = min(margin, self._shadow_reach(2.0))
+        cars = self._visible(lambda *r: lay.details_in_rect("cars", *r), low)
+        shrubs = self._visible(lambda *r: lay.details_in_rect("shrubs", *r), low)
+        self.n_details = {"cars": len(cars), "shrubs": len(shrubs), **{k: len(v) for k, v in flat.items()}}
+        if any(flat.values()):
+            materials = [None] * 6
+            materials[meshes.CONCRETE] = _image_material(
+                "concrete", _rgb_image("concrete", surfaces.concrete_image(), key), key)
+            materials[meshes.ASPHALT] = road  # parking lots: the streets' asphalt
+            materials[meshes.YARD] = _image_material(
+                "yard", _rgb_image("yard", surfaces.concrete_image() * np.float32(surfaces.YARD_SHADE), key), key)
+            materials[meshes.PAINT] = _image_material(
+                "paint", _noise_image("paint", surfaces.ROAD_PAINT, 0.08, 6, key), key)
+            materials[meshes.WATER] = _image_material(
+                "water", _rgb_image("water", surfaces.water_image(), key), key, roughness=0.1)
+            materials[meshes.COPING] = _image_material(
+                "coping", _noise_image("coping", surfaces.COPING, 0.06, 8, key), key)
+            arrays = meshes.detail_mesh(flat["pavings"], flat["pools"], flat["markings"],
+                                        meshes.road_top(n_roads) + 0.005)
+            _new_mesh_object(arrays, materials, self.collection, key)
+        if cars:
+            paints = [_image_material(f"car-{name}", _noise_image(f"car-{name}", colour, 0.03, 9, key), key, 0.4)
+                      for name, colour in surfaces.CAR_PAINT.items()]
+            glass = _image_material("glass", _noise_image("glass", surfaces.GLASS, 0.05, 10, key), key, 0.1)
+            _new_mesh_object(meshes.car_mesh(cars), [*paints, glass], self.collection, key, closed=True)
+        if shrubs:
+            _new_mesh_object(meshes.shrub_mesh(shrubs), [foliage], self.collection, key, closed=True, smooth=True)
 
     def _ground_image(self, region: Rect, seed: int, lawn) -> bpy.types.Image:
         """The region's ground cover (``sim.ground``, its lawn in colour ``lawn``) as one image spanning
         the ground quad."""
         rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix, {"lawn": lawn})
-        h, w = rgb.shape[:2]
-        rgba = np.ones((h, w, 4), dtype=np.float32)
-        rgba[..., :3] = rgb  # row 0 at the quad's south edge (v = 0), as Blender stores images
-        image = _tagged(bpy.data.images.new("ground-cover", w, h, float_buffer=True), self.key)
-        image.pixels.foreach_set(rgba.ravel())
-        image.pack()
-        return image
+        return _rgb_image("ground-cover", rgb, self.key)  # row 0 at the quad's south edge
 
     def _add_camera_and_sun(self) -> None:
         camera = _tagged(bpy.data.cameras.new("nadir"), self.key)
@@ -339,12 +416,6 @@ class CityScene:
         camera.clip_start, camera.clip_end = 1.0, 2000.0
         self.camera = _tagged(bpy.data.objects.new("nadir", camera), self.key)
         self.collection.objects.link(self.camera)
-        # Sun direction from the city seed: elevation 45 +- 15 degrees (Synthinel rules).
-        rng = np.random.default_rng([int(self.layout.seed), 7])
-        self._elevation = math.radians(float(rng.uniform(30.0, 60.0)))
-        self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
-        if self.sun_elevation_deg is not None:  # a design's sun; the azimuth stays the city's
-            self._elevation = math.radians(float(self.sun_elevation_deg))
         sun = _tagged(bpy.data.lights.new("sun", "SUN"), self.key)
         sun.energy = 4.0
         sun.angle = math.radians(0.5)

@@ -121,13 +121,19 @@ ARCHITECTURES = {
 DEFAULT_ARCHITECTURE = "additive"
 
 
+# A factorised model gives each parameter this many of z's dimensions (the default z of 10 holds two).
+Z_PER_PARAMETER = 5
+
+
 def architecture_options(name: str, widths) -> dict:
     """NAMSConfig fields for architecture ``name`` on a design space with parameter block ``widths``."""
     if name not in ARCHITECTURES:
         raise MetaSimError(f"unknown architecture {name!r}; use one of {', '.join(ARCHITECTURES)}")
     factorised, predictor, hidden, _ = ARCHITECTURES[name]
-    return {"blocks": [int(w) for w in widths] if factorised else [], "predictor": predictor,
-            "hidden": list(hidden)}
+    out = {"blocks": [int(w) for w in widths] if factorised else [], "predictor": predictor, "hidden": list(hidden)}
+    if factorised and len(widths) * Z_PER_PARAMETER > NAMSConfig.z_dim:
+        out["z_dim"] = len(widths) * Z_PER_PARAMETER  # a space of many parameters: each keeps its share of z
+    return out
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from . import polygons
+from .clutter import TREE_SIZES, Car, Marking, Paving, Pool, Shrub, generate_clutter, real_trees
 
 LAYOUT_VERSION = 1
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
@@ -228,6 +229,28 @@ class LayoutParams:
         suburban (the street grid above), dense (a packed informal town on bent
         lanes), downtown (offices and highrises on paved lots), industrial (halls
         on large paved lots). Stored as ``((name, share), ...)``.
+
+    The knobs below add street details, clutter and real-sized trees (see
+    ``sim/clutter.py``); at their defaults the city is today's, and `to_dict`
+    leaves them out. They are built in all-suburban cities (the street grid);
+    cities of other styles do not have them yet.
+
+    tree_size: "small" (today's crowns of 1.2-4 m radius, scattered) or
+        "real" (crown diameters 4-15 m, mostly 5-9 m, heights 5-20 m growing
+        with the crown, in rows along the verges and groups in yards and
+        parks; the renderer draws them as lumpy, textured, per-tree tinted
+        crowns).
+    street_details: kerbs and sidewalks in the verges, driveways to houses,
+        paved commercial and industrial lots with parking lots and painted
+        stalls, lane markings on the roads.
+    car_density: 0..1, share of kerb parking spots (times 0.6), driveway and
+        parking-lot stalls taken by a car, and traffic in the lanes (cars
+        per 100 m of lane: 1.5 times it); cars stand on driveways and in
+        parking lots only with `street_details`.
+    pool_share: 0..1, share of houses with a pool in the back yard (where the
+        lot has room behind the house).
+    shrub_density: 0..1, how often lot edges carry a hedge and how many
+        bushes stand around a house.
     """
 
     building_density: float = 0.7
@@ -236,9 +259,21 @@ class LayoutParams:
     road_width_m: float = 10.0
     block_size_m: tuple[float, float] = (60.0, 140.0)
     style: StyleMix = DEFAULT_STYLE
+    tree_size: str = "small"
+    street_details: bool = False
+    car_density: float = 0.0
+    pool_share: float = 0.0
+    shrub_density: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
+        for name in ("car_density", "pool_share", "shrub_density"):
+            object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
+        if not isinstance(self.tree_size, str) or self.tree_size not in TREE_SIZES:
+            raise MetaSimError(f"{owner}.tree_size must be one of {', '.join(TREE_SIZES)}, got {self.tree_size!r}")
+        if not isinstance(self.street_details, (bool, np.bool_)):
+            raise MetaSimError(f"{owner}.street_details must be true or false, got {self.street_details!r}")
+        object.__setattr__(self, "street_details", bool(self.street_details))
         for name in ("building_density", "sloped_share", "tree_density"):
             object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
         road = _check_number(owner, "road_width_m", self.road_width_m, 4.0, 40.0)
@@ -265,11 +300,21 @@ class LayoutParams:
         }
         if self.style != DEFAULT_STYLE:  # layouts from before styles keep their JSON
             out["style"] = dict(self.style)
+        # Added knobs only when set, so today's layouts keep their JSON.
+        out.update({name: getattr(self, name) for name, default in _CLUTTER_DEFAULTS.items()
+                    if getattr(self, name) != default})
         return out
+
+    @property
+    def clutter(self) -> bool:
+        """Whether any street detail or clutter knob is set."""
+        return any(getattr(self, name) != _CLUTTER_DEFAULTS[name]
+                   for name in ("street_details", "car_density", "pool_share", "shrub_density"))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> LayoutParams:
-        known = {"building_density", "sloped_share", "tree_density", "road_width_m", "block_size_m", "style"}
+        known = {"building_density", "sloped_share", "tree_density", "road_width_m", "block_size_m", "style",
+                 *_CLUTTER_DEFAULTS}
         unknown = set(data) - known
         if unknown:
             raise MetaSimError(f"unknown layout parameter(s) {sorted(unknown)}; remove them")
@@ -287,6 +332,10 @@ def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
     if value not in allowed:
         raise MetaSimError(f"{owner}: surface {value!r} is not one of {allowed}; the layout file is damaged")
     return str(value)
+
+
+_CLUTTER_DEFAULTS = {"tree_size": "small", "street_details": False, "car_density": 0.0, "pool_share": 0.0,
+                     "shrub_density": 0.0}
 
 
 @dataclass(frozen=True)
@@ -502,6 +551,9 @@ def _in_rect(items: tuple[Any, ...], boxes: np.ndarray, x0: float, y0: float, x1
     return [items[i] for i in np.flatnonzero(hit)]
 
 
+_DETAILS = {"pavings": Paving, "markings": Marking, "cars": Car, "pools": Pool, "shrubs": Shrub}
+
+
 @dataclass(frozen=True)
 class CityLayout:
     """A whole city: the contract between the generator and the Blender builder."""
@@ -515,9 +567,14 @@ class CityLayout:
     buildings: tuple[Building, ...]
     trees: tuple[Tree, ...]
     version: int = LAYOUT_VERSION
+    pavings: tuple[Paving, ...] = ()
+    markings: tuple[Marking, ...] = ()
+    cars: tuple[Car, ...] = ()
+    pools: tuple[Pool, ...] = ()
+    shrubs: tuple[Shrub, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "version": self.version,
             "seed": self.seed,
             "width_m": self.width_m,
@@ -528,6 +585,9 @@ class CityLayout:
             "buildings": [building.to_dict() for building in self.buildings],
             "trees": [tree.to_dict() for tree in self.trees],
         }
+        out.update({name: [item.to_dict() for item in getattr(self, name)]
+                    for name in _DETAILS if getattr(self, name)})
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> CityLayout:
@@ -548,6 +608,7 @@ class CityLayout:
                 buildings=tuple(Building.from_dict(d) for d in data["buildings"]),
                 trees=tuple(Tree.from_dict(d) for d in data["trees"]),
                 version=version,
+                **{name: tuple(kind.from_dict(d) for d in data.get(name, ())) for name, kind in _DETAILS.items()},
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise MetaSimError(f"city layout is incomplete or damaged ({exc!r}); regenerate it") from exc
@@ -583,6 +644,15 @@ class CityLayout:
     def lots_in_rect(self, x0: float, y0: float, x1: float, y1: float) -> list[Lot]:
         """Lots whose bbox shares positive area with the rectangle."""
         return _in_rect(self.lots, self._lot_boxes, x0, y0, x1, y1)
+
+    @cached_property
+    def _detail_boxes(self) -> dict[str, np.ndarray]:
+        return {name: _boxes(getattr(self, name)) for name in _DETAILS}
+
+    def details_in_rect(self, name: str, x0: float, y0: float, x1: float, y1: float) -> list[Any]:
+        """Street details or clutter of one kind ("pavings", "markings", "cars", "pools", "shrubs")
+        whose bbox shares positive area with the rectangle."""
+        return _in_rect(getattr(self, name), self._detail_boxes[name], x0, y0, x1, y1)
 
     def tile_grid(self, tile_m: float = TILE_M) -> list[Rect]:
         """Square tiles from the origin covering the city, row-major, row 0 at y = 0 (south).
@@ -1438,7 +1508,8 @@ def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutPa
     params = LayoutParams() if params is None else params
     if params.style != DEFAULT_STYLE:
         return _styled_layout(int(seed), width, height, params)
-    road_rng, lot_rng, building_rng, roof_rng, tree_rng = stage_generators(int(seed), 5)
+    # A sixth stream for clutter: spawning six leaves the first five streams as they were.
+    road_rng, lot_rng, building_rng, roof_rng, tree_rng, clutter_rng = stage_generators(int(seed), 6)
 
     blocks, roads = _blocks_and_roads(road_rng, width, height, params)
     plans = [plan for index, block in enumerate(blocks) for plan in _plan_block(lot_rng, block, index, width, height)]
@@ -1447,11 +1518,24 @@ def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutPa
     lots = [Lot(rect_polygon(*plan.rect), plan.block_index) for plan in plans]
 
     by_lot = {b.lot_index: b for b in buildings}
-    trees = [tree for block in blocks for tree in _street_trees(tree_rng, block, params.tree_density)]
-    for index, lot in enumerate(lots):
-        trees += _yard_trees(tree_rng, lot, by_lot.get(index), params.tree_density)
+    street_blocks = [(block.rect, block.road_sides) for block in blocks]
+    road_rects = [road.bbox for road in roads]
+    clutter = generate_clutter(clutter_rng, params, street_blocks, [(lot.bbox, lot.block_index) for lot in lots],
+                               buildings, road_rects, VERGE_M, params.road_width_m) if params.clutter else None
+    if params.tree_size == "real":
+        # Street trees stand in the planting strip between kerb and sidewalk when there are sidewalks.
+        row_offset = 1.6 if params.street_details else VERGE_M / 2
+        yards = [(lot.bbox, index in by_lot) for index, lot in enumerate(lots)]
+        trees = [Tree(*t) for t in real_trees(tree_rng, params.tree_density, street_blocks, yards,
+                                              [b.bbox for b in buildings], clutter.no_trunks if clutter else (),
+                                              width, height, VERGE_M, row_offset)]
+    else:
+        trees = [tree for block in blocks for tree in _street_trees(tree_rng, block, params.tree_density)]
+        for index, lot in enumerate(lots):
+            trees += _yard_trees(tree_rng, lot, by_lot.get(index), params.tree_density)
+    details = {} if clutter is None else {name: getattr(clutter, name) for name in _DETAILS}
     return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
-                      tuple(trees))
+                      tuple(trees), **details)
 
 
 def layout_for_tiles(seed: int, n_tiles: int, tile_m: float = TILE_M,

@@ -20,8 +20,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import surfaces
+from .clutter import CAR_COLOURS
+
 WALL, FLAT_ROOF, SLOPED_ROOF = 0, 1, 2
-ASPHALT, DIRT = 0, 1
+ROAD_ASPHALT, ROAD_DIRT = 0, 1  # material slots of ``road_mesh``
 
 
 def label_color(instance_id: int, roof_class: int) -> tuple[float, float, float, float]:
@@ -166,13 +169,17 @@ def building_mesh(buildings) -> MeshArrays:
     return mesh
 
 
-def road_mesh(roads, z: float = 0.03) -> MeshArrays:
-    """Road polygons; crossing roads overlap, so each sits a millimetre above the last."""
+def road_mesh(roads, z: float = 0.03, repeat_m: float = 1.0) -> MeshArrays:
+    """Road polygons; crossing roads overlap, so each sits a millimetre above the last.
+
+    UVs are metres divided by ``repeat_m``, the size one repeat of the road image covers.
+    """
     mesh = MeshArrays("roads")
     background = label_color(0, 0)
     for k, road in enumerate(roads):
         pts = _ccw([tuple(p) for p in road.polygon])
-        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], DIRT if road.surface == "dirt" else ASPHALT, pts,
+        uv = pts if repeat_m == 1.0 else [(x / repeat_m, y / repeat_m) for x, y in pts]
+        mesh.add([(x, y, z + 0.001 * k) for x, y in pts], ROAD_DIRT if road.surface == "dirt" else ROAD_ASPHALT, uv,
                  background)
     return mesh
 
@@ -185,6 +192,11 @@ def lot_mesh(lots, z: float = 0.015) -> MeshArrays:
         pts = _ccw([tuple(p) for p in lot.polygon])
         mesh.add([(x, y, z) for x, y in pts], 0, pts, background)
     return mesh
+
+
+def road_top(n_roads: int, z: float = 0.03) -> float:
+    """The height of the highest of `n_roads` roads of ``road_mesh``."""
+    return z + 0.001 * max(n_roads - 1, 0)
 
 
 def ground_mesh(x0: float, y0: float, x1: float, y1: float, whole_image: bool = False) -> MeshArrays:
@@ -214,4 +226,191 @@ def tree_mesh(trees, segments: int = 10) -> MeshArrays:
             mesh.add([quad[0], quad[1], quad[3], quad[2]], 0, [(p[0], p[1]) for p in quad], background)
             tri = [ring_hi[k], ring_hi[j], top]
             mesh.add(tri, 0, [(p[0], p[1]) for p in tri], background)
+    return mesh
+
+
+# ---------------------------------------------------------------- clutter (sim/clutter.py)
+
+CONCRETE, ASPHALT, PAINT, WATER, COPING, YARD = range(6)  # material slots of ``detail_mesh``
+GLASS = len(CAR_COLOURS)  # material slot of car windows; slots before it are the colours of CAR_COLOURS
+
+
+def _item_rng(*values: float) -> np.random.Generator:
+    """A generator fixed by an item's position, so its random shape is the same in every build."""
+    return np.random.default_rng([int(round(abs(v) * 1000.0)) for v in values])
+
+
+def _atlas_window(rng: np.random.Generator, cell: int, size_m: float):
+    """UV mapping (metres from a window's corner -> atlas UV) of a random window of one atlas cell."""
+    row, col = divmod(cell, surfaces.ATLAS_CELLS)
+    span = min(size_m / surfaces.CELL_M, 1.0)
+    ou, ov = rng.uniform(0.0, 1.0 - span, 2)
+
+    def uv(dx: float, dy: float) -> tuple[float, float]:
+        return ((col + ou + dx / surfaces.CELL_M) / surfaces.ATLAS_CELLS,
+                (row + ov + dy / surfaces.CELL_M) / surfaces.ATLAS_CELLS)
+    return uv
+
+
+def _crown_outline(cx: float, cy: float, lobes, angles) -> list[float]:
+    """Distance from a crown's centre to the edge of the union of its lobes (circles) along each angle."""
+    out = []
+    for a in angles:
+        dx, dy = math.cos(a), math.sin(a)
+        best = 0.0
+        for lx, ly, r in lobes:
+            ox, oy = lx - cx, ly - cy
+            along = ox * dx + oy * dy
+            disc = r * r - (ox * ox + oy * oy - along * along)
+            if disc >= 0.0:
+                best = max(best, along + math.sqrt(disc))
+        out.append(best)
+    return out
+
+
+def _shell(mesh: MeshArrays, rings, apex, uv, label) -> None:
+    """A closed crown-like shell: a bottom cap, bands between rings (bottom first), a fan to the apex.
+
+    Closed shells keep the mesh manifold, which Workbench's shadows draw much faster.
+    """
+    n = len(rings[0])
+    bottom = list(reversed(rings[0]))
+    mesh.add(bottom, 0, [uv(p[0], p[1]) for p in bottom], label)
+    for lo, hi in zip(rings, rings[1:]):
+        for k in range(n):
+            j = (k + 1) % n
+            quad = [lo[k], lo[j], hi[j], hi[k]]
+            mesh.add(quad, 0, [uv(p[0], p[1]) for p in quad], label)
+    for k in range(n):
+        tri = [rings[-1][k], rings[-1][(k + 1) % n], apex]
+        mesh.add(tri, 0, [uv(p[0], p[1]) for p in tri], label)
+
+
+def crown_mesh(trees, segments: int = 8) -> MeshArrays:
+    """Real-sized crowns: one closed shell per tree whose outline is the union of a few overlapping
+    lobes inside the crown radius (a lumpy, irregular edge), bulging up where the lobes are;
+    textured with a window of one tree cell of ``surfaces.foliage_atlas`` (per-tree tint and clumps).
+    Few polygons: Workbench's shadow cost grows with every silhouette edge."""
+    mesh = MeshArrays("crowns")
+    background = label_color(0, 0)
+    angles = [2 * math.pi * (k + 0.5) / segments for k in range(segments)]
+    for t in trees:
+        rng = _item_rng(t.x, t.y)
+        R, h = t.radius_m, t.height_m
+        window = _atlas_window(rng, int(rng.integers(surfaces.TREE_CELLS)), 2 * R)
+
+        def uv(x, y, x0=t.x - R, y0=t.y - R, window=window):
+            return window(x - x0, y - y0)
+        lobes = [(t.x, t.y, rng.uniform(0.5, 0.65) * R)]
+        for _ in range(int(rng.integers(3, 7 if R > 3.0 else 5))):
+            r = rng.uniform(0.3, 0.5) * R
+            a, d = rng.uniform(0, 2 * math.pi), rng.uniform(0.5, 1.0) * (R - r)
+            lobes.append((t.x + d * math.cos(a), t.y + d * math.sin(a), r))
+        edge = _crown_outline(t.x, t.y, lobes, angles)
+        lump = rng.uniform(0.9, 1.0, segments)
+        rings = []
+        for share, rise in ((1.0, 0.55), (0.6, 0.85)):
+            rings.append([(t.x + share * e * math.cos(a), t.y + share * e * math.sin(a),
+                           h * (rise + (1.0 - rise) * 0.5 * (e / R - 0.5)) * (lump[k] if rise > 0.6 else 1.0))
+                          for k, (a, e) in enumerate(zip(angles, edge))])
+        _shell(mesh, rings, (t.x, t.y, h), uv, background)
+    return mesh
+
+
+def _box(mesh: MeshArrays, corners, z0: float, z1: float, slot: int, uv, label, top_corners=None,
+         top_slot: int | None = None, side_slots=None, floor: bool = False) -> None:
+    """A prism from the outline `corners` (CCW) at z0 to `top_corners` (default the same) at z1,
+    closed by a lid and, with `floor`, a floor (a closed shell keeps Workbench's shadows fast)."""
+    top = top_corners or corners
+    n = len(corners)
+    if floor:
+        under = list(reversed(corners))
+        mesh.add([(*p, z0) for p in under], slot, [uv(*p) for p in under], label)
+    for k in range(n):
+        j = (k + 1) % n
+        quad = [(*corners[k], z0), (*corners[j], z0), (*top[j], z1), (*top[k], z1)]
+        mesh.add(quad, slot if side_slots is None else side_slots[k], [uv(p[0], p[1]) for p in quad], label)
+    mesh.add([(*p, z1) for p in top], slot if top_slot is None else top_slot, [uv(*p) for p in top], label)
+
+
+def shrub_mesh(shrubs) -> MeshArrays:
+    """Hedge pieces as closed boxes narrowing to a rounded-off top, bushes (about as wide as long) as
+    small lumpy shells; textured with the shrub cells of the foliage atlas."""
+    mesh = MeshArrays("shrubs")
+    background = label_color(0, 0)
+    shrub_cells = surfaces.ATLAS_CELLS ** 2 - surfaces.TREE_CELLS
+    for s in shrubs:
+        x0, y0, x1, y1 = s.bbox
+        rng = _item_rng(x0, y0, x1)
+        window = _atlas_window(rng, surfaces.TREE_CELLS + int(rng.integers(shrub_cells)), max(x1 - x0, y1 - y0))
+
+        def uv(x, y, x0=x0, y0=y0, window=window):
+            return window(x - x0, y - y0)
+        cx, cy, h = (x0 + x1) / 2, (y0 + y1) / 2, s.height_m
+        if max(x1 - x0, y1 - y0) < 1.5 * min(x1 - x0, y1 - y0):
+            r = min(x1 - x0, y1 - y0) / 2
+            angles = [2 * math.pi * (k + rng.random() * 0.5) / 5 for k in range(5)]
+            edge = r * (1.0 - 0.2 * rng.random(5))
+            rings = [[(cx + e * math.cos(a), cy + e * math.sin(a), h * 0.45) for a, e in zip(angles, edge)]]
+            _shell(mesh, rings, (cx, cy, h), uv, background)
+            continue
+        inset = 0.25 * min(x1 - x0, y1 - y0)
+        ground = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        top = [(x0 + inset, y0 + inset), (x1 - inset, y0 + inset), (x1 - inset, y1 - inset), (x0 + inset, y1 - inset)]
+        _box(mesh, ground, 0.02, h, 0, uv, background, top_corners=top, floor=True)
+    return mesh
+
+
+def car_mesh(cars) -> MeshArrays:
+    """Each car a box in its body colour with a dark windscreen and rear window on top. Material
+    slot = the colour's index in CAR_COLOURS; windows use slot GLASS."""
+    mesh = MeshArrays("cars")
+    background = label_color(0, 0)
+    colours = list(CAR_COLOURS)
+    for c in cars:
+        a = math.radians(c.heading_deg)
+        fx, fy, sx, sy = math.cos(a), math.sin(a), -math.sin(a), math.cos(a)
+
+        def outline(back: float, front: float, half: float, c=c, fx=fx, fy=fy, sx=sx, sy=sy):
+            return [(c.x + u * fx + v * sx, c.y + u * fy + v * sy)
+                    for u, v in ((back, -half), (front, -half), (front, half), (back, half))]
+        slot = colours.index(c.colour)
+        L, W = c.length_m, c.width_m
+
+        def uv(x, y):
+            return (x, y)
+        _box(mesh, outline(-L / 2, L / 2, W / 2), 0.25, 1.4, slot, uv, background, floor=True)
+        # Windscreen and rear window as dark panes on the roof: one closed box per car keeps shadows cheap.
+        for back, front in ((0.05 * L, 0.22 * L), (-0.32 * L, -0.24 * L)):
+            mesh.add([(*p, 1.41) for p in outline(back, front, 0.44 * W)], GLASS, [(0, 0)] * 4, background)
+    return mesh
+
+
+def detail_mesh(pavings, pools, markings, paint_z: float) -> MeshArrays:
+    """Pavings, pools and painted lines as flat quads just above the ground; lines at `paint_z`
+    (above every road). UVs are metres over each surface's repeat (``surfaces``)."""
+    mesh = MeshArrays("details")
+    background = label_color(0, 0)
+
+    def quad(rect, z, slot, repeat):
+        x0, y0, x1, y1 = rect
+        pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        mesh.add([(x, y, z) for x, y in pts], slot, [(x / repeat, y / repeat) for x, y in pts], background)
+
+    z_of = {"yard": 0.01, "sidewalk": 0.015, "kerb": 0.018, "parking": 0.015, "driveway": 0.021}
+    for p in pavings:
+        slot = {"parking": ASPHALT, "yard": YARD}.get(p.kind, CONCRETE)
+        x0, y0, x1, y1 = p.bbox
+        # Strips along y cross those along x at block corners: a millimetre apart, never coplanar (a path
+        # tracer's shadow rays would hit the twin face and paint the overlap black).
+        lift = 0.001 if p.kind in ("sidewalk", "kerb") and y1 - y0 > x1 - x0 else 0.0
+        quad(p.bbox, z_of[p.kind] + lift, slot,
+             surfaces.ASPHALT_REPEAT_M if slot == ASPHALT else surfaces.CONCRETE_REPEAT_M)
+    for pool in pools:
+        x0, y0, x1, y1 = pool.bbox
+        c = pool.coping_m
+        quad((x0, y0, x1, y1), 0.03, COPING, surfaces.CONCRETE_REPEAT_M)
+        quad((x0 + c, y0 + c, x1 - c, y1 - c), 0.035, WATER, surfaces.WATER_REPEAT_M)
+    for m in markings:
+        quad(m.bbox, paint_z, PAINT, 1.0)
     return mesh

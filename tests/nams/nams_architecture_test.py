@@ -42,9 +42,12 @@ def test_architectures_build_what_they_name():
         model = NAMS(config).eval()
         designs = torch.from_numpy(np.stack([space.encode(d) for d in space.sample(np.random.default_rng(0), 6)]))
         out = model(designs.float())
-        assert out.mu.shape == out.z.shape == (6, 10) and out.design_logits.shape == (6, 9)
-        assert model.predict(torch.randn(2, 3, 10)).shape == (2, 3, FEATURES)  # the search's leading dims
-    assert _config(space, "additive").z_blocks == (4, 3, 3)
+        z = config.z_dim  # 10 (the paper's) for a joint z; 5 per parameter for a factorised one
+        assert z == (10 if name == "paper" else 15)
+        assert out.mu.shape == out.z.shape == (6, z) and out.design_logits.shape == (6, 9)
+        assert model.predict(torch.randn(2, 3, z)).shape == (2, 3, FEATURES)  # the search's leading dims
+    assert _config(space, "additive").z_blocks == (5, 5, 5)
+    assert _config(space, "additive", z_dim=10).z_blocks == (4, 3, 3)  # an explicit z_dim wins
     assert NAMSConfig(space.dim, FEATURES).architecture == "paper"  # the paper's networks by default
 
 
@@ -85,6 +88,17 @@ def test_unknown_architecture_is_an_error_before_anything_runs():
         architecture_options("deep", [3, 4])
     with pytest.raises(MetaSimError, match="unknown architecture"):
         ModelSettings(architecture="deep").key(None, "x")
+
+
+def test_a_space_of_many_parameters_gives_each_its_share_of_z():
+    from meta_sim.sim.design import DesignSpace
+
+    assert "z_dim" not in architecture_options("additive", [40, 44])  # the default space: z of 10, 5 each
+    widths = DesignSpace.load("overhead-v1").widths()
+    options = architecture_options("additive", widths)
+    config = NAMSConfig(sum(widths), FEATURES, **{**options, "hidden": (8, 8)})
+    assert config.z_blocks == (5,) * len(widths)
+    assert "z_dim" not in architecture_options("paper", widths)  # one joint z: no blocks to share it
 
 
 def test_model_cache_keys_tell_architectures_apart():

@@ -554,3 +554,52 @@ def test_render_cli_takes_a_city_style_and_records_it(tmp_path):
     (tmp_path / "space.json").write_text(json.dumps(space))
     twice = _cli(*args, "--space", tmp_path / "space.json", "--style", "industrial", "--out", tmp_path / "d")
     assert twice.exit_code == 2 and "declares a city style already" in twice.output
+
+
+def _paint(layout, items, rect, px, gsd):
+    """Pixels whose centres fall inside any of the items' boxes (row 0 north)."""
+    x0, y0, x1, y1 = rect
+    gx, gy = np.meshgrid(x0 + (np.arange(px) + 0.5) * gsd, y1 - (np.arange(px) + 0.5) * gsd)
+    mask = np.zeros((px, px), dtype=bool)
+    for item in items:
+        bx0, by0, bx1, by1 = item.bbox
+        mask |= (gx > bx0) & (gx < bx1) & (gy > by0) & (gy < by1)
+    return mask
+
+
+def test_clutter_renders_with_the_labels_of_the_bare_city(space, bank, tmp_path):
+    """Everything on (real trees, street details, cars, pools, shrubs), one full-size tile: the labels
+    are those of the same city without clutter, pools are blue and lane markings show on the road."""
+    from dataclasses import replace
+
+    from meta_sim.sim.layout import LayoutParams
+
+    knobs = {"tree_size": "real", "street_details": True, "car_density": 0.8, "pool_share": 1.0,
+             "shrub_density": 0.8}
+    cluttered = replace(space, name="cluttered", layout={**space.layout, **knobs})
+    seed, full = 1, {"tile_px": 384, "pixel_size_m": 0.3}
+    settings = RenderSettings(space=cluttered, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "on",
+                              n_tiles=1, **full)
+    render_jobs([single_job(cluttered, cluttered.validate(_design(space, 5, 9)), seed)], settings)
+    on = tiles.read_tile(next((tmp_path / "on").glob("*.exr")))
+    _, (off,) = _render(space, [bank], tmp_path / "off", _design(space, 5, 9), n_tiles=1, seed=seed, **full)
+    assert on.rgb.shape == (384, 384, 3) and np.isfinite(on.rgb).all()
+    assert np.array_equal(on.instance, off.instance) and np.array_equal(on.roof_class, off.roof_class)
+    assert (on.instance > 0).mean() > 0.05
+    layout, rects = layout_for_tiles(seed, 1, 115.2, LayoutParams(**knobs))
+    rect = rects[0]
+    # Where nothing of the clutter stands, roofs look as without it (trees may shade a few of them).
+    roofs = _erode(on.instance > 0, 2)
+    same = np.abs(on.rgb - off.rgb).max(axis=-1) < 1e-4
+    assert same[roofs].mean() > 0.7
+    water = _erode(_paint(layout, layout.pools, rect, 384, 0.3), 3)  # inside the coping
+    assert water.sum() > 50
+    blue = on.rgb[water & ~_paint(layout, layout.trees, rect, 384, 0.3)]
+    assert len(blue) > 20 and np.median(blue[:, 2]) > 2 * np.median(blue[:, 0])
+    lines = _paint(layout, layout.markings, rect, 384, 0.3)
+    road = _paint(layout, layout.roads, rect, 384, 0.3) & ~_paint(
+        layout, [*layout.markings, *layout.cars, *layout.trees], rect, 384, 0.3)
+    lines &= ~_paint(layout, [*layout.cars, *layout.trees], rect, 384, 0.3)
+    assert lines.sum() > 30 and road.sum() > 1000
+    luminance = on.rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    assert np.median(luminance[lines]) > 2.5 * np.median(luminance[road])

@@ -319,3 +319,19 @@ def test_stage_generators_are_default_rngs_spawned_streams_without_generator_spa
     monkeypatch.setattr(layout_module.np.random, "Generator", OldGenerator)
     assert [g.random(4).tolist() for g in layout_module.stage_generators(11, 5)] == expected
     assert json.dumps(generate_layout(11, 300.0, 300.0).to_dict()) == before
+
+
+# Published benchmarks and tile caches were rendered from these layouts: the default must never move.
+DEFAULT_LAYOUT_SHA256 = {
+    0: "8cf954ea4158d2ef6908ab8f992ed1aec1a6d78b44bf88d1144d7a3a0f59587f",
+    1: "f781d59ac2955262b0374c60f0866c15a9ecad57c02def1d48c4648572d19f48",
+    7: "76b218b4ee4016ff643c5863d295ad9062caaad6e96a3fbe2bac5a0c4266620b",
+}
+
+
+@pytest.mark.parametrize("seed", sorted(DEFAULT_LAYOUT_SHA256))
+def test_default_layout_is_unchanged(seed):
+    import hashlib
+
+    text = json.dumps(generate_layout(seed, 400, 300).to_dict(), sort_keys=True)
+    assert hashlib.sha256(text.encode()).hexdigest() == DEFAULT_LAYOUT_SHA256[seed]

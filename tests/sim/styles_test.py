@@ -133,7 +133,7 @@ def test_building_mesh_of_a_turned_building_lies_on_its_outline(roof):
 
 def test_road_mesh_puts_dirt_roads_in_their_own_slot():
     roads = [Road(rect_polygon(0, 0, 10, 4)), Road(rect_polygon(0, 5, 10, 8), "dirt")]
-    assert meshes.road_mesh(roads).arrays()["material"].tolist() == [meshes.ASPHALT, meshes.DIRT]
+    assert meshes.road_mesh(roads).arrays()["material"].tolist() == [meshes.ROAD_ASPHALT, meshes.ROAD_DIRT]
 
 
 # --- styled cities: geometry ------------------------------------------------------------------------

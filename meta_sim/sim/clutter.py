@@ -1,0 +1,784 @@
+"""Street details, clutter and real-sized trees of a city: pure numpy, no ``bpy``.
+
+`layout.generate_layout` calls in here when a `LayoutParams` knob asks for
+more than today's city (all of them are off by default):
+
+* street details: a kerb and a concrete sidewalk inside the verge along every
+  street side of a block, a driveway from each house's front to the street,
+  paved yards (the whole lot) on commercial and industrial lots, with
+  asphalt parking lots and painted stalls beside their buildings,
+  and lane markings on the roads (a dashed centre line on streets; a double
+  centre line and dashed lane lines on avenues), stopping short of junctions;
+* cars parked along the kerbs, on driveways and in parking lots, and a few
+  driving in the lanes;
+* swimming pools in the back yards of houses whose lot has room;
+* shrubs: hedges along lot edges and bushes around houses;
+* trees of real sizes (``tree_size="real"``): rows along the verges and
+  groups in yards and parks, their crowns clear of every roof.
+
+Everything here is ground clutter: the label passes see it as background.
+This module knows nothing of `layout` (which imports it): it takes blocks,
+lots and roads as plain rectangles and buildings through their ``bbox``,
+``kind`` and ``lot_index``. Its items are axis-aligned rectangles, except
+cars, which carry a heading.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..core.errors import MetaSimError
+
+Point = tuple[float, float]
+Polygon = tuple[Point, ...]
+Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
+
+TREE_SIZES = ("small", "real")
+CAR_COLOURS = {"white": 0.27, "silver": 0.17, "grey": 0.17, "black": 0.23, "red": 0.08, "blue": 0.08}
+PAVING_KINDS = ("kerb", "sidewalk", "driveway", "parking", "yard")
+PAVED_LOTS = ("office", "industrial", "highrise")  # their lots are paved all over (a "yard")
+CAR_LENGTH_M = (4.2, 4.9)
+CAR_WIDTH_M = (1.75, 1.9)
+KERB_M = 0.3
+SIDEWALK_M = (1.5, 2.0)
+DRIVEWAY_M = (2.8, 3.4)
+STALL_M = (2.5, 5.0)  # width, depth of a parking stall
+TRAFFIC_PER_100M = 1.5  # cars driving per lane and 100 m of road at car_density 1
+AISLE_M = 6.0
+LINE_M = 0.3  # painted line width: wider than real paint, so a 0.3 m pixel never falls between its edges
+DASH_M = (3.0, 6.0)  # dash, gap of a dashed line
+ZEBRA_M = (0.5, 0.6)  # bar, gap of a zebra crossing
+ZEBRA_DEPTH_M = 3.0  # length of its bars along the road
+TREE_DIAMETER_M = (4.0, 15.0)
+STREET_TREE_DIAMETER_M = 10.0  # a verge tree wider than this would shade half the street
+TREE_HEIGHT_M = (5.0, 20.0)
+CLEARANCE_M = 0.05  # between a crown and a roof outline, after rounding
+
+
+def _r(value: float) -> float:
+    return round(float(value), 4)
+
+
+def _rect_polygon(x0: float, y0: float, x1: float, y1: float) -> Polygon:
+    x0, y0, x1, y1 = _r(x0), _r(y0), _r(x1), _r(y1)
+    return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+
+
+def _polygon_bbox(polygon: Polygon) -> Rect:
+    xs = [p[0] for p in polygon]
+    ys = [p[1] for p in polygon]
+    return (min(xs), min(ys), max(xs), max(ys))
+
+
+def _read_rect(data: Any, where: str) -> Polygon:
+    polygon = tuple((float(x), float(y)) for x, y in data)
+    x0, y0, x1, y1 = _polygon_bbox(polygon) if polygon else (0.0, 0.0, 0.0, 0.0)
+    if len(polygon) != 4 or not (x1 > x0 and y1 > y0) or not all(map(math.isfinite, (x0, y0, x1, y1))):
+        raise MetaSimError(f"{where}: polygon must be a rectangle of four corners; the layout file is damaged")
+    return polygon
+
+
+def _overlaps(a: Rect, b: Rect, margin: float = 0.0) -> bool:
+    return a[0] < b[2] + margin and b[0] < a[2] + margin and a[1] < b[3] + margin and b[1] < a[3] + margin
+
+
+def _grow(rect: Rect, margin: float) -> Rect:
+    return (rect[0] - margin, rect[1] - margin, rect[2] + margin, rect[3] + margin)
+
+
+# ---------------------------------------------------------------- items
+
+
+@dataclass(frozen=True)
+class Paving:
+    """A paved ground rectangle: kerb, sidewalk, driveway, yard (concrete; a yard is a whole paved
+    commercial or industrial lot, under its building) or parking lot (asphalt, off every roof)."""
+
+    polygon: Polygon
+    kind: str
+
+    @property
+    def bbox(self) -> Rect:
+        return _polygon_bbox(self.polygon)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"polygon": [list(p) for p in self.polygon], "kind": self.kind}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Paving:
+        if data["kind"] not in PAVING_KINDS:
+            raise MetaSimError(f"paving kind {data['kind']!r} is not one of {PAVING_KINDS}; the layout file is damaged")
+        return cls(_read_rect(data["polygon"], "paving"), str(data["kind"]))
+
+
+@dataclass(frozen=True)
+class Marking:
+    """A painted line piece on a road or a parking lot (a thin white rectangle)."""
+
+    polygon: Polygon
+
+    @property
+    def bbox(self) -> Rect:
+        return _polygon_bbox(self.polygon)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"polygon": [list(p) for p in self.polygon]}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Marking:
+        return cls(_read_rect(data["polygon"], "marking"))
+
+
+@dataclass(frozen=True)
+class Pool:
+    """A swimming pool: `polygon` is the outer edge of its coping, `coping_m` wide around the water."""
+
+    polygon: Polygon
+    coping_m: float
+
+    @property
+    def bbox(self) -> Rect:
+        return _polygon_bbox(self.polygon)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"polygon": [list(p) for p in self.polygon], "coping_m": self.coping_m}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Pool:
+        pool = cls(_read_rect(data["polygon"], "pool"), float(data["coping_m"]))
+        x0, y0, x1, y1 = pool.bbox
+        if not 0.0 < pool.coping_m < min(x1 - x0, y1 - y0) / 2:
+            raise MetaSimError("pool: coping_m must be positive and leave water; the layout file is damaged")
+        return pool
+
+
+@dataclass(frozen=True)
+class Shrub:
+    """A hedge piece or a bush: a rectangle of foliage `height_m` tall."""
+
+    polygon: Polygon
+    height_m: float
+
+    @property
+    def bbox(self) -> Rect:
+        return _polygon_bbox(self.polygon)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"polygon": [list(p) for p in self.polygon], "height_m": self.height_m}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Shrub:
+        shrub = cls(_read_rect(data["polygon"], "shrub"), float(data["height_m"]))
+        if not 0.0 < shrub.height_m <= 5.0:
+            raise MetaSimError("shrub: height_m must be in (0, 5]; the layout file is damaged")
+        return shrub
+
+
+@dataclass(frozen=True)
+class Car:
+    """A car: a `length_m` x `width_m` box centred on (x, y), its front towards `heading_deg`
+    (counter-clockwise from east), painted `colour`."""
+
+    x: float
+    y: float
+    heading_deg: float
+    length_m: float
+    width_m: float
+    colour: str
+
+    @property
+    def corners(self) -> Polygon:
+        """The outline, counter-clockwise from the rear right corner."""
+        a = math.radians(self.heading_deg)
+        fx, fy = math.cos(a) * self.length_m / 2, math.sin(a) * self.length_m / 2
+        sx, sy = -math.sin(a) * self.width_m / 2, math.cos(a) * self.width_m / 2
+        return tuple((self.x + i * fx + j * sx, self.y + i * fy + j * sy)
+                     for i, j in ((-1, -1), (1, -1), (1, 1), (-1, 1)))
+
+    @property
+    def bbox(self) -> Rect:
+        return _polygon_bbox(self.corners)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"x": self.x, "y": self.y, "heading_deg": self.heading_deg, "length_m": self.length_m,
+                "width_m": self.width_m, "colour": self.colour}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Car:
+        car = cls(float(data["x"]), float(data["y"]), float(data["heading_deg"]), float(data["length_m"]),
+                  float(data["width_m"]), str(data["colour"]))
+        if car.colour not in CAR_COLOURS:
+            raise MetaSimError(f"car colour {car.colour!r} is not one of {tuple(CAR_COLOURS)}; "
+                               "the layout file is damaged")
+        if not (0.5 < car.length_m < 20.0 and 0.5 < car.width_m < 5.0):
+            raise MetaSimError("car: length_m and width_m must be a car's; the layout file is damaged")
+        return car
+
+
+@dataclass(frozen=True)
+class Clutter:
+    """What `generate_clutter` adds to a city, and where trees must keep their trunks off."""
+
+    pavings: tuple[Paving, ...] = ()
+    markings: tuple[Marking, ...] = ()
+    cars: tuple[Car, ...] = ()
+    pools: tuple[Pool, ...] = ()
+    shrubs: tuple[Shrub, ...] = ()
+    no_trunks: tuple[Rect, ...] = ()  # driveways, parking lots, pools: trunks stay off them
+
+
+# ---------------------------------------------------------------- lot frames
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """A lot seen from its street: u along the frontage, v back from the front edge."""
+
+    rect: Rect
+    front: str  # "S", "N", "W" or "E"
+
+    @property
+    def frontage(self) -> float:
+        x0, y0, x1, y1 = self.rect
+        return x1 - x0 if self.front in "SN" else y1 - y0
+
+    @property
+    def depth(self) -> float:
+        x0, y0, x1, y1 = self.rect
+        return y1 - y0 if self.front in "SN" else x1 - x0
+
+    @property
+    def v_heading(self) -> float:
+        """World heading (degrees) of the +v direction, into the lot."""
+        return {"S": 90.0, "N": 270.0, "W": 0.0, "E": 180.0}[self.front]
+
+    def world(self, u0: float, u1: float, v0: float, v1: float) -> Rect:
+        x0, y0, x1, y1 = self.rect
+        return {
+            "S": (x0 + u0, y0 + v0, x0 + u1, y0 + v1),
+            "N": (x0 + u0, y1 - v1, x0 + u1, y1 - v0),
+            "W": (x0 + v0, y0 + u0, x0 + v1, y0 + u1),
+            "E": (x1 - v1, y0 + u0, x1 - v0, y0 + u1),
+        }[self.front]
+
+    def local(self, rect: Rect) -> tuple[float, float, float, float]:
+        """(u0, u1, v0, v1) of a world rectangle."""
+        x0, y0, x1, y1 = self.rect
+        a0, b0, a1, b1 = rect
+        return {
+            "S": (a0 - x0, a1 - x0, b0 - y0, b1 - y0),
+            "N": (a0 - x0, a1 - x0, y1 - b1, y1 - b0),
+            "W": (b0 - y0, b1 - y0, a0 - x0, a1 - x0),
+            "E": (b0 - y0, b1 - y0, x1 - a1, x1 - a0),
+        }[self.front]
+
+
+def _front(lot: Rect, block: Rect, road_sides: frozenset, verge: float, roof: Rect | None) -> str | None:
+    """The side of a lot that faces a street across the verge (the one nearest its roof if several)."""
+    lx0, ly0, lx1, ly1 = lot
+    bx0, by0, bx1, by1 = block
+    on_street = {
+        "S": abs(ly0 - (by0 + verge)) < 1e-3, "N": abs(ly1 - (by1 - verge)) < 1e-3,
+        "W": abs(lx0 - (bx0 + verge)) < 1e-3, "E": abs(lx1 - (bx1 - verge)) < 1e-3,
+    }
+    sides = [s for s in "SNWE" if s in road_sides and on_street[s]]
+    if not sides:
+        return None
+    if roof is None:
+        return sides[0]
+    gaps = {"S": roof[1] - ly0, "N": ly1 - roof[3], "W": roof[0] - lx0, "E": lx1 - roof[2]}
+    return min(sides, key=lambda s: gaps[s])
+
+
+# ---------------------------------------------------------------- streets
+
+
+def _axis(road: Rect) -> int:
+    """0 if a road runs along x, 1 along y."""
+    return 0 if road[2] - road[0] >= road[3] - road[1] else 1
+
+
+def _subtract(lo: float, hi: float, cuts: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The parts of [lo, hi] outside every cut interval."""
+    pieces = [(lo, hi)]
+    for c0, c1 in cuts:
+        pieces = [p for a, b in pieces for p in ((a, min(b, c0)), (max(a, c1), b)) if p[1] > p[0]]
+    return pieces
+
+
+def _junctions(road: Rect, roads: Sequence[Rect]) -> list[tuple[float, float]]:
+    """Along-axis extents of the crossing roads that overlap a road."""
+    k = _axis(road)
+    return [(other[k], other[k + 2]) for other in roads
+            if other is not road and _axis(other) != k and _overlaps(road, other)]
+
+
+def _strip(road: Rect, a0: float, a1: float, c0: float, c1: float) -> Rect:
+    """A rectangle of a road from along-axis a0..a1 and across-axis c0..c1."""
+    return (a0, c0, a1, c1) if _axis(road) == 0 else (c0, a0, c1, a1)
+
+
+def _dashes(a0: float, a1: float, phase: float) -> list[tuple[float, float]]:
+    dash, gap = DASH_M
+    out, pos = [], a0 + phase
+    while pos + dash <= a1:
+        out.append((pos, pos + dash))
+        pos += dash + gap
+    return out
+
+
+def _crosswalk(road: Rect, a0: float, a1: float) -> list[Marking]:
+    """Zebra stripes across a road between along-axis a0 and a1: bars along the traffic, 1 m apart."""
+    k = _axis(road)
+    c_lo, c_hi = road[1 - k], road[3 - k]
+    bars = np.arange(c_lo + 0.6, c_hi - 0.6 - ZEBRA_M[0] + 1e-9, ZEBRA_M[0] + ZEBRA_M[1])
+    return [Marking(_rect_polygon(*_strip(road, a0, a1, c, c + ZEBRA_M[0]))) for c in bars]
+
+
+def _road_markings(rng: np.random.Generator, roads: Sequence[Rect], road_width: float) -> list[Marking]:
+    """A dashed centre line on streets; a double centre line and two dashed lane lines on avenues;
+    zebra crossings at some junctions, where the lines stop short."""
+    out = []
+    for road in roads:
+        k = _axis(road)
+        lo, hi = road[k], road[k + 2]
+        c_lo, c_hi = road[1 - k], road[3 - k]
+        centre, width = (c_lo + c_hi) / 2, c_hi - c_lo
+        cuts = []
+        for a, b in _junctions(road, roads):
+            if rng.random() < 0.5:
+                for z0, z1 in ((a - 1.0 - ZEBRA_DEPTH_M, a - 1.0), (b + 1.0, b + 1.0 + ZEBRA_DEPTH_M)):
+                    if lo <= z0 and z1 <= hi:
+                        out += _crosswalk(road, z0, z1)
+                cuts.append((a - 2.0 - ZEBRA_DEPTH_M, b + 2.0 + ZEBRA_DEPTH_M))
+            else:
+                cuts.append((a - 1.5, b + 1.5))
+        for a0, a1 in _subtract(lo + 1.0, hi - 1.0, cuts):
+            if a1 - a0 < DASH_M[0]:
+                continue
+            if width > 1.4 * road_width:
+                for offset in (-0.3, 0.3):
+                    c = centre + offset
+                    out.append(Marking(_rect_polygon(*_strip(road, a0, a1, c - LINE_M / 2, c + LINE_M / 2))))
+                for offset in (-width / 4, width / 4):
+                    c = centre + offset
+                    out += [Marking(_rect_polygon(*_strip(road, d0, d1, c - LINE_M / 2, c + LINE_M / 2)))
+                            for d0, d1 in _dashes(a0, a1, 1.0)]
+            else:
+                out += [Marking(_rect_polygon(*_strip(road, d0, d1, centre - LINE_M / 2, centre + LINE_M / 2)))
+                        for d0, d1 in _dashes(a0, a1, 1.0)]
+    return out
+
+
+def _sidewalks(rng: np.random.Generator, blocks, verge: float) -> list[Paving]:
+    """A kerb at the road edge and a sidewalk at the lot side of the verge, along every street side."""
+    out = []
+    for rect, sides in blocks:
+        x0, y0, x1, y1 = rect
+        width = rng.uniform(*SIDEWALK_M)
+        for side in sorted(sides):
+            for kind, near, far in (("kerb", 0.0, KERB_M), ("sidewalk", verge - 0.3 - width, verge - 0.3)):
+                strip = {"S": (x0, y0 + near, x1, y0 + far), "N": (x0, y1 - far, x1, y1 - near),
+                         "W": (x0 + near, y0, x0 + far, y1), "E": (x1 - far, y0, x1 - near, y1)}[side]
+                out.append(Paving(_rect_polygon(*strip), kind))
+    return out
+
+
+def _colour(rng: np.random.Generator) -> str:
+    names = list(CAR_COLOURS)
+    return names[int(rng.choice(len(names), p=list(CAR_COLOURS.values())))]
+
+
+def _car(rng: np.random.Generator, x: float, y: float, heading: float) -> Car:
+    return Car(_r(x), _r(y), _r(heading), _r(rng.uniform(*CAR_LENGTH_M)), _r(rng.uniform(*CAR_WIDTH_M)),
+               _colour(rng))
+
+
+def _kerb_cars(rng: np.random.Generator, roads: Sequence[Rect], mouths: Sequence[Rect], density: float) -> list[Car]:
+    """Cars parked along both kerbs of every road, clear of junctions and driveway mouths."""
+    out = []
+    for road in roads:
+        k = _axis(road)
+        lo, hi = road[k], road[k + 2]
+        for side, edge in ((-1, road[1 - k]), (1, road[3 - k])):
+            touching = [m for m in mouths if abs((m[3 - k] if side < 0 else m[1 - k]) - edge) < 1e-3
+                        and m[k] < hi and m[k + 2] > lo]
+            cuts = [(a - 6.0, b + 6.0) for a, b in _junctions(road, roads)]
+            cuts += [(m[k] - 0.8, m[k + 2] + 0.8) for m in touching]
+            across = edge - side * (0.4 + CAR_WIDTH_M[1] / 2)  # room for a slight slant
+            heading = (0.0 if side < 0 else 180.0) + (90.0 if k == 1 else 0.0)
+            for a0, a1 in _subtract(lo, hi, cuts):
+                pos = a0 + rng.uniform(0.0, 3.0)
+                while pos + CAR_LENGTH_M[1] <= a1:
+                    length = CAR_LENGTH_M[1]
+                    if rng.random() < density:
+                        c = across + rng.uniform(-0.1, 0.1)
+                        along = pos + length / 2
+                        x, y = (along, c) if k == 0 else (c, along)
+                        out.append(_car(rng, x, y, heading + rng.uniform(-2.0, 2.0)))
+                    pos += length + rng.uniform(0.8, 2.5)
+    return out
+
+
+def _traffic(rng: np.random.Generator, roads: Sequence[Rect], parked: Sequence[Car], road_width: float,
+             density: float) -> list[Car]:
+    """Cars driving in the lanes (right-hand traffic), clear of junctions and of the parked cars."""
+    out: list[Car] = []
+    parked_boxes = [_grow(c.bbox, 0.3) for c in parked]
+    for road in roads:
+        k = _axis(road)
+        lo, hi = road[k], road[k + 2]
+        c_lo, c_hi = road[1 - k], road[3 - k]
+        centre, width = (c_lo + c_hi) / 2, c_hi - c_lo
+        if width > 1.4 * road_width:
+            lanes = (-width / 8, -(width / 4 + 1.1), width / 8, width / 4 + 1.1)
+        else:
+            lanes = (-1.6, 1.6) if width >= 7.0 else (0.0,)
+        junctions = [(a - 1.0, b + 1.0) for a, b in _junctions(road, roads)]
+        taken = [box for box in parked_boxes if _overlaps(box, road)]
+        for offset in lanes:
+            forward = offset < 0 if offset else rng.random() < 0.5
+            heading = (0.0 if forward else 180.0) + (90.0 if k == 1 else 0.0)
+            for _ in range(rng.poisson(density * TRAFFIC_PER_100M * (hi - lo) / 100.0)):
+                along = rng.uniform(lo + 3.0, hi - 3.0) if hi - lo > 6.0 else (lo + hi) / 2
+                across = centre + offset
+                car = _car(rng, *((along, across) if k == 0 else (across, along)), heading + rng.uniform(-1.0, 1.0))
+                box = car.bbox
+                on_road = box[0] >= road[0] and box[1] >= road[1] and box[2] <= road[2] and box[3] <= road[3]
+                free = not any(a < along < b for a, b in junctions) and not any(_overlaps(box, t) for t in taken)
+                if on_road and free:
+                    out.append(car)
+                    taken.append(_grow(box, 0.3))
+    return out
+
+
+# ---------------------------------------------------------------- lots
+
+
+def _driveway(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Frame, roof: Rect, verge: float,
+              density: float) -> tuple[Rect, list[Car]]:
+    """A concrete strip from the street to the house (beside it if the side yard has room), with cars."""
+    u0, u1, v0, v1 = frame.local(roof)
+    width = rng.uniform(*DRIVEWAY_M)
+    left, right = u0, frame.frontage - u1
+    on_right = right > left if abs(right - left) > 0.5 else rng.random() < 0.5
+    gap = right if on_right else left
+    if gap >= width + 0.6:  # beside the house, to a garage at the side
+        a = u1 + 0.3 if on_right else u0 - 0.3 - width
+        end = min(v1, v0 + rng.uniform(4.0, 9.0))
+    else:  # to the house front
+        a = u1 - width - rng.uniform(0.3, 1.5) if on_right else u0 + rng.uniform(0.3, 1.5)
+        end = v0
+    a = float(np.clip(a, 0.2, frame.frontage - width - 0.2))
+    cars = []
+    length = CAR_LENGTH_M[1]
+    for n in range(2):  # inside the lot (the sidewalk stays free), clear of the roof
+        v_mid = end - 0.3 - length / 2 - n * (length + 0.6)
+        if v_mid - length / 2 < 0.3 or car_rng.random() >= density:
+            break
+        cx, cy, _, _ = frame.world(a + width / 2, a + width / 2, v_mid, v_mid)
+        heading = frame.v_heading + (180.0 if car_rng.random() < 0.3 else 0.0) + car_rng.uniform(-3.0, 3.0)
+        cars.append(_car(car_rng, cx, cy, heading))
+    return frame.world(a, a + width, -verge, end), cars
+
+
+def _parking_lot(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Frame, roof: Rect, verge: float,
+                 density: float) -> tuple[list[Paving], list[Marking], list[Car]]:
+    """The largest free strip of a lot beside its building, paved, with stalls and parked cars."""
+    u0, u1, v0, v1 = frame.local(roof)
+    f, d = frame.frontage, frame.depth
+    candidates = [(0.5, f - 0.5, 0.5, v0 - 0.5), (0.5, f - 0.5, v1 + 0.5, d - 0.5),
+                  (0.5, u0 - 0.5, 0.5, d - 0.5), (u1 + 0.5, f - 0.5, 0.5, d - 0.5)]
+    module = STALL_M[1] + AISLE_M
+    fitting = [c for c in candidates if min(c[1] - c[0], c[3] - c[2]) >= module]
+    if not fitting:
+        return [], [], []
+    cu0, cu1, cv0, cv1 = max(fitting, key=lambda c: (c[1] - c[0]) * (c[3] - c[2]))
+    region = frame.world(cu0, cu1, cv0, cv1)
+    pavings = [Paving(_rect_polygon(*region), "parking")]
+    if cv0 < 1.0:  # an entrance from the street
+        width = min(6.0, cu1 - cu0)
+        a = cu0 if rng.random() < 0.5 else cu1 - width
+        pavings.append(Paving(_rect_polygon(*frame.world(a, a + width, -verge, cv0)), "driveway"))
+    x0, y0, x1, y1 = region
+    k = 0 if x1 - x0 >= y1 - y0 else 1  # rows of stalls run along the long side
+    lo, hi = region[k], region[k + 2]
+    c_lo, c_hi = region[1 - k], region[3 - k]
+    rows = []  # (near, far, +1 if its aisle lies on the far side else -1)
+    pos = c_lo
+    while pos + module <= c_hi + 1e-9:
+        double = pos + module + STALL_M[1] <= c_hi + 1e-9
+        rows.append((pos, pos + STALL_M[1], 1))
+        if double:
+            rows.append((pos + module, pos + module + STALL_M[1], -1))
+        pos += module + STALL_M[1] * double
+    n = int((hi - lo - 1.0) // STALL_M[0])
+    start = lo + (hi - lo - n * STALL_M[0]) / 2
+    markings, cars = [], []
+    for near, far, facing in rows:
+        for i in range(n + 1):
+            a = start + i * STALL_M[0]
+            markings.append(Marking(_rect_polygon(*_strip(region, a - LINE_M / 2, a + LINE_M / 2, near, far))))
+        for i in range(n):
+            if car_rng.random() >= density:
+                continue
+            along = start + (i + 0.5) * STALL_M[0] + car_rng.uniform(-0.15, 0.15)
+            across = (near + far) / 2  # a 4.9 m car all but fills a 5 m stall
+            nose_in = car_rng.random() < 0.8
+            heading = (90.0 if k == 0 else 0.0) + (0.0 if (facing > 0) == nose_in else 180.0)
+            x, y = (along, across) if k == 0 else (across, along)
+            cars.append(_car(car_rng, x, y, heading + car_rng.uniform(-1.5, 1.5)))
+    return pavings, markings, cars
+
+
+def _pool(rng: np.random.Generator, frame: _Frame, roof: Rect) -> Pool | None:
+    """A pool in the back yard, 1.5 m behind the house and 1 m inside the lot, if it fits."""
+    _, _, _, v1 = frame.local(roof)
+    length, width, coping = rng.uniform(6.0, 10.0), rng.uniform(3.0, 5.0), rng.uniform(0.3, 0.6)
+    free_u = frame.frontage - 2.0 - (length + 2 * coping)
+    free_v = frame.depth - 1.0 - (v1 + 1.5) - (width + 2 * coping)
+    if free_u < 0 or free_v < 0:
+        return None
+    a = 1.0 + rng.uniform(0.0, free_u)
+    b = v1 + 1.5 + rng.uniform(0.0, free_v)
+    return Pool(_rect_polygon(*frame.world(a, a + length + 2 * coping, b, b + width + 2 * coping)), _r(coping))
+
+
+def _shrubs(rng: np.random.Generator, frame: _Frame, roof: Rect | None, density: float,
+            taken: list[Rect]) -> list[Shrub]:
+    """Hedges along a lot's edges (in pieces, broken where something else stands) and bushes by its house."""
+    out: list[Shrub] = []
+    lot = frame.rect
+    blocked = list(taken) + ([_grow(roof, 0.2)] if roof else [])
+
+    def add(rect: Rect, height: float) -> None:
+        inside = rect[0] >= lot[0] and rect[1] >= lot[1] and rect[2] <= lot[2] and rect[3] <= lot[3]
+        if inside and not any(_overlaps(rect, b, -0.01) for b in blocked):  # touching pieces make one hedge
+            shrub = Shrub(_rect_polygon(*rect), _r(height))
+            out.append(shrub)
+            blocked.append(shrub.bbox)
+
+    f, d = frame.frontage, frame.depth
+    for edge in ("front", "back", "left", "right"):
+        if rng.random() >= density * (0.35 if edge == "front" else 0.6):
+            continue
+        thick, base = rng.uniform(0.6, 1.1), rng.uniform(0.9, 1.8)
+        length = f if edge in ("front", "back") else d
+        pos = 0.1
+        while pos < length - 0.6:
+            piece = min(rng.uniform(3.0, 8.0), length - 0.1 - pos)
+            u_or_v = (pos, pos + piece)
+            if edge == "front":
+                rect = frame.world(*u_or_v, 0.1, 0.1 + thick)
+            elif edge == "back":
+                rect = frame.world(*u_or_v, d - 0.1 - thick, d - 0.1)
+            elif edge == "left":
+                rect = frame.world(0.1, 0.1 + thick, *u_or_v)
+            else:
+                rect = frame.world(f - 0.1 - thick, f - 0.1, *u_or_v)
+            add(rect, base * rng.uniform(0.85, 1.15))
+            pos += piece
+    if roof is not None:
+        x0, y0, x1, y1 = roof
+        for _ in range(rng.poisson(density * 2 * ((x1 - x0) + (y1 - y0)) / 5.0)):
+            size = rng.uniform(0.8, 2.2)
+            off = 0.3 + size / 2 + rng.uniform(0.0, 1.0)
+            side = int(rng.integers(4))
+            t = rng.uniform(0.0, 1.0)
+            cx, cy = {0: (x0 + t * (x1 - x0), y0 - off), 1: (x0 + t * (x1 - x0), y1 + off),
+                      2: (x0 - off, y0 + t * (y1 - y0)), 3: (x1 + off, y0 + t * (y1 - y0))}[side]
+            w, h = size * rng.uniform(0.8, 1.25), size
+            add((cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2), rng.uniform(0.5, 1.6))
+    return out
+
+
+def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, roads: Sequence[Rect],
+                     verge_m: float, road_width_m: float) -> Clutter:
+    """Street details, cars, pools and shrubs for a city (see the module docstring).
+
+    `blocks` are (rect, road sides) pairs, `lots` (rect, block index) pairs. Each knob draws from its
+    own stream, so changing `params.car_density` moves no pool, shrub or paving.
+    """
+    street_rng, car_rng, pool_rng, shrub_rng = (
+        np.random.Generator(np.random.PCG64(child))
+        for child in np.random.SeedSequence(int(rng.integers(2**63))).spawn(4))
+    by_lot = {b.lot_index: b for b in buildings}
+    pavings: list[Paving] = []
+    markings: list[Marking] = []
+    cars: list[Car] = []
+    pools: list[Pool] = []
+    shrubs: list[Shrub] = []
+    no_trunks: list[Rect] = []
+    taken: dict[int, list[Rect]] = {}
+    if params.street_details:
+        pavings += _sidewalks(street_rng, blocks, verge_m)
+        markings += _road_markings(street_rng, roads, road_width_m)
+    for index, (rect, block_index) in enumerate(lots):
+        building = by_lot.get(index)
+        if building is None:
+            continue
+        block_rect, sides = blocks[block_index]
+        roof = building.bbox
+        front = _front(rect, block_rect, sides, verge_m, roof)
+        if front is None:
+            continue
+        frame = _Frame(rect, front)
+        here = taken.setdefault(index, [])
+        # Every lot draws its driveway or parking lot whatever the knobs, so the streams stay aligned.
+        if building.kind in ("office", "industrial", "apartment"):
+            lot_pavings, lot_markings, lot_cars = _parking_lot(street_rng, car_rng, frame, roof, verge_m,
+                                                               params.car_density)
+        else:
+            lot_pavings, lot_markings, lot_cars = [], [], []
+        if not lot_pavings and building.kind in ("residential", "apartment"):
+            drive, lot_cars = _driveway(street_rng, car_rng, frame, roof, verge_m, params.car_density)
+            lot_pavings = [Paving(_rect_polygon(*drive), "driveway")]
+        if building.kind in PAVED_LOTS:
+            if not any(p.kind == "driveway" for p in lot_pavings):  # an entrance from the street
+                width = min(6.0, frame.frontage - 1.0)
+                a = street_rng.uniform(0.5, frame.frontage - 0.5 - width)
+                lot_pavings.append(Paving(_rect_polygon(*frame.world(a, a + width, -verge_m, 0.0)), "driveway"))
+            lot_pavings.insert(0, Paving(_rect_polygon(*rect), "yard"))
+        here += [p.bbox for p in lot_pavings]
+        if params.street_details:
+            pavings += lot_pavings
+            markings += lot_markings
+            if params.car_density > 0:
+                cars += lot_cars
+        if building.kind == "residential" and params.pool_share > 0 and pool_rng.random() < params.pool_share:
+            pool = _pool(pool_rng, frame, roof)
+            if pool is not None:
+                pools.append(pool)
+                here.append(_grow(pool.bbox, 0.3))
+        no_trunks += here
+    if params.car_density > 0:
+        mouths = [p.bbox for p in pavings if p.kind == "driveway"]
+        parked = _kerb_cars(car_rng, roads, mouths, 0.6 * params.car_density)
+        cars += parked + _traffic(car_rng, roads, cars + parked, road_width_m, params.car_density)
+    if params.shrub_density > 0:
+        for index, (rect, block_index) in enumerate(lots):
+            building = by_lot.get(index)
+            block_rect, sides = blocks[block_index]
+            roof = building.bbox if building else None
+            front = _front(rect, block_rect, sides, verge_m, roof) or "S"
+            if building is None or building.kind in ("residential", "apartment"):
+                shrubs += _shrubs(shrub_rng, _Frame(rect, front), roof, params.shrub_density, taken.get(index, []))
+    return Clutter(tuple(pavings), tuple(markings), tuple(cars), tuple(pools), tuple(shrubs), tuple(no_trunks))
+
+
+# ---------------------------------------------------------------- real trees
+
+
+def _diameter(rng: np.random.Generator, hi: float = TREE_DIAMETER_M[1]) -> float:
+    """Crown diameters skewed to 5-9 m with a tail of big trees."""
+    return float(np.clip(rng.lognormal(math.log(6.8), 0.3), TREE_DIAMETER_M[0], hi))
+
+
+def _height(rng: np.random.Generator, diameter: float) -> float:
+    return float(np.clip(1.2 * diameter + 1.5 + rng.normal(0.0, 1.2), *TREE_HEIGHT_M))
+
+
+class _Buckets:
+    """Boxes filed by the grid cells they touch, so a query looks at the few boxes near a point."""
+
+    CELL_M = 40.0
+
+    def __init__(self, boxes: np.ndarray):
+        self.boxes = boxes
+        self.cells: dict[tuple[int, int], list[int]] = {}
+        for i, (x0, y0, x1, y1) in enumerate(boxes):
+            for cx in range(int(x0 // self.CELL_M), int(x1 // self.CELL_M) + 1):
+                for cy in range(int(y0 // self.CELL_M), int(y1 // self.CELL_M) + 1):
+                    self.cells.setdefault((cx, cy), []).append(i)
+
+    def near(self, x: float, y: float, reach: float) -> np.ndarray:
+        """The boxes of the cells within `reach` of (x, y)."""
+        found: set[int] = set()
+        for cx in range(int((x - reach) // self.CELL_M), int((x + reach) // self.CELL_M) + 1):
+            for cy in range(int((y - reach) // self.CELL_M), int((y + reach) // self.CELL_M) + 1):
+                found.update(self.cells.get((cx, cy), ()))
+        return self.boxes[sorted(found)].reshape(-1, 4)
+
+
+class _Stand:
+    """The trees placed so far, and the test a new crown must pass."""
+
+    def __init__(self, roofs: np.ndarray, no_trunks: np.ndarray, width: float, height: float):
+        self.roofs, self.no_trunks = _Buckets(roofs), _Buckets(no_trunks)
+        self.width, self.height = width, height
+        self._xyr = np.zeros((64, 3))  # grown by doubling; the first len(self.trees) rows are placed
+        self.trees: list[tuple[float, float, float, float]] = []
+
+    @property
+    def xyr(self) -> np.ndarray:
+        return self._xyr[:len(self.trees)]
+
+    def fits(self, x: float, y: float, r: float, overlap: float) -> bool:
+        if x - r < 0 or y - r < 0 or x + r > self.width or y + r > self.height:
+            return False
+        roofs = self.roofs.near(x, y, r + CLEARANCE_M)
+        if len(roofs):
+            dx = np.maximum(np.maximum(roofs[:, 0] - x, x - roofs[:, 2]), 0.0)
+            dy = np.maximum(np.maximum(roofs[:, 1] - y, y - roofs[:, 3]), 0.0)
+            if np.min(np.hypot(dx, dy)) < r + CLEARANCE_M:
+                return False
+        t = self.no_trunks.near(x, y, 0.5)
+        if len(t):
+            if np.any((t[:, 0] - 0.5 < x) & (x < t[:, 2] + 0.5) & (t[:, 1] - 0.5 < y) & (y < t[:, 3] + 0.5)):
+                return False
+        if len(self.xyr):
+            gap = np.hypot(self.xyr[:, 0] - x, self.xyr[:, 1] - y)
+            if np.any(gap < overlap * (self.xyr[:, 2] + r)):
+                return False
+        return True
+
+    def add(self, rng: np.random.Generator, x: float, y: float, diameter: float) -> None:
+        if len(self.trees) == len(self._xyr):
+            self._xyr = np.vstack([self._xyr, np.zeros_like(self._xyr)])
+        self._xyr[len(self.trees)] = (x, y, diameter / 2)
+        self.trees.append((_r(x), _r(y), _r(diameter / 2), _r(_height(rng, diameter))))
+
+
+def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Sequence[Rect], no_trunks,
+               width: float, height: float, verge_m: float,
+               row_offset_m: float) -> list[tuple[float, float, float, float]]:
+    """Trees of real sizes as (x, y, crown radius, height): rows of one kind along verges (trunks
+    `row_offset_m` from the kerb) and groups in yards and parks. Crowns may reach over roads and
+    neighbouring yards but never over a roof outline (the roof boxes given)."""
+    stand = _Stand(np.asarray(roofs, float).reshape(-1, 4), np.asarray(no_trunks, float).reshape(-1, 4),
+                   width, height)
+    for rect, sides in blocks:
+        x0, y0, x1, y1 = rect
+        for side in sorted(sides):
+            if rng.random() >= min(1.0, 0.25 + 0.9 * density):
+                continue
+            lo, hi = (x0, x1) if side in "SN" else (y0, y1)
+            across = {"S": y0 + row_offset_m, "N": y1 - row_offset_m,
+                      "W": x0 + row_offset_m, "E": x1 - row_offset_m}[side]
+            d0 = _diameter(rng, STREET_TREE_DIAMETER_M)
+            pos = lo + verge_m + rng.uniform(0.0, d0 / 2)
+            while pos < hi - verge_m:
+                d = float(np.clip(d0 * rng.uniform(0.85, 1.15), TREE_DIAMETER_M[0], STREET_TREE_DIAMETER_M))
+                x, y = (pos, across) if side in "SN" else (across, pos)
+                if rng.random() < 0.75 + 0.25 * density and stand.fits(x, y, d / 2, 0.45):
+                    stand.add(rng, x, y, d)
+                pos += d0 * rng.uniform(0.9, 1.3)
+    for (x0, y0, x1, y1), built in lots:
+        area = (x1 - x0) * (y1 - y0)
+        groups = rng.poisson(density * area / (250.0 if built else 120.0))
+        for _ in range(groups):
+            cx, cy = rng.uniform(x0, x1), rng.uniform(y0, y1)
+            d0 = _diameter(rng)
+            spread = d0 * rng.uniform(0.3, 0.6)  # neighbours' crowns touch and merge into one canopy
+            for _ in range(1 + rng.poisson(1.5 if built else 3.0)):
+                for attempt in range(4):  # a crown too big for a yard is tried smaller
+                    d = float(np.clip(d0 * rng.uniform(0.75, 1.25) * 0.8 ** attempt, *TREE_DIAMETER_M))
+                    x, y = cx + rng.normal(0.0, spread), cy + rng.normal(0.0, spread)
+                    if x0 < x < x1 and y0 < y < y1 and stand.fits(x, y, d / 2, 0.35):
+                        stand.add(rng, x, y, d)
+                        break
+    return stand.trees

@@ -1,0 +1,239 @@
+"""Street details, clutter and real-sized trees: placement rules, streams, JSON, validation."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from meta_sim.core.errors import MetaSimError
+from meta_sim.sim import meshes, surfaces
+from meta_sim.sim.clutter import CAR_COLOURS
+from meta_sim.sim.layout import VERGE_M, CityLayout, LayoutParams, generate_layout
+
+TOL = 1e-3
+ALL_ON = LayoutParams(tree_size="real", street_details=True, car_density=0.7, pool_share=0.6, shrub_density=0.7)
+
+
+@pytest.fixture(scope="module")
+def city():
+    return generate_layout(7, 700.0, 600.0, ALL_ON)
+
+
+def _boxes(items):
+    return np.array([item.bbox for item in items], dtype=float).reshape(-1, 4)
+
+
+def _overlap(a, b, margin=0.0):
+    """Pairs (i, j) of boxes of `a` and `b` closer than `margin` (positive area overlap for margin 0)."""
+    return ((a[:, None, 0] < b[None, :, 2] + margin) & (b[None, :, 0] < a[:, None, 2] + margin)
+            & (a[:, None, 1] < b[None, :, 3] + margin) & (b[None, :, 1] < a[:, None, 3] + margin))
+
+
+def _inside_any(x, y, boxes):
+    return bool(np.any((boxes[:, 0] - TOL <= x) & (x <= boxes[:, 2] + TOL)
+                       & (boxes[:, 1] - TOL <= y) & (y <= boxes[:, 3] + TOL)))
+
+
+def test_default_params_stay_out_of_the_json_and_new_ones_round_trip(city):
+    assert set(LayoutParams().to_dict()) == {"building_density", "sloped_share", "tree_density", "road_width_m",
+                                             "block_size_m"}
+    assert set(generate_layout(1, 300, 300).to_dict()) == {"version", "seed", "width_m", "height_m", "params",
+                                                           "roads", "lots", "buildings", "trees"}
+    data = json.loads(json.dumps(city.to_dict()))
+    assert data["params"]["tree_size"] == "real" and data["params"]["street_details"] is True
+    assert {"pavings", "markings", "cars", "pools", "shrubs"} <= set(data)
+    assert CityLayout.from_dict(data) == city
+    assert LayoutParams.from_dict({"car_density": 0.5}).car_density == 0.5
+
+
+def test_same_seed_same_clutter_and_the_first_stages_are_untouched(city):
+    assert generate_layout(7, 700.0, 600.0, ALL_ON) == city
+    base = generate_layout(7, 700.0, 600.0)
+    assert city.roads == base.roads and city.lots == base.lots and city.buildings == base.buildings
+    # Cars draw from their own stream: more cars move no paving, pool or shrub.
+    busier = generate_layout(7, 700.0, 600.0, LayoutParams(**{**ALL_ON.to_dict(), "block_size_m": (60.0, 140.0),
+                                                             "car_density": 1.0}))
+    assert busier.pavings == city.pavings and busier.pools == city.pools and busier.shrubs == city.shrubs
+    assert len(busier.cars) > len(city.cars)
+    # Small trees with clutter: today's trees, untouched by the clutter stream.
+    small = generate_layout(7, 700.0, 600.0, LayoutParams(street_details=True, car_density=0.5))
+    assert small.trees == base.trees and small.cars
+
+
+def test_every_kind_of_item_is_there(city):
+    kinds = {p.kind for p in city.pavings}
+    assert kinds == {"kerb", "sidewalk", "driveway", "parking", "yard"}
+    assert len(city.cars) > 50 and len(city.pools) > 3 and len(city.shrubs) > 50 and len(city.markings) > 50
+    assert {c.colour for c in city.cars} == set(CAR_COLOURS)
+    roads = _boxes(city.roads)
+
+    def in_lane(c):  # on a road, away from both its kerbs: driving, not parked
+        for x0, y0, x1, y1 in roads:
+            if x0 < c.x < x1 and y0 < c.y < y1:
+                return min(c.x - x0, x1 - c.x) > 2.5 if x1 - x0 < y1 - y0 else min(c.y - y0, y1 - c.y) > 2.5
+        return False
+    assert sum(map(in_lane, city.cars)) > 5
+
+
+def test_real_trees_have_real_sizes_and_stay_off_roofs(city):
+    trees = city.trees
+    diameters = np.array([2 * t.radius_m for t in trees])
+    heights = np.array([t.height_m for t in trees])
+    assert len(trees) > 200
+    assert diameters.min() >= 4.0 - TOL and diameters.max() <= 15.0 + TOL
+    assert 5.0 <= np.median(diameters) <= 9.0 and np.mean((diameters >= 5) & (diameters <= 9)) > 0.5
+    assert diameters.max() > 10.0  # a tail of big trees
+    assert heights.min() >= 5.0 - TOL and heights.max() <= 20.0 + TOL
+    assert np.corrcoef(diameters, heights)[0, 1] > 0.6
+    roofs = _boxes(city.buildings)
+    for t in trees:
+        assert t.x - t.radius_m >= -TOL and t.y - t.radius_m >= -TOL
+        assert t.x + t.radius_m <= city.width_m + TOL and t.y + t.radius_m <= city.height_m + TOL
+        dx = np.maximum(np.maximum(roofs[:, 0] - t.x, t.x - roofs[:, 2]), 0.0)
+        dy = np.maximum(np.maximum(roofs[:, 1] - t.y, t.y - roofs[:, 3]), 0.0)
+        assert np.hypot(dx, dy).min() >= t.radius_m - TOL, t
+
+
+def _clark_evans(trees, area):
+    """Mean nearest-neighbour distance over its value for random points (below 1: clustered)."""
+    xy = np.array([(t.x, t.y) for t in trees])
+    d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    np.fill_diagonal(d, np.inf)
+    return d.min(axis=1).mean() / (0.5 / math.sqrt(len(xy) / area))
+
+
+def test_real_trees_cluster_in_rows_and_groups(city):
+    area = city.width_m * city.height_m
+    assert _clark_evans(city.trees, area) < 0.85
+    assert _clark_evans(city.trees, area) < _clark_evans(generate_layout(7, 700.0, 600.0).trees, area)
+    # Rows: many street trees share a verge line with their neighbours.
+    verge_lines = {}
+    for t in city.trees:
+        for key in (("x", round(t.x, 2)), ("y", round(t.y, 2))):
+            verge_lines[key] = verge_lines.get(key, 0) + 1
+    assert max(verge_lines.values()) >= 6
+
+
+def test_cars_stand_on_roads_driveways_or_parking_and_never_on_buildings(city):
+    cars = city.cars
+    roofs, roads = _boxes(city.buildings), _boxes(city.roads)
+    paved = _boxes([p for p in city.pavings if p.kind in ("driveway", "parking")])
+    assert not _overlap(_boxes(cars), roofs).any(), "a car under or on a roof"
+    for c in cars:
+        assert _inside_any(c.x, c.y, roads) or _inside_any(c.x, c.y, paved), c
+        assert all(_inside_any(x, y, np.vstack([roads, paved])) for x, y in c.corners), c
+        assert 4.0 <= c.length_m <= 5.0 and 1.7 <= c.width_m <= 2.0
+    xy = np.array([(c.x, c.y) for c in cars])
+    d = np.hypot(xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1])
+    np.fill_diagonal(d, np.inf)
+    assert d.min() > 1.9, "two cars on one spot"
+
+
+def test_pools_lie_in_lots_behind_houses_clear_of_buildings(city):
+    roofs, lots = _boxes(city.buildings), _boxes(city.lots)
+    assert not _overlap(_boxes(city.pools), roofs, 1.0).any()
+    by_lot = {b.lot_index: b for b in city.buildings}
+    for pool in city.pools:
+        x0, y0, x1, y1 = pool.bbox
+        inside = [i for i, lot in enumerate(lots) if lot[0] <= x0 + TOL and lot[1] <= y0 + TOL
+                  and x1 <= lot[2] + TOL and y1 <= lot[3] + TOL]
+        assert len(inside) == 1 and by_lot[inside[0]].kind == "residential"
+        assert 6.0 <= max(x1 - x0, y1 - y0) and min(x1 - x0, y1 - y0) >= 3.0
+
+
+def test_shrubs_are_low_and_off_roofs_and_streets(city):
+    shrubs = _boxes(city.shrubs)
+    assert not _overlap(shrubs, _boxes(city.buildings)).any()
+    assert not _overlap(shrubs, _boxes(city.roads)).any()
+    assert not _overlap(shrubs, _boxes(city.pools)).any()
+    assert all(0.5 - TOL <= s.height_m <= 2.1 for s in city.shrubs)
+
+
+def test_pavings_and_markings_lie_where_they_belong(city):
+    roads, lots, roofs = _boxes(city.roads), _boxes(city.lots), _boxes(city.buildings)
+    verge = [p for p in city.pavings if p.kind in ("kerb", "sidewalk")]
+    assert not _overlap(_boxes(verge), roads).any() and not _overlap(_boxes(verge), lots).any()
+    assert all(min(p.bbox[2] - p.bbox[0], p.bbox[3] - p.bbox[1]) <= VERGE_M for p in verge)
+    drives = _boxes([p for p in city.pavings if p.kind == "driveway"])
+    assert not _overlap(drives, roads).any()
+    assert _overlap(drives, roads, 0.01).any(axis=1).all(), "a driveway that does not reach its street"
+    parking = _boxes([p for p in city.pavings if p.kind == "parking"])
+    assert not _overlap(parking, roofs).any()
+    surfaces_ = np.vstack([roads, parking])
+    for m in city.markings:
+        x0, y0, x1, y1 = m.bbox
+        assert _inside_any((x0 + x1) / 2, (y0 + y1) / 2, surfaces_), m
+
+
+def test_meshes_of_the_clutter_are_background_and_modest(city):
+    background = meshes.label_color(0, 0)
+    for arrays in (meshes.crown_mesh(city.trees), meshes.shrub_mesh(city.shrubs), meshes.car_mesh(city.cars),
+                   meshes.detail_mesh(city.pavings, city.pools, city.markings, 0.05)):
+        data = arrays.arrays()
+        assert np.all(data["label"] == np.asarray(background, np.float32)), arrays.name
+        assert len(data["loop_start"]) and np.isfinite(data["vertices"]).all()
+    crowns = meshes.crown_mesh(city.trees).arrays()
+    assert len(crowns["loop_start"]) < 200 * len(city.trees)
+    for t in city.trees[:50]:  # the lumpy outline stays inside the crown radius the layout checked
+        mesh = meshes.crown_mesh([t]).arrays()["vertices"]
+        assert np.hypot(mesh[:, 0] - t.x, mesh[:, 1] - t.y).max() <= t.radius_m + TOL
+        assert mesh[:, 2].max() <= t.height_m + TOL
+    assert meshes.crown_mesh(city.trees[:5]).arrays()["vertices"].tobytes() == \
+        meshes.crown_mesh(city.trees[:5]).arrays()["vertices"].tobytes()
+
+
+def test_baked_surfaces_are_deterministic_and_tile():
+    for make in (surfaces.asphalt_image, surfaces.concrete_image, surfaces.water_image, surfaces.foliage_atlas):
+        a = make(3)
+        assert np.array_equal(a, make(3)) and a.dtype == np.float32 and 0 <= a.min() and a.max() <= 1
+    water = surfaces.water_image(0).mean(axis=(0, 1))
+    assert water[2] > 3 * water[0]
+    asphalt = surfaces.asphalt_image(0)
+    assert asphalt.std() > 0.01  # patches and cracks, not one flat grey
+    # Tileable: the jump across the wrap is no bigger than between neighbouring pixels.
+    assert np.abs(asphalt[0] - asphalt[-1]).mean() < 2 * np.abs(np.diff(asphalt, axis=0)).mean()
+
+
+@pytest.mark.parametrize("kwargs,field", [
+    ({"tree_size": "huge"}, "tree_size"),
+    ({"tree_size": 3}, "tree_size"),
+    ({"street_details": "yes"}, "street_details"),
+    ({"street_details": 1}, "street_details"),
+    ({"car_density": 1.5}, "car_density"),
+    ({"pool_share": -0.1}, "pool_share"),
+    ({"shrub_density": float("nan")}, "shrub_density"),
+])
+def test_bad_clutter_params_name_the_field(kwargs, field):
+    with pytest.raises(MetaSimError, match=field):
+        LayoutParams(**kwargs)
+
+
+def test_damaged_clutter_in_a_layout_file_is_rejected(city):
+    data = json.loads(json.dumps(city.to_dict()))
+    data["cars"][0]["colour"] = "plaid"
+    with pytest.raises(MetaSimError, match="colour"):
+        CityLayout.from_dict(data)
+    data = json.loads(json.dumps(city.to_dict()))
+    data["pavings"][0]["kind"] = "lava"
+    with pytest.raises(MetaSimError, match="kind"):
+        CityLayout.from_dict(data)
+    data = json.loads(json.dumps(city.to_dict()))
+    data["pools"][0]["polygon"] = [[0, 0], [1, 1]]
+    with pytest.raises(MetaSimError, match="rectangle"):
+        CityLayout.from_dict(data)
+
+
+def test_speed_with_everything_on():
+    import time
+
+    start = time.perf_counter()
+    generate_layout(0, 1000.0, 1000.0, ALL_ON)
+    assert time.perf_counter() - start < 3.0
+
+
+def test_a_sixth_stage_stream_leaves_the_first_five_as_they_were():
+    from meta_sim.sim.layout import stage_generators
+
+    five = [g.random(4).tolist() for g in stage_generators(11, 5)]
+    assert [g.random(4).tolist() for g in stage_generators(11, 6)][:5] == five
