@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -71,6 +71,11 @@ bench-infer: setup
 # default model is cached; both CPUs train).
 bench-task: setup
 	META_SIM_THREADS=2 $(BIN)/meta-sim bench task --out benchmarks/task.json --pictures benchmarks/task
+
+# E1 in the overhead-v1 design space: how well NAMS infers a target's ground, vegetation, sun, brightness, sensor
+# and city style besides its roofs (trains its own model on 1,200 designs first; its cache serves bench-realism).
+bench-appearance: setup
+	META_SIM_THREADS=2 $(BIN)/meta-sim bench appearance --out benchmarks/appearance.json --pictures benchmarks/appearance
 
 # How close renders are to each real domain (sim-only building IoU and a real-vs-rendered classifier);
 # shares bench-task's cache of trained segmenters.

@@ -61,6 +61,24 @@ def bench_nams_command(out, docs, targets, adjoint_targets, cache):
     _publish(result, out, format_nams_table(result), "nams", docs)
 
 
+@bench.command("appearance")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/appearance.json"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True, help="target groups")
+@click.option("--pictures", type=click.Path(path_type=Path), default=Path("benchmarks/appearance"),
+              show_default=True, help="folder for sheet.png (targets beside their inferred designs)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_torch_threads
+def bench_appearance_command(out, docs, targets, pictures, cache):
+    """E1 in overhead-v1: how well NAMS infers a target's look (ground, vegetation, sun, sensor, city style)."""
+    from ..experiments.bench import bench_appearance, format_appearance_table
+
+    bars = _Bars()
+    result = bench_appearance(targets=targets, root=cache, bars=bars, out=pictures)
+    bars.close()
+    _publish(result, out, format_appearance_table(result), "appearance", docs, Path(pictures) / "sheet.png")
+
+
 @bench.command("reference")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
