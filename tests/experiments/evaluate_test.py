@@ -98,3 +98,19 @@ def test_appearance_parameters_are_scored_and_e2_draws_them_as_e1_does():
     table = results_markdown({"experiment": "e1", "targets": 1, "tiles_per_target": 9, "methods": {
         "nams_adjoint": {**scores, "seconds_per_target": 0.01}}})
     assert "ground hit" in table and "greenness error" in table and "| 0.000 | 0.500 |" in table
+
+
+def test_appearance_table_lists_every_metric_with_the_nams_interval():
+    from meta_sim.experiments.bench import format_appearance_table
+
+    scores = {"flat_top1": 0.9, "flat_top10": 1.0, "ground_hit": 0.8, "greenness_error": 0.12,
+              "seconds_per_target": 0.02}
+    result = {"targets": 100, "tiles_per_target": 9, "seed": 11,
+              "training": {"designs": 1200, "tiles": 2, "seconds": {"train_nams": 60.0, "train_dr": 30.0}},
+              "methods": {"uniform": {**scores, "ground_hit": 0.25, "greenness_error": 0.33},
+                          "dr": scores, "nams_adjoint": scores},
+              "nams_intervals": {k: [v - 0.05, v + 0.05] for k, v in scores.items()}}
+    table = format_appearance_table(result)
+    assert "| ground hit | 0.250 | 0.800 | 0.800 | [0.750, 0.850] |" in table
+    assert "| greenness error | 0.330 | 0.120 | 0.120 | [0.070, 0.170] |" in table
+    assert "flat top1" in table and "seconds" not in table.split("\n")[3] and "1.5 min" in table
