@@ -221,16 +221,28 @@ def bench_task_command(out, docs, pictures, quick, realdata, cache):
 
 @bench.command("realism")
 @_task_bench_options("realism", "folder for realism*.png (real scenes beside renders of their inferred designs)")
-def bench_realism_command(out, docs, pictures, quick, realdata, cache):
+@click.option("--runs", default=None,
+              help="comma-separated runs to (re)measure, e.g. overhead-v1; their rows replace those in --out and "
+                   "the other rows stay (default: every run)")
+def bench_realism_command(out, docs, pictures, quick, realdata, cache, runs):
     """How close renders are to each real domain: sim-only building IoU against the other real domains
     and the all-building answer, and a real-versus-rendered classifier's accuracy."""
+    import json
+
     from ..experiments.task_eval import realism_markdown, run_realism
 
     dataset, models, settings = _task_configs(quick)
+    only = {r.strip() for r in runs.split(",") if r.strip()} if runs else None
     bars = _Bars()
     try:
-        result = run_realism(dataset, models, settings, pictures, cache, realdata, bars)
+        result = run_realism(dataset, models, settings, pictures, cache, realdata, bars, only=only)
     finally:
         bars.close()
+    if only and Path(out).is_file():  # the runs not measured now keep their rows (and their share of the time)
+        earlier = json.loads(Path(out).read_text())
+        runs = {**{k: v for k, v in earlier.get("runs", {}).items() if k not in result["runs"]}, **result["runs"]}
+        models = {**earlier.get("nams_models", {}), **result["nams_models"]}
+        result = {**earlier, **result, "runs": runs, "nams_models": models,
+                  "seconds": result["seconds"] + float(earlier.get("seconds", 0.0))}
     _publish(result, out, realism_markdown(result), "realism", docs and not quick,
              *sorted(Path(pictures).glob("realism*.png")))

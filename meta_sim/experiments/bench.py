@@ -23,22 +23,37 @@ def _blender_import_seconds() -> float:
     return time.perf_counter() - started
 
 
+# The richer scene bench-render also times: real targets' space, whose designs bring city styles, street
+# details, cars, pools, real-sized trees, ground cover and a sensor (issue 18's speed limits hold for it).
+RICH_SPACE = "overhead-v1"
+
+
 def bench_render(designs: int = 4, tiles: int = 9, repeats: int = 3, presets=("fast", "balanced", "quality"),
-                 seed: int = 101) -> dict:
-    """Seconds per tile (render + label pass + EXR write) for each preset, one city of ``designs`` designs."""
+                 seed: int = 101, rich: bool = True) -> dict:
+    """Seconds per tile (render + label pass + EXR write) for each preset, one city of ``designs`` designs
+    of the default space; with ``rich`` also of designs of ``RICH_SPACE`` (under "rich")."""
+    startup = statistics.median(_blender_import_seconds() for _ in range(repeats))
+    result = {**_render_costs("rooftops-v1", designs, tiles, repeats, presets, seed), "designs_per_city": designs,
+              "tiles_per_design": tiles, "repeats": repeats, "blender_import_seconds": round(startup, 3),
+              "machine": {"cpus": os.cpu_count(), "python": platform.python_version()}}
+    if rich:
+        result["rich"] = {"space": RICH_SPACE, **_render_costs(RICH_SPACE, designs, tiles, repeats, presets, seed)}
+    return result
+
+
+def _render_costs(space_name: str, designs: int, tiles: int, repeats: int, presets, seed: int) -> dict:
+    """Per preset: the medians of the stage times per tile over ``repeats`` runs (after a warm-up run),
+    rendering ``designs`` designs of ``space_name`` (their cities may differ: a design's look can)."""
     from ..render.jobs import RenderSettings, design_jobs, sample_designs
     from ..render.loop import render_jobs
     from ..sim.design import DesignSpace
     from ..sim.quality import get_preset
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
-    space = DesignSpace.load()
+    space = DesignSpace.load(space_name)
     banks = [ensure_default_bank(), ensure_heldout_bank()]
     jobs = design_jobs(space, sample_designs(space, designs, seed), seed, cities=1)
-    startup = statistics.median(_blender_import_seconds() for _ in range(repeats))
-    result = {"presets": {}, "designs_per_city": designs, "tiles_per_design": tiles, "repeats": repeats,
-              "blender_import_seconds": round(startup, 3),
-              "machine": {"cpus": os.cpu_count(), "python": platform.python_version()}}
+    result = {"presets": {}}
     builds, first_frames = [], []
     for name in presets:
         preset = get_preset(name)
@@ -70,12 +85,14 @@ def bench_render(designs: int = 4, tiles: int = 9, repeats: int = 3, presets=("f
 
 def format_render_table(result: dict) -> str:
     """``bench_render``'s result as the Markdown table of docs/benchmarks.md, with a note under it."""
-    lines = ["| preset | engine | s/tile (render+labels+write) | render | labels | EXR write |",
-             "|---|---|---|---|---|---|"]
-    for name, p in result["presets"].items():
-        lines.append(f"| {name} | {p['engine']} {p['samples']} spp | {p['seconds_per_tile']:.3f} | "
-                     f"{p['render_seconds_per_tile']:.3f} | {p['label_seconds_per_tile']:.3f} | "
-                     f"{p['write_seconds_per_tile']:.3f} |")
+    lines = ["| scene | preset | engine | s/tile (render+labels+write) | render | labels | EXR write | "
+             "s/tile with the city build |", "|---|---|---|---|---|---|---|---|"]
+    scenes = [("rooftops-v1", result)] + ([(result["rich"]["space"], result["rich"])] if "rich" in result else [])
+    for scene, costs in scenes:
+        for name, p in costs["presets"].items():
+            lines.append(f"| {scene} | {name} | {p['engine']} {p['samples']} spp | {p['seconds_per_tile']:.3f} | "
+                         f"{p['render_seconds_per_tile']:.3f} | {p['label_seconds_per_tile']:.3f} | "
+                         f"{p['write_seconds_per_tile']:.3f} | {p.get('wall_seconds_per_tile', 0):.3f} |")
     lines.append("")
     lines.append(f"City build (layout + Blender geometry, {result['tiles_per_design']} tiles): "
                  f"{result['city_build_seconds']:.3f} s; Blender start-up (import bpy): "

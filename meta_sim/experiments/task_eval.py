@@ -520,6 +520,15 @@ def task_markdown(results: dict) -> str:
 REALISM_VARIANTS = (("none", 0.0, "plain"), ("auto", 0.0, "plain"), ("auto", 0.6, "plain"), ("auto", 0.6, "mixed"))
 
 
+def _run_name(sensor: str, jitter: float, ground: str) -> str:
+    return f"{sensor}+jitter{jitter:g}+{ground}"
+
+
+def realism_runs(variants=REALISM_VARIANTS, spaces=None) -> list[str]:
+    """The names of bench-realism's runs: one per variant, then one per design space."""
+    return [_run_name(*v) for v in variants] + list(REALISM_SPACES if spaces is None else spaces)
+
+
 # Design spaces whose NAMS model infers each domain's look as well as its roofs (trained like the default
 # model, on a training set of that space twice the default's size: more parameters to learn).
 REALISM_SPACES = ("overhead-v1",)
@@ -527,26 +536,36 @@ REALISM_SPACES = ("overhead-v1",)
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
                 realdata: Path | None = None, bars: Bars | None = None, variants=REALISM_VARIANTS,
-                spaces=REALISM_SPACES) -> dict:
+                spaces=REALISM_SPACES, only: set | None = None) -> dict:
     """How far renders are from each real domain: the sim-only transfer with the real-versus-rendered
     classifier and a picture in ``out``, once per ``(sensor, roof jitter, ground)`` of ``variants`` with
     the default model, and once per design space of ``spaces`` with a model trained in that space
-    (whose inferred designs set the look they declare; see ``run_sim_only``)."""
+    (whose inferred designs set the look they declare; see ``run_sim_only``). ``only`` restricts the
+    runs to those names (``realism_runs`` lists them); MetaSimError for an unknown one."""
     import time
 
+    names = realism_runs(variants, spaces)
+    unknown = sorted(set(only or ()) - set(names))
+    if unknown:
+        raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)}")
+    variants = [v for v in variants if only is None or _run_name(*v) in only]
+    spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    h = make_harness(dataset, models_settings, settings, root, realdata, bars)
-    result = {"runs": {f"{sensor}+jitter{jitter:g}+{ground}":
-                       run_sim_only(h, out, True, sensor, jitter, ground)["domains"]
-                       for sensor, jitter, ground in variants}}
+    result, models = {"runs": {}}, {}
+    if variants:
+        h = make_harness(dataset, models_settings, settings, root, realdata, bars)
+        models[dataset.space] = h.methods.nams.model_id
+        result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for space in spaces:
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
         other = make_harness(wider, models_settings, settings, root, realdata, bars)
+        models[space] = other.methods.nams.model_id
         result["runs"][space] = run_sim_only(other, out, True)["domains"]
-    result.update(settings={**asdict(settings), "train": asdict(settings.train)}, nams_model=h.methods.nams.model_id,
-                  render_preset=dataset.preset, seconds=time.perf_counter() - started)
+    result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
+                  seconds=time.perf_counter() - started, nams_models=models,
+                  **({"nams_model": models[dataset.space]} if dataset.space in models else {}))
     return result
 
 
