@@ -1,4 +1,6 @@
-"""Helpers the torch-side tests share (a module, not fixtures: they are called with arguments)."""
+"""Helpers the tests share (a module, not fixtures: they are called with arguments)."""
+
+import math
 
 from meta_sim.sim.design import DesignSpace
 
@@ -11,3 +13,20 @@ def toy_space(*widths, continuous=False) -> DesignSpace:
         params.append({"name": "density", "type": "continuous", "low": 0.3, "high": 0.9})
     return DesignSpace.from_dict({"format": "meta-sim-design-space", "version": 1, "name": "toy",
                                   "parameters": params})
+
+
+def distance_to_polygon(x, y, polygon) -> float:
+    """0 inside the polygon (even-odd rule), else the distance from (x, y) to its boundary."""
+    polygon = list(polygon)
+    inside = False
+    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]):
+        if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
+            inside = not inside
+    if inside:
+        return 0.0
+    best = math.inf
+    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]):
+        dx, dy = x1 - x0, y1 - y0
+        t = min(1.0, max(0.0, ((x - x0) * dx + (y - y0) * dy) / (dx * dx + dy * dy)))
+        best = min(best, math.hypot(x - x0 - t * dx, y - y0 - t * dy))
+    return best

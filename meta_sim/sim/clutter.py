@@ -32,6 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..core.errors import MetaSimError
+from . import polygons
 
 Point = tuple[float, float]
 Polygon = tuple[Point, ...]
@@ -59,19 +60,9 @@ TREE_HEIGHT_M = (5.0, 20.0)
 CLEARANCE_M = 0.05  # between a crown and a roof outline, after rounding
 
 
-def _r(value: float) -> float:
-    return round(float(value), 4)
-
-
-def _rect_polygon(x0: float, y0: float, x1: float, y1: float) -> Polygon:
-    x0, y0, x1, y1 = _r(x0), _r(y0), _r(x1), _r(y1)
-    return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
-
-
-def _polygon_bbox(polygon: Polygon) -> Rect:
-    xs = [p[0] for p in polygon]
-    ys = [p[1] for p in polygon]
-    return (min(xs), min(ys), max(xs), max(ys))
+_r = polygons.rounded
+_rect_polygon = polygons.rect_polygon
+_polygon_bbox = polygons.bbox
 
 
 def _read_rect(data: Any, where: str) -> Polygon:

@@ -116,14 +116,8 @@ MASSING = {
 SLOPED_PRIORITY = ("residential", "apartment", "industrial", "office")
 
 
-def _r(value: float) -> float:
-    return round(float(value), 4)
-
-
-def rect_polygon(x0: float, y0: float, x1: float, y1: float) -> Polygon:
-    """Axis-aligned rectangle as a CCW polygon starting at its south-west corner."""
-    x0, y0, x1, y1 = _r(x0), _r(y0), _r(x1), _r(y1)
-    return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+_r = polygons.rounded
+rect_polygon = polygons.rect_polygon
 
 
 def polygon_area(polygon: Polygon) -> float:
@@ -133,10 +127,7 @@ def polygon_area(polygon: Polygon) -> float:
     return float(0.5 * np.sum(xs * np.roll(ys, -1) - np.roll(xs, -1) * ys))
 
 
-def polygon_bbox(polygon: Polygon) -> Rect:
-    xs = [p[0] for p in polygon]
-    ys = [p[1] for p in polygon]
-    return (min(xs), min(ys), max(xs), max(ys))
+polygon_bbox = polygons.bbox
 
 
 def _polygon_from_list(points: Any) -> Polygon:

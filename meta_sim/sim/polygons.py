@@ -11,6 +11,24 @@ import math
 Point = tuple[float, float]
 
 
+def rounded(value: float) -> float:
+    """A coordinate rounded to 0.1 mm: the layout's stored floats, so its JSON is stable."""
+    return round(float(value), 4)
+
+
+def rect_polygon(x0: float, y0: float, x1: float, y1: float) -> tuple[Point, ...]:
+    """Axis-aligned rectangle as a CCW polygon starting at its south-west corner (rounded coordinates)."""
+    x0, y0, x1, y1 = rounded(x0), rounded(y0), rounded(x1), rounded(y1)
+    return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+
+
+def bbox(points) -> tuple[float, float, float, float]:
+    """(x0, y0, x1, y1) of the points."""
+    xs = [p[0] for p in points]
+    ys = [p[1] for p in points]
+    return (min(xs), min(ys), max(xs), max(ys))
+
+
 def rotate(points, cx: float, cy: float, degrees: float) -> tuple[Point, ...]:
     """The points turned counter-clockwise by ``degrees`` about (cx, cy)."""
     c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))

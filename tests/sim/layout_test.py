@@ -1,11 +1,11 @@
 """City layout: geometric invariants, determinism, proportions, queries, validation."""
 
 import json
-import math
 import time
 
 import numpy as np
 import pytest
+from toys import distance_to_polygon
 
 from meta_sim.core.errors import MetaSimError
 from meta_sim.sim.layout import (
@@ -38,26 +38,6 @@ def _separation(a, b):
 def _inside(box, outer):
     return (box[0] >= outer[0] - TOL and box[1] >= outer[1] - TOL
             and box[2] <= outer[2] + TOL and box[3] <= outer[3] + TOL)
-
-
-def _point_in_polygon(x, y, polygon):
-    inside = False
-    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]):
-        if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
-            inside = not inside
-    return inside
-
-
-def _distance_to_polygon(x, y, polygon):
-    """0 inside the polygon, else the distance to its boundary."""
-    if _point_in_polygon(x, y, polygon):
-        return 0.0
-    best = math.inf
-    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]):
-        dx, dy = x1 - x0, y1 - y0
-        t = min(1.0, max(0.0, ((x - x0) * dx + (y - y0) * dy) / (dx * dx + dy * dy)))
-        best = min(best, math.hypot(x - x0 - t * dx, y - y0 - t * dy))
-    return best
 
 
 def _is_axis_rect(polygon):
@@ -126,7 +106,7 @@ def check_invariants(layout: CityLayout) -> None:
         # Exact disc-polygon check only where the boxes overlap.
         for i, j in zip(*np.nonzero(_separation(tree_boxes, roof_boxes) < 0)):
             t, outline = trees[i], buildings[j].roof_outline
-            assert _distance_to_polygon(t.x, t.y, outline) >= t.radius_m - TOL, (t, buildings[j])
+            assert distance_to_polygon(t.x, t.y, outline) >= t.radius_m - TOL, (t, buildings[j])
 
 
 @pytest.fixture(scope="module")

@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from toys import distance_to_polygon
 
 from meta_sim.core.errors import MetaSimError
 from meta_sim.sim import layout as layout_module
@@ -151,18 +152,6 @@ def _pairs(items_a, items_b, margin=0.0):
     return list(zip(*np.nonzero(near)))
 
 
-def _disc_distance(x, y, polygon):
-    """Distance from a point to a convex polygon (0 inside)."""
-    if polygons.inside([(x, y)], polygon, 0.0):
-        return 0.0
-    best = np.inf
-    for (x0, y0), (x1, y1) in zip(polygon, polygon[1:] + polygon[:1]):
-        dx, dy = x1 - x0, y1 - y0
-        t = min(1.0, max(0.0, ((x - x0) * dx + (y - y0) * dy) / (dx * dx + dy * dy)))
-        best = min(best, np.hypot(x - x0 - t * dx, y - y0 - t * dy))
-    return best
-
-
 def check_styled(layout):
     """What every city must keep, whatever its styles: nothing overlaps, all inside the city."""
     city = rect_polygon(0.0, 0.0, layout.width_m, layout.height_m)
@@ -186,10 +175,10 @@ def check_styled(layout):
             (buildings[i], layout.roads[j])
     for i, j in _pairs(layout.trees, buildings):
         t = layout.trees[i]
-        assert _disc_distance(t.x, t.y, buildings[j].roof_outline) >= t.radius_m - 1e-3, (t, buildings[j])
+        assert distance_to_polygon(t.x, t.y, buildings[j].roof_outline) >= t.radius_m - 1e-3, (t, buildings[j])
     for i, j in _pairs(layout.trees, layout.roads):
         t = layout.trees[i]
-        assert _disc_distance(t.x, t.y, layout.roads[j].polygon) >= t.radius_m - 1e-3, (t, layout.roads[j])
+        assert distance_to_polygon(t.x, t.y, layout.roads[j].polygon) >= t.radius_m - 1e-3, (t, layout.roads[j])
 
 
 @pytest.fixture(scope="module")
