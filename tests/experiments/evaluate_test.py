@@ -105,7 +105,7 @@ def test_appearance_table_lists_every_metric_with_the_nams_interval():
 
     scores = {"flat_top1": 0.9, "flat_top10": 1.0, "ground_hit": 0.8, "greenness_error": 0.12,
               "seconds_per_target": 0.02}
-    result = {"targets": 100, "tiles_per_target": 9, "seed": 11,
+    result = {"targets": 100, "tiles_per_target": 9, "seed": 11, "adjoint": {"M": 64, "iterations": 100},
               "training": {"designs": 1200, "tiles": 2, "seconds": {"train_nams": 60.0, "train_dr": 30.0}},
               "methods": {"uniform": {**scores, "ground_hit": 0.25, "greenness_error": 0.33},
                           "dr": scores, "nams_adjoint": scores},
