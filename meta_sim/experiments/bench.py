@@ -260,7 +260,6 @@ def stage_times(result: dict, render_bench: Path = Path("benchmarks/render.json"
 
 
 APPEARANCE_SPACE = "overhead-v1"
-APPEARANCE_SEARCH = (64, 100)  # adjoint starts M and steps
 
 
 def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = None, bars: Bars | None = None,
@@ -277,13 +276,10 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     from ..pipeline.workflow import ModelSettings
     from ..sim.design import DesignSpace
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
-    from .evaluate import EvalSettings, rankings, run_eval, score
+    from .evaluate import CONTINUOUS_SEARCH, EvalSettings, rankings, run_eval, score
 
     dataset = DatasetConfig(space=APPEARANCE_SPACE, designs=designs)
-    # The adjoint search at bench-nams's (64 starts, 100 steps) setting: a factorised model of 11 parameters
-    # costs about 5 times the default's per step, and the paper's 1,000 x 200 would take minutes per group.
-    settings = EvalSettings(targets=targets, seed=seed, ms2=False, M=APPEARANCE_SEARCH[0],
-                            iterations=APPEARANCE_SEARCH[1])
+    settings = EvalSettings(targets=targets, seed=seed, ms2=False, **CONTINUOUS_SEARCH)
     import shutil
 
     with tempfile.TemporaryDirectory(prefix="meta-sim-appearance-") as scratch:  # the checkpoints stay out

@@ -138,9 +138,9 @@ def _real_pool(name: str, scenes: list, train: TrainSettings) -> Pool:
 
 def _predictions(h: Harness, ctx, seed: int) -> dict:
     """Strategy -> one design per target group, for the strategies that infer designs."""
-    from .evaluate import method_runs
+    from .evaluate import CONTINUOUS_SEARCH, discrete, method_runs
 
-    runs = method_runs(ctx, seed, {}, 50)
+    runs = method_runs(ctx, seed, {} if discrete(ctx.nams.space) else CONTINUOUS_SEARCH, 50)
     runs.setdefault("nams_exhaustive", runs["nams_adjoint"])  # a space with continuous parameters
     return {strategy: runs[method]() for strategy, method in METHOD_OF.items() if method in runs}
 
