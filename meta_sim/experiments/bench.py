@@ -321,7 +321,8 @@ def format_appearance_table(result: dict) -> str:
         low, high = result["nams_intervals"][key]
         cells = " | ".join(f"{methods[m][key]:.3f}" for m in names)
         lines.append(f"| {key.replace('_', ' ')} | {cells} | [{low:.3f}, {high:.3f}] |")
+    trained = [v for k, v in result["training"]["seconds"].items() if k.startswith("train")]
     lines += ["", f"NAMS search: {methods['nams_adjoint']['seconds_per_target']:.3f} s per target group; "
-              f"training: {sum(v for k, v in result['training']['seconds'].items() if k.startswith('train')) / 60:.1f} "
-              "min on this machine."]
+              + (f"training: {sum(trained) / 60:.1f} min on this machine." if trained else
+                 "the models came from the cache (trained by an earlier run).")]
     return "\n".join(lines) + "\n"

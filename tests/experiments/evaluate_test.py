@@ -114,3 +114,5 @@ def test_appearance_table_lists_every_metric_with_the_nams_interval():
     assert "| ground hit | 0.250 | 0.800 | 0.800 | [0.750, 0.850] |" in table
     assert "| greenness error | 0.330 | 0.120 | 0.120 | [0.070, 0.170] |" in table
     assert "flat top1" in table and "seconds" not in table.split("\n")[3] and "1.5 min" in table
+    result["training"]["seconds"] = {"render": 1.0}
+    assert "from the cache" in format_appearance_table(result)
