@@ -248,13 +248,7 @@ class _Frame:
         return {"S": 90.0, "N": 270.0, "W": 0.0, "E": 180.0}[self.front]
 
     def world(self, u0: float, u1: float, v0: float, v1: float) -> Rect:
-        x0, y0, x1, y1 = self.rect
-        return {
-            "S": (x0 + u0, y0 + v0, x0 + u1, y0 + v1),
-            "N": (x0 + u0, y1 - v1, x0 + u1, y1 - v0),
-            "W": (x0 + v0, y0 + u0, x0 + v1, y0 + u1),
-            "E": (x1 - v1, y0 + u0, x1 - v0, y0 + u1),
-        }[self.front]
+        return polygons.lot_to_world(self.rect, self.front, u0, u1, v0, v1)
 
     def local(self, rect: Rect) -> tuple[float, float, float, float]:
         """(u0, u1, v0, v1) of a world rectangle."""

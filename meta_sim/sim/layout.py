@@ -857,13 +857,7 @@ class _Sketch:
 
 def _to_world(plan: _LotPlan, u0: float, u1: float, v0: float, v1: float) -> Rect:
     """Lot-local rectangle (u along the frontage, v back from the front) in world coordinates."""
-    x0, y0, x1, y1 = plan.rect
-    return {
-        "S": (x0 + u0, y0 + v0, x0 + u1, y0 + v1),
-        "N": (x0 + u0, y1 - v1, x0 + u1, y1 - v0),
-        "W": (x0 + v0, y0 + u0, x0 + v1, y0 + u1),
-        "E": (x1 - v1, y0 + u0, x1 - v0, y0 + u1),
-    }[plan.front]
+    return polygons.lot_to_world(plan.rect, plan.front, u0, u1, v0, v1)
 
 
 def _footprint_rect(rng: np.random.Generator, plan: _LotPlan, kind: str, fill: float) -> Rect | None:

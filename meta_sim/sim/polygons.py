@@ -29,6 +29,18 @@ def bbox(points) -> tuple[float, float, float, float]:
     return (min(xs), min(ys), max(xs), max(ys))
 
 
+def lot_to_world(rect, front: str, u0: float, u1: float, v0: float, v1: float) -> tuple[float, float, float, float]:
+    """A lot-local rectangle (u along the frontage, v back from the front side ``front``: "S", "N", "W" or
+    "E") of the axis-aligned lot ``rect`` in world coordinates."""
+    x0, y0, x1, y1 = rect
+    return {
+        "S": (x0 + u0, y0 + v0, x0 + u1, y0 + v1),
+        "N": (x0 + u0, y1 - v1, x0 + u1, y1 - v0),
+        "W": (x0 + v0, y0 + u0, x0 + v1, y0 + u1),
+        "E": (x1 - v1, y0 + u0, x1 - v0, y0 + u1),
+    }[front]
+
+
 def rotate(points, cx: float, cy: float, degrees: float) -> tuple[Point, ...]:
     """The points turned counter-clockwise by ``degrees`` about (cx, cy)."""
     c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
