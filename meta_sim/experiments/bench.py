@@ -270,8 +270,6 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     ``targets`` groups of target ``seed`` (11: no setting was chosen on it) against uniform guessing
     and DR. Every metric of NAMS comes with a 95% bootstrap interval over target groups. ``out``
     receives ``sheet.png`` (targets beside their inferred designs)."""
-    import numpy as np
-
     from ..pipeline.dataset import DatasetConfig
     from ..pipeline.workflow import ModelSettings
     from ..sim.design import DesignSpace
@@ -291,17 +289,23 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     space = DesignSpace.load(APPEARANCE_SPACE)
     ranks = rankings("e1", ensure_default_bank(), ensure_heldout_bank())
     rows = [score(t["predicted"]["nams_adjoint"], t["truth"], ranks, space) for t in result["targets_detail"]]
-    rng = np.random.default_rng(0)
-    draws = rng.integers(0, len(rows), (2000, len(rows)))
-    intervals = {}
-    for key in rows[0]:
-        values = np.array([r[key] for r in rows])
-        means = values[draws].mean(axis=1)
-        intervals[key] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
-    result["nams_intervals"] = intervals
+    result["nams_intervals"] = bootstrap_intervals(rows)
     result["space"] = space.to_dict()
     del result["targets_detail"]
     return result
+
+
+def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0) -> dict:
+    """Per metric of the score rows (one per target group): a 95% interval of its mean, resampling the
+    rows with replacement (the same draws for every metric)."""
+    import numpy as np
+
+    draws = np.random.default_rng(seed).integers(0, len(rows), (resamples, len(rows)))
+    out = {}
+    for key in rows[0]:
+        means = np.array([r[key] for r in rows], dtype=np.float64)[draws].mean(axis=1)
+        out[key] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
+    return out
 
 
 def format_appearance_table(result: dict) -> str:
