@@ -116,3 +116,19 @@ def test_appearance_table_lists_every_metric_with_the_nams_interval():
     assert "flat top1" in table and "seconds" not in table.split("\n")[3] and "1.5 min" in table
     result["training"]["seconds"] = {"render": 1.0}
     assert "from the cache" in format_appearance_table(result)
+
+
+def test_bootstrap_intervals_hold_the_mean_and_narrow_with_more_groups():
+    import numpy as np
+
+    from meta_sim.experiments.bench import bootstrap_intervals
+
+    rng = np.random.default_rng(3)
+    few = [{"hit": float(h), "error": e} for h, e in zip(rng.random(20) < 0.7, rng.random(20))]
+    many = [{"hit": float(h), "error": e} for h, e in zip(rng.random(400) < 0.7, rng.random(400))]
+    for rows in (few, many):
+        intervals = bootstrap_intervals(rows)
+        for key, (low, high) in intervals.items():
+            assert low < np.mean([r[key] for r in rows]) < high
+    assert np.diff(bootstrap_intervals(many)["hit"]) < 0.5 * np.diff(bootstrap_intervals(few)["hit"])
+    assert bootstrap_intervals([{"hit": 1.0}] * 5) == {"hit": [1.0, 1.0]}

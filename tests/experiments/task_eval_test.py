@@ -116,3 +116,40 @@ def test_quick_realism_benchmark_end_to_end_infers_the_look_in_overhead_v1(tmp_p
         assert 0 <= row["rendered_only"]["iou"] <= 1 and 0 <= row["realness"]["accuracy"] <= 1
     assert (tmp_path / "pictures" / "realism-overhead-v1.png").is_file()
     assert "| overhead-v1 | inferred |" in result.output
+
+
+def test_realism_runs_are_named_and_an_unknown_one_is_refused_before_any_work(tmp_path):
+    from meta_sim.experiments.task_eval import realism_runs, run_realism
+
+    assert realism_runs()[-1] == "overhead-v1" and "none+jitter0+plain" in realism_runs()
+    with pytest.raises(MetaSimError, match="unknown realism run"):
+        run_realism(None, None, None, tmp_path / "pictures", only={"overhead-v2"})
+    assert not (tmp_path / "pictures").exists()
+
+
+def test_bench_realism_runs_option_replaces_its_rows_and_keeps_the_others(tmp_path, monkeypatch):
+    from meta_sim.cli import main
+    from meta_sim.experiments import task_eval
+
+    out = tmp_path / "realism.json"
+    row = {"rendered_only": {"iou": 0.5, "iou_std": 0.0}, "other_real": {"iou": 0.4, "iou_std": 0.0},
+           "other_domains": ["rio"], "all_building": 0.3, "sensor": "none"}
+    out.write_text(json.dumps({"runs": {"none+jitter0+plain": {"banepa": row}, "overhead-v1": {"banepa": row}},
+                               "seconds": 60.0, "nams_models": {"rooftops-v1": "a"}, "render_preset": "fast",
+                               "settings": {"seeds": [0]}}))
+    asked = {}
+
+    def fake(dataset, models, settings, pictures, cache, realdata, bars, only=None):
+        asked["only"] = only
+        return {"runs": {"overhead-v1": {"banepa": {**row, "all_building": 0.25}}}, "seconds": 30.0,
+                "nams_models": {"overhead-v1": "b"}, "render_preset": "fast", "settings": {"seeds": [0]}}
+
+    monkeypatch.setattr(task_eval, "run_realism", fake)
+    result = CliRunner().invoke(main, ["bench", "realism", "--quick", "--runs", "overhead-v1", "--out", str(out),
+                                       "--pictures", str(tmp_path / "pictures")])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert asked["only"] == {"overhead-v1"} and list(data["runs"]) == ["none+jitter0+plain", "overhead-v1"]
+    assert data["runs"]["overhead-v1"]["banepa"]["all_building"] == 0.25
+    assert data["runs"]["none+jitter0+plain"]["banepa"]["all_building"] == 0.3
+    assert data["seconds"] == 90.0 and data["nams_models"] == {"rooftops-v1": "a", "overhead-v1": "b"}

@@ -59,3 +59,20 @@ def test_real_dataset_resamples_images_and_masks_to_the_working_pixel_size():
     assert batch["image"].shape == (4, 3, 222, 222)
     with pytest.raises(MetaSimError, match="pixel size is unknown"):
         RealDataset(REALDATA / "banepa" / "images", REALDATA / "banepa" / "masks")[0]
+
+
+def test_a_training_set_in_a_space_from_a_file_is_named_by_what_the_file_declares(tmp_path):
+    import json
+
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.sim.design import DesignSpace
+
+    path = tmp_path / "space.json"
+    spec = DesignSpace.load("rooftops-v1").to_dict()
+    path.write_text(json.dumps(spec))
+    first = DatasetConfig(space=str(path)).key()
+    assert first != DatasetConfig().key()
+    path.write_text(json.dumps({**spec, "layout": {"style": "dense"}}))  # same file, other scenes
+    assert DatasetConfig(space=str(path)).key() != first
+    assert DatasetConfig(space="overhead-v1").key() != DatasetConfig().key()
+    assert DatasetConfig().identity()["space"] == "rooftops-v1"  # built-in spaces keep their keys
