@@ -153,7 +153,8 @@ def render_preview(settings, library) -> tuple[bpy.types.Image, bpy.types.Image]
         city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
         city.set_roofs(textures)
         instance, roof_class = city.render_labels(city.rects[0])
-        rgb = city.render_rgb(city.rects[0], get_preset(settings.render_preset))
+        preset = get_preset(settings.render_preset)
+        rgb = preset.tone_map(city.render_rgb(city.rects[0], preset))
     finally:
         if city is not None:
             city.close()

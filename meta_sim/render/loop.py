@@ -158,7 +158,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             software=software, appearance=settings.header(job), sun=scene.sun)
                         # the sensor sees each tile alone (its noise seeded by the tile); labels untouched
                         image = look.apply(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
-                                           [job.city_seed, j])
+                                           [job.city_seed, j], settings.preset)
                         tiles.write_tile(path, image, instance[cut], roof_class[cut], meta)
                         if settings.preview:
                             write_previews(path, image, instance[cut], roof_class[cut])

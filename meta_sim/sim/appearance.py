@@ -84,13 +84,16 @@ class Appearance:
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
-              seed) -> np.ndarray:
+              seed, preset=None) -> np.ndarray:
         """A finished linear render as this appearance shows it: roofs varied per building, the light
-        scaled by the brightness, then seen through the sensor (its noise seeded by ``seed``)."""
+        scaled by the brightness, then seen through the sensor (its noise seeded by ``seed``), whose
+        own tone curve replaces that of the render ``preset`` (a ``RenderPreset``; None: no curve)."""
         image = roof_jitter(rgb, instance, roof_class, city_seed, self.roof_jitter)
         if self.brightness != 1.0:
             image = image * np.float32(self.brightness)
-        return self.sensor.apply(image, seed)
+        if self.sensor.active or preset is None:
+            return self.sensor.apply(image, seed)
+        return preset.tone_map(image)
 
 
 def check_field(target, categorical: bool, where: str, choices=(), low: float = 0.0, high: float = 1.0) -> str:

@@ -7,7 +7,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..core.errors import MetaSimError
+from .sensor import tone_curve
 
 
 @dataclass(frozen=True)
@@ -25,17 +28,27 @@ class RenderPreset:
     shadows: bool = True
     # Linear gain on the rendered RGB, so that every preset renders a scene at one brightness.
     exposure: float = 1.0
+    # The tone curve a render ends with, (knee, ceiling) of ``sensor.tone_curve``; None: none (bright
+    # surfaces clip at white when the tile is shown or read as 8 bits).
+    tone: tuple[float, float] | None = None
 
     def to_dict(self) -> dict:
         """The settings as plain values (recorded in tile metadata)."""
         return {"name": self.name, "engine": self.engine, "samples": self.samples,
                 "bounces": self.bounces, "denoise": self.denoise,
-                "antialiasing": self.antialiasing, "shadows": self.shadows, "exposure": self.exposure}
+                "antialiasing": self.antialiasing, "shadows": self.shadows, "exposure": self.exposure,
+                **({"tone": list(self.tone)} if self.tone else {})}
 
     def cache_fields(self) -> dict:
         """What, beyond the preset's name, tells its renders apart from those cached before presets
-        had the setting: the exposure when it is not 1 (tiles, training sets and models key on it)."""
-        return {} if self.exposure == 1.0 else {"exposure": self.exposure}
+        had the setting: the exposure when it is not 1 and the tone curve when there is one (tiles,
+        training sets and models key on them)."""
+        return {**({} if self.exposure == 1.0 else {"exposure": self.exposure}),
+                **({"tone": list(self.tone)} if self.tone else {})}
+
+    def tone_map(self, rgb: np.ndarray) -> np.ndarray:
+        """A finished linear render through the preset's tone curve (unchanged without one)."""
+        return rgb if self.tone is None else tone_curve(rgb, *self.tone)
 
 
 # Workbench's studio light renders a surface far darker than the path-traced presets' sun and sky do,
@@ -44,15 +57,22 @@ class RenderPreset:
 # preset's exposure"); `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
 FAST_EXPOSURE = 6.0
 
+# Every preset ends with a tone curve that does not clip: the identity up to a linear 0.6 (display
+# 0.80), then a shoulder towards 0.95 (display 0.977, an 8-bit 249), so a white roof keeps its texture
+# instead of clipping flat, and everything darker than the knee renders as before. Under the fast
+# preset's exposure and the path-traced sun, white roofs render at a linear 1.0-1.8; without the curve
+# most of their pixels clip (docs/design.md, "A tone curve in every preset").
+TONE = (0.6, 0.95)
+
 
 PRESETS = {p.name: p for p in (
     RenderPreset("fast", "BLENDER_WORKBENCH",
                  "rasterised (Workbench): textures, studio light, sun-direction shadows, FXAA",
-                 exposure=FAST_EXPOSURE),
+                 exposure=FAST_EXPOSURE, tone=TONE),
     RenderPreset("balanced", "CYCLES",
-                 "path traced (Cycles): 4 samples, 2 diffuse bounces, sun and sky", samples=4, bounces=2),
+                 "path traced (Cycles): 4 samples, 2 diffuse bounces, sun and sky", samples=4, bounces=2, tone=TONE),
     RenderPreset("quality", "CYCLES",
-                 "path traced (Cycles): 16 samples, 3 diffuse bounces, sun and sky", samples=16, bounces=3),
+                 "path traced (Cycles): 8 samples, 3 diffuse bounces, sun and sky", samples=8, bounces=3, tone=TONE),
 )}
 
 

@@ -68,7 +68,8 @@ def tile_metadata(*, design: dict, space: str, city_seed: int, tile_index: int, 
             "tile_origin_m": [float(origin_m[0]), float(origin_m[1])],
             "tile_size_px": [int(size_px[0]), int(size_px[1])],
             "pixel_size_m": float(pixel_size_m), "preset": preset.name, "render": preset.to_dict(),
-            "exposure": preset.exposure, "software": software or software_versions(),
+            "exposure": preset.exposure, **({"tone": list(preset.tone)} if preset.tone else {}),
+            "software": software or software_versions(),
             **(appearance or {}), **({"sun": sun} if sun else {})}
 
 

@@ -78,19 +78,20 @@ def test_write_is_atomic_and_leaves_nothing_on_failure(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["t.exr"]
 
 
-def test_tiles_rendered_before_an_exposure_change_are_rendered_again(tmp_path):
-    """A preset whose exposure is not 1 names it in the tiles it expects, the training set's key and
-    the models' key; presets at exposure 1 keep the keys of their earlier caches."""
+def test_tiles_rendered_before_an_exposure_or_tone_change_are_rendered_again(tmp_path):
+    """A preset whose exposure is not 1, or that has a tone curve, names them in the tiles it expects,
+    the training set's key and the models' key; a preset at exposure 1 without a curve keeps the keys
+    of earlier caches."""
     from meta_sim.pipeline.dataset import DatasetConfig
     from meta_sim.render.jobs import RenderSettings, expected_meta, single_job
     from meta_sim.sim.quality import get_preset
 
     rgb, instance, roof_class = _pixels(np.random.default_rng(1))
     path = tmp_path / "t.exr"
-    old = {key: value for key, value in _meta().items() if key not in ("exposure", "render")}
+    old = {key: value for key, value in _meta().items() if key not in ("exposure", "render", "tone")}
     tiles.write_tile(path, rgb, instance, roof_class, old)
     fast = get_preset("fast")
-    assert fast.exposure != 1.0 and fast.cache_fields() == {"exposure": fast.exposure}
+    assert fast.exposure != 1.0 and fast.cache_fields() == {"exposure": fast.exposure, "tone": list(fast.tone)}
     assert not tiles.is_valid_tile(path, {"city_seed": 7, **fast.cache_fields()})
     tiles.write_tile(path, rgb, instance, roof_class, _meta())
     assert tiles.is_valid_tile(path, {"city_seed": 7, **fast.cache_fields()})
@@ -100,7 +101,10 @@ def test_tiles_rendered_before_an_exposure_change_are_rendered_again(tmp_path):
     settings = RenderSettings(space=space, banks=[], preset=fast, out_dir=tmp_path, n_tiles=1)
     assert expected_meta(settings, single_job(space, space.sample(np.random.default_rng(0), 1)[0], 1), 0)[
         "exposure"] == fast.exposure
-    assert get_preset("balanced").cache_fields() == {}
+    balanced = get_preset("balanced")
+    assert balanced.cache_fields() == {"tone": list(balanced.tone)}
     config = DatasetConfig(preset="balanced")
-    assert config.identity() == dataclasses.asdict(config)  # the key of sets cached before exposures
-    assert "exposure" in DatasetConfig(preset="fast").identity()
+    assert config.identity() == {**dataclasses.asdict(config), "tone": list(balanced.tone)}
+    assert {"exposure", "tone"} <= set(DatasetConfig(preset="fast").identity())
+    untoned = dataclasses.replace(balanced, tone=None)
+    assert untoned.cache_fields() == {}  # the key of sets cached before exposures and tone curves
