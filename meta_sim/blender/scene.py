@@ -40,6 +40,7 @@ from ..core.errors import MetaSimError
 from ..sim import meshes, surfaces
 from ..sim.appearance import vegetation_colour
 from ..sim.clutter import TREE_HEIGHT_M
+from ..sim.furniture import SURFACES, roof_furniture
 from ..sim.ground import COVERS, ground_image
 from ..sim.quality import RenderPreset
 
@@ -319,7 +320,7 @@ class CityScene:
         else:
             trees = self._visible(lay.trees_in_rect, margin)
         region = bounding_rect(self.rects).grown(margin)
-        seed, key = int(lay.seed), self.key
+        seed, key, params = int(lay.seed), self.key, lay.params
         grey = _image_material("wall", _noise_image("wall", (0.45, 0.43, 0.40), 0.05, seed, key), key, 0.9)
         self._placeholder = {
             meshes.FLAT_ROOF: _image_material(
@@ -332,7 +333,6 @@ class CityScene:
             ground = _image_material("ground", self._ground_image(region, seed + 1, lawn), key)
         else:
             ground = _image_material("ground", _noise_image("ground", lawn, 0.25, seed + 1, key), key)
-        params = lay.params
         if params.street_details:
             road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(), key), key)
         else:
@@ -346,6 +346,8 @@ class CityScene:
                 [grey, self._placeholder[meshes.FLAT_ROOF], self._placeholder[meshes.SLOPED_ROOF]],
                 self.collection, key)
             self.buildings_obj[ROLE_TAG] = "buildings"
+        if params.roof_furniture > 0.0:
+            self._build_furniture(params.roof_furniture)
         _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(self.ground_mix)),
                          [ground], self.collection, key)
         if roads:
@@ -365,6 +367,24 @@ class CityScene:
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
         self._build_clutter(margin, len(roads), road, foliage)
+
+    def _build_furniture(self, density: float) -> None:
+        """The roof furniture (``sim/furniture.py``) of the buildings built, labelled as their roofs."""
+        key = self.key
+        arrays = meshes.furniture_mesh([(b, roof_furniture(b, self.layout.seed, density)) for b in self.buildings])
+        if not arrays.n_polygons:
+            return
+        materials = []
+        for name in SURFACES:
+            rough = surfaces.FURNITURE_ROUGHNESS.get(name, 0.85)
+            if name == "solar":
+                image = _rgb_image("solar", surfaces.solar_image(), key)
+            else:
+                image = _noise_image(f"roof-{name}", surfaces.FURNITURE[name], 0.06, 12 + len(materials), key)
+            materials.append(_image_material(f"roof-{name}", image, key, rough))
+        lid = _image_material("hvac-lid", _rgb_image("hvac-lid", surfaces.fan_lid_image(), key), key,
+                              surfaces.FURNITURE_ROUGHNESS["metal"])
+        _new_mesh_object(arrays, [*materials, lid], self.collection, key, closed=True)
 
     def _shadow_reach(self, height_m: float) -> float:
         """How far from its foot the shadow of something `height_m` tall falls in this city's sun."""

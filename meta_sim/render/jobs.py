@@ -64,8 +64,11 @@ class RenderSettings:
         return Appearance(self.sensor, self.roof_jitter, self.ground).with_design(self.space, job.design)
 
     def header(self, job: "Job") -> dict:
-        """What a tile header of ``job`` records beyond a plain render: its look and the city style."""
-        return {**self.appearance(job).header(), **({"style": self.style} if self.style != "suburban" else {})}
+        """What a tile header of ``job`` records beyond a plain render: its look, the city style and the
+        roof furniture's density (so tiles rendered before a space had furniture are never taken for its)."""
+        furniture = self.space.layout_overrides(job.design).get("roof_furniture", 0.0)
+        return {**self.appearance(job).header(), **({"style": self.style} if self.style != "suburban" else {}),
+                **({"roof_furniture": furniture} if furniture else {})}
 
     @property
     def tile_m(self) -> float:

@@ -242,6 +242,12 @@ class LayoutParams:
         lot has room behind the house).
     shrub_density: 0..1, how often lot edges carry a hedge and how many
         bushes stand around a house.
+    roof_furniture: 0..1, how much stands on the roofs (``sim/furniture.py``):
+        parapet rims, HVAC units, skylights, hatches, stair housings and
+        solar rows on flat roofs, chimneys, roof windows and solar panels on
+        sloped ones. Unlike the knobs above it is built in cities of every
+        style, and the layout does not store the pieces: they follow from the
+        seed, each building and this value.
     """
 
     building_density: float = 0.7
@@ -255,10 +261,11 @@ class LayoutParams:
     car_density: float = 0.0
     pool_share: float = 0.0
     shrub_density: float = 0.0
+    roof_furniture: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
-        for name in ("car_density", "pool_share", "shrub_density"):
+        for name in ("car_density", "pool_share", "shrub_density", "roof_furniture"):
             object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
         if not isinstance(self.tree_size, str) or self.tree_size not in TREE_SIZES:
             raise MetaSimError(f"{owner}.tree_size must be one of {', '.join(TREE_SIZES)}, got {self.tree_size!r}")
@@ -325,8 +332,9 @@ def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
     return str(value)
 
 
+# The knobs added after the first layouts: `to_dict` writes them only when set.
 _CLUTTER_DEFAULTS = {"tree_size": "small", "street_details": False, "car_density": 0.0, "pool_share": 0.0,
-                     "shrub_density": 0.0}
+                     "shrub_density": 0.0, "roof_furniture": 0.0}
 
 
 @dataclass(frozen=True)

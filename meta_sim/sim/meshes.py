@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import surfaces
+from . import polygons, surfaces
 from .clutter import CAR_COLOURS
+from .furniture import PANEL_M, SURFACES
 
 WALL, FLAT_ROOF, SLOPED_ROOF = 0, 1, 2
 ROAD_ASPHALT, ROAD_DIRT = 0, 1  # material slots of ``road_mesh``
@@ -317,20 +318,24 @@ def crown_mesh(trees, segments: int = 8) -> MeshArrays:
     return mesh
 
 
-def _box(mesh: MeshArrays, corners, z0: float, z1: float, slot: int, uv, label, top_corners=None,
-         top_slot: int | None = None, side_slots=None, floor: bool = False) -> None:
+def _box(mesh: MeshArrays, corners, z0, z1, slot: int, uv, label, top_corners=None,
+         top_slot: int | None = None, side_slots=None, floor: bool = False, top_uv=None) -> None:
     """A prism from the outline `corners` (CCW) at z0 to `top_corners` (default the same) at z1,
-    closed by a lid and, with `floor`, a floor (a closed shell keeps Workbench's shadows fast)."""
+    closed by a lid and, with `floor`, a floor (a closed shell keeps Workbench's shadows fast).
+    z0 and z1 are one height or one per corner (a tilted lid); `top_uv` overrides the lid's UVs."""
     top = top_corners or corners
     n = len(corners)
+    lo = list(z0) if isinstance(z0, (list, tuple)) else [z0] * n
+    hi = list(z1) if isinstance(z1, (list, tuple)) else [z1] * n
     if floor:
-        under = list(reversed(corners))
-        mesh.add([(*p, z0) for p in under], slot, [uv(*p) for p in under], label)
+        under = [(*p, z) for p, z in zip(corners, lo)][::-1]
+        mesh.add(under, slot, [uv(p[0], p[1]) for p in under], label)
     for k in range(n):
         j = (k + 1) % n
-        quad = [(*corners[k], z0), (*corners[j], z0), (*top[j], z1), (*top[k], z1)]
+        quad = [(*corners[k], lo[k]), (*corners[j], lo[j]), (*top[j], hi[j]), (*top[k], hi[k])]
         mesh.add(quad, slot if side_slots is None else side_slots[k], [uv(p[0], p[1]) for p in quad], label)
-    mesh.add([(*p, z1) for p in top], slot if top_slot is None else top_slot, [uv(*p) for p in top], label)
+    mesh.add([(*p, z) for p, z in zip(top, hi)], slot if top_slot is None else top_slot,
+             top_uv or [uv(*p) for p in top], label)
 
 
 def shrub_mesh(shrubs) -> MeshArrays:
@@ -413,4 +418,58 @@ def detail_mesh(pavings, pools, markings, paint_z: float) -> MeshArrays:
         quad((x0 + c, y0 + c, x1 - c, y1 - c), 0.035, WATER, surfaces.WATER_REPEAT_M)
     for m in markings:
         quad(m.bbox, paint_z, PAINT, 1.0)
+    return mesh
+
+
+# ---------------------------------------------------------------- roof furniture (sim/furniture.py)
+
+FAN_LID = len(SURFACES)  # material slot of HVAC lids; the slots before it are furniture.SURFACES in order
+
+
+def _metres(x: float, y: float) -> tuple[float, float]:
+    return (x, y)
+
+
+def _rim(mesh: MeshArrays, outer, inner, z0: float, z1: float, slot: int, label) -> None:
+    """A closed ring from z0 to z1 between the CCW outline `outer` and `inner`, its inset: a parapet."""
+    n = len(outer)
+    for k in range(n):
+        j = (k + 1) % n
+        for face in ([(*outer[k], z0), (*outer[j], z0), (*outer[j], z1), (*outer[k], z1)],  # facing out
+                     [(*inner[j], z0), (*inner[k], z0), (*inner[k], z1), (*inner[j], z1)],  # facing the roof
+                     [(*outer[k], z1), (*outer[j], z1), (*inner[j], z1), (*inner[k], z1)],  # the coping
+                     [(*inner[k], z0), (*inner[j], z0), (*outer[j], z0), (*outer[k], z0)]):  # underneath
+            mesh.add(face, slot, [(p[0], p[1]) for p in face], label)
+
+
+def furniture_mesh(furnished) -> MeshArrays:
+    """Roof furniture (``sim/furniture.py``) of (building, fixtures) pairs, each piece a closed shell built
+    in its building's own frame and turned with it. Every polygon carries its building's label colour
+    (instance id and roof class), so the labels are those of the bare roofs.
+
+    Material slot: the index of the piece's surface in ``furniture.SURFACES``; HVAC lids use FAN_LID,
+    whose image spans each lid. Panel tops map one module of ``furniture.PANEL_M`` per image repeat,
+    from the corner at the start of their low edge; other UVs are metres.
+    """
+    mesh = MeshArrays("roof-furniture")
+    for b, fixtures in furnished:
+        start = len(mesh.vertices)
+        label = label_color(b.id, b.roof_class)
+        for f in fixtures:
+            slot = SURFACES.index(f.surface)
+            if f.inner:
+                _rim(mesh, f.outline, f.inner, f.bottom[0], f.top[0], slot, label)
+                continue
+            top_uv, top_slot = None, None
+            if f.kind == "hvac":
+                x0, y0, x1, y1 = polygons.bbox(f.outline)
+                top_uv = [((x - x0) / (x1 - x0), (y - y0) / (y1 - y0)) for x, y in f.outline]
+                top_slot = FAN_LID
+            elif f.surface == "solar":
+                uv = _slope_uv([(*p, z) for p, z in zip(f.outline, f.top)])
+                top_uv = [((u - uv[0][0]) / PANEL_M[0], (v - uv[0][1]) / PANEL_M[1]) for u, v in uv]
+            _box(mesh, list(f.outline), f.bottom, f.top, slot, _metres, label, top_slot=top_slot, floor=True,
+                 top_uv=top_uv)
+        if b.rotation_deg:
+            _turn(mesh, start, b)
     return mesh

@@ -152,3 +152,40 @@ GLASS = (0.02, 0.025, 0.03)
 ROAD_PAINT = (0.62, 0.62, 0.60)
 COPING = (0.55, 0.53, 0.50)
 YARD_SHADE = 0.6  # paved commercial and industrial lots: concrete, weathered darker than sidewalks
+
+# Roof furniture (sim/furniture.py): colours (linear RGB) and roughness of its surfaces; "solar" panels and
+# HVAC lids are images (below).
+FURNITURE = {"coping": COPING, "metal": (0.50, 0.51, 0.52), "dark": (0.09, 0.09, 0.10), "dome": (0.62, 0.66, 0.68),
+             "glass": (0.025, 0.035, 0.05), "brick": (0.25, 0.085, 0.055), "render": (0.44, 0.42, 0.39)}
+FURNITURE_ROUGHNESS = {"metal": 0.5, "dome": 0.3, "glass": 0.1, "solar": 0.2}
+
+
+@_frozen
+def solar_image(seed: int = 0) -> np.ndarray:
+    """One solar module (``furniture.PANEL_M``, portrait): dark blue cells in a light frame, faint lines
+    between the cells, a slight sheen across it."""
+    rng = np.random.default_rng([int(seed), 47])
+    h, w = 60, 36  # rows up the module, columns across it
+    rows, cols = np.arange(h)[:, None], np.arange(w)[None, :]
+    rgb = np.empty((h, w, 3))
+    rgb[:] = (0.018, 0.03, 0.07)
+    rgb *= (1.0 + 0.15 * (rows / h) + 0.04 * rng.standard_normal((h, w)))[..., None]
+    lines = (rows % 6 == 0) | (cols % 6 == 0)
+    rgb[lines] = (0.05, 0.06, 0.09)
+    frame = (rows < 1) | (rows >= h - 1) | (cols < 1) | (cols >= w - 1)
+    rgb[frame] = (0.30, 0.31, 0.32)
+    return np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+@_frozen
+def fan_lid_image(seed: int = 0, n: int = 32) -> np.ndarray:
+    """The lid of an HVAC unit, spanning it: light sheet metal, a dark fan grille with a hub towards one
+    end, louvres at the other."""
+    rng = np.random.default_rng([int(seed), 53])
+    yy, xx = (np.mgrid[0:n, 0:n] + 0.5) / n
+    value = np.asarray(FURNITURE["metal"])[None, None, :] * (1.0 + 0.03 * rng.standard_normal((n, n)))[..., None]
+    r = np.hypot(xx - 0.3, yy - 0.5)
+    value[(r < 0.24) & (r > 0.06)] *= 0.18
+    louvres = (xx > 0.62) & (xx < 0.92) & (yy > 0.15) & (yy < 0.85) & ((np.arange(n)[:, None] % 4) < 2)
+    value[louvres] *= 0.6
+    return np.clip(value, 0.0, 1.0).astype(np.float32)

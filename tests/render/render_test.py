@@ -626,3 +626,35 @@ def test_white_roofs_do_not_clip_in_any_preset(space, bank, tmp_path, preset):
     assert tile.meta["tone"] == list(toned.tone) and share <= 0.01
     assert median > 200  # still white, not greyed down
     assert clipped(dataclasses.replace(toned, tone=None), tmp_path / "raw")[1] > 0.3
+
+
+@pytest.mark.parametrize("style, seed", [("suburban", 1), ("dense", 1)])
+def test_roof_furniture_keeps_the_labels_and_shows_on_the_roofs(space, bank, tmp_path, style, seed):
+    """One city with and without roof furniture (axis-aligned suburban buildings; turned dense houses):
+    the instance and roof-class labels are the same, the RGB differs where the pieces stand."""
+    from dataclasses import replace
+
+    from meta_sim.sim import polygons
+    from meta_sim.sim.furniture import roof_furniture
+
+    px, gsd = 192, 0.6
+    out = {}
+    for name, density in (("off", 0.0), ("on", 1.0)):
+        scene = replace(space, name=f"roofs-{name}", layout={"style": style, "roof_furniture": density})
+        _, (out[name],) = _render(scene, [bank], tmp_path / name, _design(space, 5, 9), n_tiles=1, seed=seed,
+                                  tile_px=px, pixel_size_m=gsd)
+    on, off = out["on"], out["off"]
+    assert np.array_equal(on.instance, off.instance) and np.array_equal(on.roof_class, off.roof_class)
+    assert on.meta["roof_furniture"] == 1.0 and "roof_furniture" not in off.meta
+    layout, (rect,) = layout_for_tiles(seed, 1, px * gsd, LayoutParams(style=style))
+    outlines = []
+    for b in layout.buildings_in_rect(*rect):
+        x0, y0, x1, y1 = polygons.bbox(b.footprint)
+        outlines += [polygons.rotate(f.outline, (x0 + x1) / 2, (y0 + y1) / 2, b.rotation_deg)
+                     for f in roof_furniture(b, seed, 1.0) if f.kind != "parapet"]
+    pieces = _rasterise_polygons(outlines, rect, px, gsd)
+    changed = np.abs(on.rgb - off.rgb).max(axis=-1) > 0.02
+    assert pieces.sum() > 100 and changed[pieces].mean() > 0.8
+    assert (pieces <= (on.instance > 0)).all()  # every piece stands on a roof
+    roofs = on.instance > 0
+    assert 0.03 < changed[roofs].mean() < 0.6  # furniture covers parts of the roofs, not whole roofs
