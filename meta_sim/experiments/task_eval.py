@@ -346,7 +346,8 @@ def run_real(h: Harness, out: Path) -> dict:
 def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "none",
                  roof_jitter: float = 0.0, ground: str = "plain") -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
-    domains vs all-building, scored on the domain's test scenes. With ``realness`` also the accuracy
+    domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
+    designs in the same cities (what inferring the domain's design adds). With ``realness`` also the accuracy
     of a real-versus-rendered classifier (``task.realness``; held-out real scenes against renders in
     held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them.
     ``sensor`` is a sensor name for every domain's renders, or "auto" for the one matching the domain's
@@ -356,13 +357,16 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     from ..task.score import all_building, count
 
     s = h.settings
-    rows, picture = {}, []
+    rows, picture, uniform = {}, [], {}
     for domain in realdomains.DOMAINS:
         adapt, test = realdomains.split(realdomains.scenes(domain, h.realdata))
         designs = _infer_real(h, adapt, s.target_seed, domain)["nams"]
         seen_by = realdomains.SENSOR_OF[domain] if sensor == "auto" else sensor
         rendered = render_set(h, f"{domain} nams", synthetic_jobs(h, designs, s.r_real, s.target_seed), seen_by,
                               roof_jitter, ground)
+        if seen_by not in uniform:  # the same cities with uniform designs: what inferring the design adds
+            uniform[seen_by] = render_set(h, "uniform", synthetic_jobs(h, None, s.r_real, s.target_seed), seen_by,
+                                          roof_jitter, ground)
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
         test_pool = _real_pool(f"{domain} test", test, s.train)
@@ -371,7 +375,10 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         real = [count(trained(h, other, None, seed, f"{'+'.join(others)}"), test_pool.images,
                       test_pool.masks)[0] for seed in s.seeds]
         space = h.methods.nams.space
-        rows[domain] = {"rendered_only": _mean_iou(sim), "other_real": _mean_iou(real), "other_domains": others,
+        flat = [count(trained(h, None, uniform[seen_by], seed, "uniform designs"), test_pool.images,
+                      test_pool.masks)[0] for seed in s.seeds]
+        rows[domain] = {"rendered_only": _mean_iou(sim), "uniform_designs": _mean_iou(flat),
+                        "other_real": _mean_iou(real), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
                         "ground": ground, "space": space.name}
@@ -574,17 +581,23 @@ def _g(value) -> str:
     return f"{value:g}" if isinstance(value, (int, float)) else str(value)
 
 
+def _iou_cell(iou: dict | None) -> str:
+    return "-" if iou is None else f"{100 * iou['iou']:.1f} +- {100 * iou['iou_std']:.1f}"
+
+
 def realism_markdown(result: dict) -> str:
     """``run_realism``'s result as a Markdown table."""
     seeds = len(result["settings"]["seeds"])
     lines = [f"Per real domain, scored on its test scenes (mean +- standard deviation over {seeds} seeds): "
              "building IoU (%) of a segmenter trained on rendered tiles alone (the design NAMS inferred for "
-             "the domain), of one trained on the other real domains, and of calling everything a building; "
+             "the domain), of one trained on renders of uniform designs in the same cities, of one trained on the "
+             "other real domains, and of calling everything a building; "
              "and the accuracy of a small CNN telling held-out real crops from crops of renders in held-out "
              "cities (0.5: indistinguishable).", "",
-             "| domain | space | sensor | roof jitter | ground | rendered only | other real domains | all building "
-             "| rendered only - all building | rendered only: precision / recall | real-vs-rendered accuracy |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| domain | space | sensor | roof jitter | ground | rendered only | rendered only, uniform designs "
+             "| other real domains | all building | rendered only - all building | rendered only: precision / recall "
+             "| real-vs-rendered accuracy |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     rows = sorted(((domain, row) for run in result["runs"].values() for domain, row in run.items()),
                   key=lambda item: realdomains.DOMAINS.index(item[0]))
     for domain, row in rows:
@@ -592,7 +605,7 @@ def realism_markdown(result: dict) -> str:
         acc = row.get("realness")
         lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
                      f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
-                     f"{100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | "
+                     f"{100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | {_iou_cell(row.get('uniform_designs'))} | "
                      f"{100 * o['iou']:.1f} +- "
                      f"{100 * o['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | {100 * row['all_building']:.1f} "
                      f"| {100 * (r['iou'] - row['all_building']):+.1f} | "

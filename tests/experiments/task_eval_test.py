@@ -114,6 +114,7 @@ def test_quick_realism_benchmark_end_to_end_infers_the_look_in_overhead_v1(tmp_p
         assert row["space"] == "overhead-v1" and row["ground"] == row["sensor"] == "inferred"
         assert all(space.validate(d) == d for d in row["designs"])
         assert 0 <= row["rendered_only"]["iou"] <= 1 and 0 <= row["realness"]["accuracy"] <= 1
+        assert 0 <= row["uniform_designs"]["iou"] <= 1
     assert (tmp_path / "pictures" / "realism-overhead-v1.png").is_file()
     assert "| overhead-v1 | inferred |" in result.output
 
@@ -153,3 +154,19 @@ def test_bench_realism_runs_option_replaces_its_rows_and_keeps_the_others(tmp_pa
     assert data["runs"]["overhead-v1"]["banepa"]["all_building"] == 0.25
     assert data["runs"]["none+jitter0+plain"]["banepa"]["all_building"] == 0.3
     assert data["seconds"] == 90.0 and data["nams_models"] == {"rooftops-v1": "a", "overhead-v1": "b"}
+
+
+def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_measured_before_it():
+    from meta_sim.experiments.task_eval import realism_markdown
+
+    row = {"rendered_only": {"iou": 0.5, "iou_std": 0.01}, "other_real": {"iou": 0.4, "iou_std": 0.02},
+           "other_domains": ["rio"], "all_building": 0.3, "sensor": "drone"}
+    result = {"runs": {"a": {"banepa": {**row, "uniform_designs": {"iou": 0.25, "iou_std": 0.03}}},
+                       "b": {"kampala": row}}, "settings": {"seeds": [0, 1]}, "render_preset": "fast", "seconds": 60}
+    lines = realism_markdown(result).splitlines()
+    header = next(line for line in lines if line.startswith("| domain"))
+    banepa = next(line for line in lines if line.startswith("| banepa"))
+    kampala = next(line for line in lines if line.startswith("| kampala"))
+    column = header.split(" | ").index("rendered only, uniform designs")
+    assert banepa.split(" | ")[column] == "25.0 +- 3.0" and kampala.split(" | ")[column] == "-"
+    assert len(banepa.split(" | ")) == len(header.split(" | "))
