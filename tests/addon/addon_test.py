@@ -68,6 +68,19 @@ def test_manifest_passes_blenders_validator():
     assert "bl_info" not in (ROOT / "__init__.py").read_text()
 
 
+def test_manifest_has_what_the_extension_platform_asks_for():
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert manifest["license"] == ["SPDX:GPL-3.0-or-later"] and project["license"] == "GPL-3.0-or-later"
+    assert (ROOT / "LICENSE").read_text().lstrip().startswith("GNU GENERAL PUBLIC LICENSE\n                       "
+                                                               "Version 3, 29 June 2007")
+    assert manifest["website"].startswith("https://")
+    assert all(line.split(" ", 1)[0].isdigit() and line.split(" ", 1)[1] for line in manifest["copyright"])
+    assert "<" in manifest["maintainer"] and "@" in manifest["maintainer"].split("<")[1]  # a contact address
+    # the platform shows each permission's reason before install: a short phrase, no trailing full stop
+    assert all(0 < len(why) <= 64 and not why.endswith(".") for why in manifest["permissions"].values())
+
+
 def _imported_modules(source: str) -> set[str]:
     names = set()
     for node in ast.walk(ast.parse(source)):
@@ -84,7 +97,7 @@ def test_zip_holds_exactly_the_addon_and_the_pure_layers(zip_path):
         sources = {n: archive.read(n).decode() for n in names if n.endswith(".py")}
     shipped = {str(p.relative_to(ROOT)) for folder in SHIPPED for p in (ROOT / folder).rglob("*")
                if p.is_file() and "__pycache__" not in p.parts and "docs" not in p.parts}
-    assert names == {"blender_manifest.toml", "__init__.py", "meta_sim/__init__.py", *shipped}
+    assert names == {"blender_manifest.toml", "LICENSE", "__init__.py", "meta_sim/__init__.py", *shipped}
     assert {n.split("/")[1] for n in names if n.startswith("meta_sim/") and n.count("/") > 1} == {
         "core", "sim", "blender", "render"}
     imported = {n: {m.split(".")[0] for m in _imported_modules(text)} for n, text in sources.items()}
