@@ -11,7 +11,7 @@ So the add-on runs the very code the command line and the render farm run,
 and the manifest's ``[build] paths`` lists exactly those files: no torch side,
 CLI or tests in the zip.
 
-Modules: ``properties`` (scene settings), ``library`` (texture bank and
+Modules: ``preferences`` (the add-on's preferences), ``properties`` (scene settings), ``library`` (texture bank and
 design space), ``previews`` (thumbnails), ``city`` (the city in the user's
 file), ``presets_ui`` (preset rows and their list), ``operators``, ``panels``.
 """
@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import library, operators, panels, presets_ui, previews, properties
+from . import library, operators, panels, preferences, presets_ui, previews, properties
 
-CLASSES = (*properties.CLASSES, *presets_ui.CLASSES, *operators.CLASSES, *panels.CLASSES)
+CLASSES = (*preferences.CLASSES, *properties.CLASSES, *presets_ui.CLASSES, *operators.CLASSES, *panels.CLASSES)
 
 
 def register() -> None:

@@ -27,8 +27,7 @@ from ..meta_sim.sim.presets import DesignPreset, save_preset
 from ..meta_sim.sim.preview import label_image, to_srgb8
 from ..meta_sim.sim.quality import get_preset
 from ..meta_sim.sim.textures import write_png
-from . import library as libraries
-from . import previews
+from . import preferences, previews
 
 COLLECTION_NAME = "Meta-Sim City"
 PARAMS_TAG = "meta_sim_params"  # on the city collection: the knobs it was generated with (JSON)
@@ -153,12 +152,12 @@ def render_preview(settings, library) -> tuple[bpy.types.Image, bpy.types.Image]
         city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
         city.set_roofs(textures)
         instance, roof_class = city.render_labels(city.rects[0])
-        rgb = city.render_rgb(city.rects[0], get_preset(settings.render_preset))
+        rgb = city.render_rgb(city.rects[0], get_preset(preferences.quality(settings)))
     finally:
         if city is not None:
             city.close()
         remove_city(key)
-    folder = libraries.user_dir("preview")
+    folder = preferences.user_dir("preview")
     paths = (folder / "preview.png", folder / "preview_labels.png")
     write_png(paths[0], to_srgb8(rgb))
     write_png(paths[1], label_image(instance, roof_class))
@@ -203,8 +202,8 @@ def export_job(settings, library, job_dir: Path, population: DesignPreset | None
     space["layout"] = {**{name: params[name] for name in ("building_density", "sloped_share", "tree_density")},
                        **space["layout"]}
     space_path, out = job_dir / "design-space.json", job_dir / "tiles"
-    options = {"seed": params["seed"], "tiles": params["tiles"], "preset": settings.render_preset, "out": str(out),
-               "space": str(space_path), "tile_px": params["tile_px"], "gsd": params["gsd"],
+    options = {"seed": params["seed"], "tiles": params["tiles"], "preset": preferences.quality(settings),
+               "out": str(out), "space": str(space_path), "tile_px": params["tile_px"], "gsd": params["gsd"],
                "bank": None if settings.bank_source == "DEFAULT" else str(library.bank.root)}
     if population is None:
         chosen = design(settings, library)

@@ -501,3 +501,56 @@ def test_panels_draw_in_every_state(addon, settings, preset_folder, tmp_path):
             assert "Distribution over the target's groups:" in labels
     names = {name for name, _, _ in calls}
     assert {"template_icon_view", "template_list", "template_icon", "operator", "prop"} <= names
+
+
+@pytest.fixture
+def prefs(addon):
+    """The add-on's preferences, back to their defaults afterwards."""
+    import bpy
+
+    yield bpy.context.preferences.addons[MODULE].preferences
+    prefs = bpy.context.preferences.addons[MODULE].preferences  # read again: reading the preferences frees the old
+    prefs.cache_folder = prefs.bank_folder = ""
+    prefs.preview_quality = "fast"
+
+
+def test_preferences_round_trip_through_the_saved_preferences(prefs, tmp_path, heldout_bank):
+    import bpy
+
+    prefs.cache_folder, prefs.bank_folder, prefs.preview_quality = str(tmp_path), str(heldout_bank.root), "balanced"
+    assert bpy.ops.wm.save_userpref() == {"FINISHED"}
+    prefs.cache_folder, prefs.bank_folder, prefs.preview_quality = "", "", "quality"
+    assert bpy.ops.wm.read_userpref() == {"FINISHED"}
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    assert (prefs.cache_folder, prefs.bank_folder, prefs.preview_quality) == (
+        str(tmp_path), str(heldout_bank.root), "balanced")
+
+
+def test_preferences_are_used_where_the_environment_variable_was(addon, settings, prefs, tmp_path, heldout_bank):
+    import bpy
+
+    library = addon.blender_addon.library
+    preferences = addon.blender_addon.preferences
+    assert preferences.cache_dir_and_source() == (Path(os.environ["META_SIM_CACHE"]), "$META_SIM_CACHE")  # farms
+    prefs.cache_folder = str(tmp_path / "cache")
+    assert preferences.cache_dir_and_source() == (tmp_path / "cache", "preferences")
+    assert library._folder(settings).parent == tmp_path / "cache" / "banks"  # where Load would build the bank
+    prefs.cache_folder = ""
+
+    settings.bank_source, settings.bank_folder = "FOLDER", ""
+    with pytest.raises(RuntimeError, match="default bank folder in the add-on's preferences"):
+        bpy.ops.meta_sim.load_bank()
+    prefs.bank_folder = str(heldout_bank.root)
+    assert bpy.ops.meta_sim.load_bank() == {"FINISHED"}
+    assert library.require(settings).bank.root == heldout_bank.root
+    settings.bank_source = "DEFAULT"
+
+    settings.render_preset = "DEFAULT"
+    prefs.preview_quality = "balanced"
+    assert preferences.quality(settings) == "balanced"
+    bpy.ops.meta_sim.generate_city()
+    settings.job_dir = str(tmp_path / "job")
+    bpy.ops.meta_sim.export_job()
+    assert json.loads((tmp_path / "job" / "render-job.json").read_text())["options"]["preset"] == "balanced"
+    settings.render_preset = "quality"  # a scene's own quality wins over the default
+    assert preferences.quality(settings) == "quality"
