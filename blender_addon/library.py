@@ -15,8 +15,8 @@ import bpy
 
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.sim.design import DesignSpace
-from ..meta_sim.sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank
-from . import preferences
+from ..meta_sim.sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank, procedural
+from . import preferences, tasks
 
 
 @dataclass(frozen=True)
@@ -57,17 +57,28 @@ def get(settings, build: bool = False) -> Library | None:
     bank from disk; without it nothing slow happens (panels and enum callbacks call this).
     """
     folder = _folder(settings)
-    key = str(folder)
-    if key in _loaded:
-        return _loaded[key]
+    if str(folder) in _loaded:
+        return _loaded[str(folder)]
     if not build and not (folder / MANIFEST).is_file():
         return None
+    return tasks.run(load_steps(settings))
+
+
+def load_steps(settings):
+    """Steps (see ``tasks``): load the library, building the default bank first on first use (on a thread:
+    Blender stays responsive, and a cancelled build leaves no bank behind); returns the library."""
+    folder = _folder(settings)
+    if str(folder) in _loaded:
+        return _loaded[str(folder)]
     if settings.bank_source == "DEFAULT":
-        library = Library(ensure_default_bank(cache_dir=preferences.cache_dir()), DesignSpace.load())
+        cache = preferences.cache_dir()
+        work = tasks.Threaded(lambda progress: ensure_default_bank(cache_dir=cache, progress=progress),
+                              total=len(procedural.recipes()))
+        library = Library((yield from work.wait("building the default texture bank")), DesignSpace.load())
     else:
         bank = load_bank(folder)
         library = Library(bank, DesignSpace.for_textures(f"bank:{bank.name}", bank.ids("flat"), bank.ids("sloped")))
-    _loaded[key] = library
+    _loaded[str(folder)] = library
     return library
 
 

@@ -53,8 +53,8 @@ def main() -> int:
                       read_rgb8(bpy.data.images["Meta-Sim Preview"].filepath)))
         settings.presets_folder = str(args.presets.resolve())
         bpy.ops.meta_sim.load_presets()
-        row = next(i for i, r in enumerate(settings.presets) if not r.error and r.flat)
-        bpy.ops.meta_sim.apply_preset(index=row)
+        settings.presets_index = next(i for i, r in enumerate(settings.presets) if not r.error and r.flat)
+        bpy.ops.meta_sim.apply_preset()
         bpy.ops.meta_sim.render_preview()
         shots.append(("AFTER: " + settings.flat_roof[5:] + " + " + settings.sloped_roof[7:],
                       read_rgb8(bpy.data.images["Meta-Sim Preview"].filepath)))

@@ -272,15 +272,16 @@ def test_presets_browser_applies_good_presets_and_rejects_bad_ones(addon, settin
     shares = json.loads(rows["population.json"].distribution)["flat_roof"]
     assert shares[0][0] == bank.ids("flat")[5] and abs(shares[0][1] - 2 / 3) < 1e-6
 
-    index = list(settings.presets).index(good)
-    assert bpy.ops.meta_sim.apply_preset(index=index) == {"FINISHED"}
+    settings.presets_index = list(settings.presets).index(good)
+    assert bpy.ops.meta_sim.apply_preset() == {"FINISHED"}
     applied = _roof_images_on_polygons(addon)
     assert applied[1] == str(bank.image_path(bank.ids("flat")[5]))
     assert settings.flat_roof == bank.ids("flat")[5]
     for name, message in (("broken.json", "not valid JSON"), ("future.json", "newer"),
                           ("unknown.json", "flat-no-such-texture")):
-        with pytest.raises(RuntimeError, match=message):
-            bpy.ops.meta_sim.apply_preset(index=list(settings.presets).index(rows[name]))
+        settings.presets_index = list(settings.presets).index(rows[name])
+        with pytest.raises(RuntimeError, match=message):  # the button is greyed out, saying why
+            bpy.ops.meta_sim.apply_preset()
         assert _roof_images_on_polygons(addon) == applied and settings.flat_roof == bank.ids("flat")[5]
 
 
@@ -427,7 +428,7 @@ def test_user_errors_are_reported_not_raised_as_tracebacks(settings, tmp_path):
 
     settings.job_dir = ""
     bpy.ops.meta_sim.generate_city()
-    with pytest.raises(RuntimeError, match="choose a job folder"):
+    with pytest.raises(RuntimeError, match="Choose a job folder"):
         bpy.ops.meta_sim.export_job()
     settings.presets_folder = str(tmp_path / "missing")
     with pytest.raises(RuntimeError, match="does not exist"):
@@ -554,3 +555,185 @@ def test_preferences_are_used_where_the_environment_variable_was(addon, settings
     assert json.loads((tmp_path / "job" / "render-job.json").read_text())["options"]["preset"] == "balanced"
     settings.render_preset = "quality"  # a scene's own quality wins over the default
     assert preferences.quality(settings) == "quality"
+
+
+def _poll_message(name: str) -> str | None:
+    """None when the operator can run, else the message its greyed-out button shows."""
+    import bpy
+
+    operator = getattr(bpy.ops.meta_sim, name)
+    if operator.poll():
+        return None
+    with pytest.raises(RuntimeError) as raised:
+        operator()
+    return str(raised.value)
+
+
+def test_every_operator_polls_and_says_why_it_is_disabled(addon, settings, preset_folder, tmp_path):
+    import bpy
+
+    operators, tasks = addon.blender_addon.operators, addon.blender_addon.tasks
+    names = [cls.bl_idname.split(".")[1] for cls in operators.CLASSES]
+    assert all("poll" in vars(cls) for cls in operators.CLASSES)
+
+    def disabled() -> dict:
+        return {name: message for name in names if (message := _poll_message(name)) is not None}
+
+    settings.job_dir, settings.presets_folder = "", ""
+    settings.presets.clear()
+    bpy.ops.meta_sim.generate_city()
+    bpy.ops.meta_sim.remove_city()
+    settings.job_designs = "CURRENT"
+    states = disabled()  # a bank, but no city, no job folder, no presets folder, no preset
+    assert set(states) == {"remove_city", "apply_roofs", "export_job", "load_presets", "apply_preset"}
+    assert "Generate a city first" in states["remove_city"] and "Generate a city first" in states["apply_roofs"]
+    assert "Choose a job folder" in states["export_job"]
+    assert "Choose a presets folder" in states["load_presets"]
+    assert "select a preset" in states["apply_preset"]
+
+    settings.job_dir = str(tmp_path / "job")
+    assert "Generate a city first: the job renders the current city" in disabled()["export_job"]
+    settings.presets_folder = str(preset_folder)
+    bpy.ops.meta_sim.load_presets()
+    settings.presets_index = next(k for k, row in enumerate(settings.presets) if row.error)
+    assert "The selected preset cannot be applied: " in disabled()["apply_preset"]
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_index = next(k for k, row in enumerate(settings.presets) if not row.error)
+    assert disabled() == {}
+
+    settings.bank_source, settings.bank_folder = "FOLDER", str(tmp_path)  # not a bank: nothing loaded from it
+    states = disabled()
+    assert set(states) == set(names) - {"load_bank", "generate_city", "remove_city"}
+    assert all("Load a texture bank first" in message for message in states.values())
+    settings.bank_folder = ""  # no folder at all: nothing to load a bank from either
+    assert "Choose a texture bank folder" in disabled()["load_bank"]
+    assert "Choose a texture bank folder" in disabled()["generate_city"]
+    settings.bank_source = "DEFAULT"
+
+    tasks._running["meta_sim.test"] = "rendering the tile"  # while a long operation runs, nothing else can
+    try:
+        states = disabled()
+        assert set(states) == set(names)
+        assert all("Wait until Meta-Sim has finished (rendering the tile)" in m for m in states.values())
+    finally:
+        tasks._running.clear()
+    bpy.ops.meta_sim.remove_city()
+
+
+def _step_through(steps, n: int):
+    """Advance a generator of steps ``n`` times (or to its end); True when it ended."""
+    for _ in range(n):
+        try:
+            next(steps)
+        except StopIteration:
+            return True
+    return False
+
+
+def test_cancelling_a_city_build_at_any_step_keeps_the_old_city(addon, settings):
+    import bpy
+
+    city, libraries = addon.blender_addon.city, addon.blender_addon.library
+    bpy.ops.meta_sim.generate_city()
+    old_key, before = settings.city_key, _counts()
+    settings.seed = 11
+    for n in range(1, 100):
+        steps = city.generate_steps(bpy.context.scene, settings, libraries.require(settings))
+        if _step_through(steps, n):
+            break
+        steps.close()  # Esc
+        assert settings.city_key == old_key and _counts() == before, n
+    assert n > 3 and settings.city_key != old_key and _counts() == before  # the last run went to the end
+    bpy.ops.meta_sim.remove_city()
+
+
+def test_cancelling_a_preview_at_any_step_leaves_nothing(addon, settings):
+    import bpy
+
+    city, libraries = addon.blender_addon.city, addon.blender_addon.library
+    settings.render_preset = "balanced"  # Cycles: rendered in strips, Esc between them
+    settings.tile_px, settings.gsd = 160, 0.72
+    bpy.ops.meta_sim.generate_city()
+    for image in [bpy.data.images.get(name) for name in city.PREVIEW_IMAGES]:
+        if image is not None:
+            bpy.data.images.remove(image)
+    before = _counts()
+    for n in range(1, 100):
+        steps = city.render_preview_steps(settings, libraries.require(settings))
+        if _step_through(steps, n):
+            break
+        steps.close()
+        assert _counts() == before and not any(bpy.data.images.get(name) for name in city.PREVIEW_IMAGES), n
+    assert n > 4 and bpy.data.images.get(city.PREVIEW_IMAGES[0]).size[:] == (160, 160)
+    settings.render_preset = "fast"
+    bpy.ops.meta_sim.remove_city()
+
+
+def test_cancelling_the_default_bank_build_leaves_no_bank(addon, settings, prefs, tmp_path):
+    libraries = addon.blender_addon.library
+    prefs.cache_folder = str(tmp_path)
+    steps = libraries.load_steps(settings)
+    share, text = next(steps)
+    assert text == "building the default texture bank" and 0 <= share < 1
+    steps.close()
+    assert not [p for p in tmp_path.rglob("*") if p.is_file()]
+
+
+class _FakeWindowManager:
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        return lambda *args, **kwargs: self.calls.append(name) or name
+
+
+def test_a_long_operation_shows_progress_and_esc_undoes_it(addon):
+    """The modal side of `tasks.Stepped`, driven by hand with timer events and Esc (no window headless)."""
+    import time
+
+    tasks = addon.blender_addon.tasks
+    built = []
+
+    class Operation(tasks.Stepped):
+        bl_idname, bl_label = "meta_sim.test", "Test Operation"
+
+        def __init__(self):
+            self.reports = []
+
+        def report(self, kind, message):
+            self.reports.append((kind, message))
+
+        def steps(self, context, settings):
+            try:
+                for k in range(6):
+                    built.append(k)
+                    time.sleep(tasks.SLICE / 2.5)  # about three steps per timer event
+                    yield (k + 1) / 6, f"step {k}"
+            except GeneratorExit:
+                built.clear()  # what a cancelled operation does: remove what it built
+                raise
+            return "done"
+
+    status = []
+    context = SimpleNamespace(window=object(), window_manager=_FakeWindowManager(),
+                              scene=SimpleNamespace(meta_sim=None),
+                              workspace=SimpleNamespace(status_text_set=status.append))
+    op = Operation()
+    assert op.invoke(context, None) == {"RUNNING_MODAL"} and tasks.busy() == "test operation"
+    timer = SimpleNamespace(type="TIMER", value="NOTHING", timer=op._timer)
+    assert op.modal(context, SimpleNamespace(type="LEFTMOUSE", value="PRESS", timer=None)) == {"RUNNING_MODAL"}
+    assert op.modal(context, SimpleNamespace(type="WHEELUPMOUSE", value="PRESS", timer=None)) == {"PASS_THROUGH"}
+    assert op.modal(context, timer) == {"RUNNING_MODAL"} and 0 < len(built) < 6
+    assert status[-1].startswith("Meta-Sim: step ") and "Esc to cancel" in status[-1]
+    assert tasks.busy().startswith("step ")
+    assert op.modal(context, SimpleNamespace(type="ESC", value="PRESS", timer=None)) == {"CANCELLED"}
+    assert built == [] and tasks.busy() is None and status[-1] is None
+    assert {"event_timer_remove", "progress_end"} <= set(context.window_manager.calls)
+    assert op.reports == [({"WARNING"}, "Test Operation cancelled: nothing was changed")]
+
+    op = Operation()
+    op.invoke(context, None)
+    while (result := op.modal(context, timer)) == {"RUNNING_MODAL"}:
+        pass
+    assert result == {"FINISHED"} and built == list(range(6)) and op.reports[-1] == ({"INFO"}, "done")
+    assert tasks.busy() is None
