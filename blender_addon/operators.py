@@ -11,8 +11,9 @@ from bpy.props import StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from ..meta_sim.core.errors import MetaSimError
+from ..meta_sim.sim.design_assets import PRESETS_SUBDIR
 from ..meta_sim.sim.presets import DesignPreset, save_preset
-from . import city, presets_ui, tasks
+from . import assets, city, presets_ui, tasks
 from . import library as libraries
 
 
@@ -24,7 +25,7 @@ def _folder(path: str, what: str) -> Path:
 
 # --- poll: why a button is greyed out (each returns True or sets the message and returns False) ---------
 
-def _bank_chosen(cls, settings) -> bool:
+def poll_bank_chosen(cls, settings) -> bool:
     if settings.bank_source == "FOLDER" and libraries.bank_folder(settings) is None:
         cls.poll_message_set("Choose a texture bank folder (Roof Textures > Folder), or a default bank folder in "
                              "the add-on's preferences")
@@ -32,8 +33,8 @@ def _bank_chosen(cls, settings) -> bool:
     return True
 
 
-def _bank_loaded(cls, settings) -> bool:
-    if not _bank_chosen(cls, settings):
+def poll_bank_loaded(cls, settings) -> bool:
+    if not poll_bank_chosen(cls, settings):
         return False
     if libraries.get_quietly(settings) is None:
         cls.poll_message_set("Load a texture bank first (Roof Textures > Load Texture Bank)")
@@ -41,7 +42,7 @@ def _bank_loaded(cls, settings) -> bool:
     return True
 
 
-def _has_city(cls, settings) -> bool:
+def poll_has_city(cls, settings) -> bool:
     if city.find(settings) is None:
         cls.poll_message_set("Generate a city first (City > Generate City)")
         return False
@@ -57,7 +58,7 @@ class META_SIM_OT_load_bank(tasks.Stepped, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return tasks.poll_idle(cls) and _bank_chosen(cls, context.scene.meta_sim)
+        return tasks.poll_idle(cls) and poll_bank_chosen(cls, context.scene.meta_sim)
 
     def steps(self, context, settings):
         library = yield from libraries.load_steps(settings)
@@ -74,7 +75,7 @@ class META_SIM_OT_generate_city(tasks.Stepped, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return tasks.poll_idle(cls) and _bank_chosen(cls, context.scene.meta_sim)
+        return tasks.poll_idle(cls) and poll_bank_chosen(cls, context.scene.meta_sim)
 
     def steps(self, context, settings):
         library = yield from libraries.load_steps(settings)
@@ -90,7 +91,7 @@ class META_SIM_OT_remove_city(tasks.Reporting, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return tasks.poll_idle(cls) and _has_city(cls, context.scene.meta_sim)
+        return tasks.poll_idle(cls) and poll_has_city(cls, context.scene.meta_sim)
 
     def run(self, context, settings):
         city.remove(settings)
@@ -107,7 +108,7 @@ class META_SIM_OT_apply_roofs(tasks.Reporting, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         settings = context.scene.meta_sim
-        return tasks.poll_idle(cls) and _bank_loaded(cls, settings) and _has_city(cls, settings)
+        return tasks.poll_idle(cls) and poll_bank_loaded(cls, settings) and poll_has_city(cls, settings)
 
     def run(self, context, settings):
         library = libraries.require(settings)
@@ -125,7 +126,7 @@ class META_SIM_OT_render_preview(tasks.Stepped, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return tasks.poll_idle(cls) and _bank_loaded(cls, context.scene.meta_sim)
+        return tasks.poll_idle(cls) and poll_bank_loaded(cls, context.scene.meta_sim)
 
     def steps(self, context, settings):
         rgb, labels = yield from city.render_preview_steps(settings, libraries.require(settings))
@@ -146,7 +147,7 @@ class META_SIM_OT_export_job(tasks.Reporting, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         settings = context.scene.meta_sim
-        if not (tasks.poll_idle(cls) and _bank_loaded(cls, settings)):
+        if not (tasks.poll_idle(cls) and poll_bank_loaded(cls, settings)):
             return False
         if not settings.job_dir.strip():
             cls.poll_message_set("Choose a job folder (Preview and Farm Job > Job Folder)")
@@ -183,7 +184,7 @@ class META_SIM_OT_load_presets(tasks.Reporting, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         settings = context.scene.meta_sim
-        if not (tasks.poll_idle(cls) and _bank_loaded(cls, settings)):
+        if not (tasks.poll_idle(cls) and poll_bank_loaded(cls, settings)):
             return False
         if not settings.presets_folder.strip():
             cls.poll_message_set("Choose a presets folder (the --out folder of `meta-sim infer`)")
@@ -210,7 +211,7 @@ class META_SIM_OT_apply_preset(tasks.Reporting, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         settings = context.scene.meta_sim
-        if not (tasks.poll_idle(cls) and _bank_loaded(cls, settings)):
+        if not (tasks.poll_idle(cls) and poll_bank_loaded(cls, settings)):
             return False
         if not 0 <= settings.presets_index < len(settings.presets):
             cls.poll_message_set("Load a presets folder and select a preset")
@@ -247,7 +248,7 @@ class META_SIM_OT_save_preset(tasks.Reporting, bpy.types.Operator, ExportHelper)
 
     @classmethod
     def poll(cls, context):
-        return tasks.poll_idle(cls) and _bank_loaded(cls, context.scene.meta_sim)
+        return tasks.poll_idle(cls) and poll_bank_loaded(cls, context.scene.meta_sim)
 
     def run(self, context, settings):
         library = libraries.require(settings)
@@ -259,8 +260,26 @@ class META_SIM_OT_save_preset(tasks.Reporting, bpy.types.Operator, ExportHelper)
         preset = DesignPreset(kind="group", name=path.stem, design_space=library.space.name,
                               design=city.design(settings, library), search={"method": "manual"})
         save_preset(path, preset)
-        self.report({"INFO"}, f"design preset written to {path}")
+        folder = _presets_folder_of(path, settings)
+        added = ""
+        if assets.has_library(folder):  # the folder is an asset library: the new design joins it
+            tasks.run(assets.build_steps(settings, library, folder, keep_settings=True))
+            added = f" and added to the asset library {assets.find_library(folder).name!r}"
+        if settings.presets_folder.strip() and folder == Path(bpy.path.abspath(settings.presets_folder)).resolve():
+            presets_ui.fill(settings, presets_ui.read_folder(folder, library))
+        self.report({"INFO"}, f"design preset written to {path}{added}")
         return {"FINISHED"}
+
+
+def _presets_folder_of(path: Path, settings) -> Path:
+    """The presets folder a saved preset belongs to: the loaded one when it lies in it (or in its presets/
+    subfolder, where `meta-sim infer` puts them), else its own folder."""
+    parent = path.parent.resolve()
+    if settings.presets_folder.strip():
+        loaded = Path(bpy.path.abspath(settings.presets_folder)).resolve()
+        if parent in (loaded, loaded / PRESETS_SUBDIR):
+            return loaded
+    return parent
 
 
 CLASSES = (META_SIM_OT_load_bank, META_SIM_OT_generate_city, META_SIM_OT_remove_city, META_SIM_OT_apply_roofs,

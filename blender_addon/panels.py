@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import bpy
 
-from . import city, preferences, presets_ui, previews
+from . import assets, city, preferences, presets_ui, previews
 from . import library as libraries
 
 
@@ -121,6 +122,11 @@ class META_SIM_PT_presets(_MetaSimPanel, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("meta_sim.apply_preset", icon="CHECKMARK")
         row.operator("meta_sim.save_preset", icon="FILE_TICK")
+        layout.operator("meta_sim.build_assets", icon="ASSET_MANAGER")
+        if settings.presets_folder.strip():
+            entry = assets.find_library(Path(bpy.path.abspath(settings.presets_folder)))
+            if entry is not None:
+                layout.label(text=f"In the Asset Browser as {entry.name!r}", icon="CHECKMARK")
 
 
 def draw_preset_details(box, settings, item):

@@ -15,6 +15,8 @@ from __future__ import annotations
 import threading
 import time
 
+import bpy
+
 from ..meta_sim.core.errors import MetaSimError
 
 TICK = 0.05  # seconds between timer events
@@ -106,6 +108,11 @@ class Threaded:
         return self._result
 
 
+def interactive(context) -> bool:
+    """Whether an event loop will send timer events (not so in background mode: ``blender -b``, the bpy module)."""
+    return context.window is not None and not bpy.app.background
+
+
 class Reporting:
     """Operator mixin: ``execute`` runs ``run(context, settings)`` and turns the errors a user can cause
     (MetaSimError, file-system errors) into an error report instead of a traceback."""
@@ -130,7 +137,7 @@ class Stepped(Reporting):
         return self.guarded(lambda: self._finished(run(self.steps(context, context.scene.meta_sim))))
 
     def invoke(self, context, event):
-        if context.window is None:  # background mode, scripts: no event loop to step in
+        if not interactive(context):
             return self.execute(context)
         self._steps = self.steps(context, context.scene.meta_sim)
         wm = context.window_manager
@@ -175,7 +182,9 @@ class Stepped(Reporting):
         wm.progress_end()
         context.workspace.status_text_set(None)
 
-    def _finished(self, message: str):
+    def _finished(self, message):
+        """Report what the steps returned: a message, or (report type, message)."""
+        kind, message = message if isinstance(message, tuple) else ({"INFO"}, message)
         if message:
-            self.report({"INFO"}, message)
+            self.report(kind, message)
         return {"FINISHED"}

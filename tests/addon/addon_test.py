@@ -693,11 +693,12 @@ class _FakeWindowManager:
         return lambda *args, **kwargs: self.calls.append(name) or name
 
 
-def test_a_long_operation_shows_progress_and_esc_undoes_it(addon):
+def test_a_long_operation_shows_progress_and_esc_undoes_it(addon, monkeypatch):
     """The modal side of `tasks.Stepped`, driven by hand with timer events and Esc (no window headless)."""
     import time
 
     tasks = addon.blender_addon.tasks
+    monkeypatch.setattr(tasks, "interactive", lambda context: True)  # as in Blender with a window
     built = []
 
     class Operation(tasks.Stepped):
@@ -743,3 +744,95 @@ def test_a_long_operation_shows_progress_and_esc_undoes_it(addon):
         pass
     assert result == {"FINISHED"} and built == list(range(6)) and op.reports[-1] == ({"INFO"}, "done")
     assert tasks.busy() is None
+
+
+def _library_assets(blend: Path) -> dict:
+    """The assets of a library file as read back: name -> metadata, tags, description, catalog, preview."""
+    import bpy
+    import numpy as np
+
+    out = {}
+    with bpy.data.temp_data() as data:
+        with data.libraries.load(str(blend), assets_only=True) as (source, target):
+            target.scenes = source.scenes
+        for scene in target.scenes:
+            meta, preview = scene.asset_data, scene.preview
+            width, height = preview.image_size
+            pixels = np.asarray(preview.image_pixels_float[:], dtype=np.float32).reshape(height, width, 4)
+            out[scene.name] = SimpleNamespace(
+                name=scene.name, full_library_path=str(blend), metadata={k: meta[k] for k in meta.keys()},
+                tags={t.name for t in meta.tags}, description=meta.description, catalog_id=meta.catalog_id,
+                size=(width, height), pixels=pixels[::-1])  # top row first, as the PNGs
+    return out
+
+
+@pytest.fixture
+def infer_folder(preset_folder, tmp_path_factory, bank):
+    """A `meta-sim infer` output: population.json and report.json at the top, group presets in presets/,
+    and the bad files of ``preset_folder``; the asset library it gets is unlisted afterwards."""
+    import shutil
+
+    import bpy
+
+    folder = tmp_path_factory.mktemp("inferred")
+    (folder / "presets").mkdir()
+    for path in preset_folder.glob("*.json"):
+        shutil.copy(path, folder / ("presets" if path.name.startswith("kampala") else ".") / path.name)
+    (folder / "report.json").write_text(json.dumps({"target_dir": "/data/kampala", "groups": []}))
+    yield folder
+    libraries = bpy.context.preferences.filepaths.asset_libraries
+    for entry in [e for e in libraries if Path(e.path).resolve() == (folder / "meta-sim-assets").resolve()]:
+        libraries.remove(entry)
+
+
+def test_a_presets_folder_becomes_an_asset_library(addon, settings, infer_folder, bank):
+    import bpy
+    import numpy as np
+
+    from meta_sim.sim.imageio import read_rgb8
+
+    assets, tasks = addon.blender_addon.assets, addon.blender_addon.tasks
+    settings.tile_px, settings.gsd = 256, 0.45  # the preview's pixels: a preview tile renders the same
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(infer_folder)
+    assert bpy.ops.meta_sim.build_assets() == {"FINISHED"}
+    blend = infer_folder / "meta-sim-assets" / "meta-sim-designs.blend"
+    found = _library_assets(blend)
+    assert set(found) == {"kampala-005", "kampala-006", "population"}  # report.json and the bad files: none
+    assert [Path(e.path).resolve() for e in bpy.context.preferences.filepaths.asset_libraries].count(
+        blend.parent.resolve()) == 1
+    for asset in found.values():
+        assert asset.size == (256, 256) and (asset.pixels[..., 3] == 1).all() and asset.pixels.std() > 0.02
+        assert assets.is_design(asset) and "Meta-Sim" in asset.tags
+
+    group = found["kampala-005"]  # its preview is a rendered tile of its design
+    bpy.ops.meta_sim.build_assets()  # again: the same library (previews from the cache), listed once
+    assert (_library_assets(blend)["kampala-005"].pixels == group.pixels).all()
+    assert [Path(e.path).resolve() for e in bpy.context.preferences.filepaths.asset_libraries].count(
+        blend.parent.resolve()) == 1
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[5], bank.ids("sloped")[2]
+    settings.render_preset = "fast"
+    bpy.ops.meta_sim.render_preview()
+    tile = read_rgb8(bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath))
+    assert (np.round(group.pixels[..., :3] * 255) == tile).all()
+    assert np.abs(found["kampala-006"].pixels - group.pixels).mean() > 0.005  # another flat roof, another tile
+
+    metadata = group.metadata
+    assert metadata["preset"] == "presets/kampala-005.json" and metadata["model_id"] == "abc"
+    assert json.loads(metadata["vote_shares"])["flat_roof"][bank.ids("flat")[5]] == 0.62
+    assert metadata["source_images"] == 3 and metadata["target"] == "3 images in /data/kampala"
+    assert json.loads(metadata["design"]) == {"flat_roof": bank.ids("flat")[5], "sloped_roof": bank.ids("sloped")[2]}
+    assert f"flat_roof {bank.ids('flat')[5]} (62% of votes)" in group.description
+    assert {"group", bank.ids("flat")[5], bank.ids("sloped")[2]} <= group.tags
+    assert "population" in found["population"].tags and found["population"].metadata["kind"] == "population"
+    catalogs = (blend.parent / "blender_assets.cats.txt").read_text()
+    assert f"{group.catalog_id}:Meta-Sim/kampala:Meta-Sim-kampala" in catalogs.splitlines()
+    assert {a.catalog_id for a in found.values()} == {group.catalog_id}
+
+    library = addon.blender_addon.library.require(settings)
+    built, bad = tasks.run(assets.build_steps(settings, library, infer_folder))
+    reasons = {path.name: why for path, why in bad}
+    assert set(reasons) == {"broken.json", "future.json", "unknown.json"}
+    assert "not valid JSON" in reasons["broken.json"] and "newer" in reasons["future.json"]
+    assert "flat-no-such-texture" in reasons["unknown.json"]
+    assert len(built) == 3
