@@ -574,7 +574,8 @@ def test_every_operator_polls_and_says_why_it_is_disabled(addon, settings, prese
 
     operators, tasks = addon.blender_addon.operators, addon.blender_addon.tasks
     names = [cls.bl_idname.split(".")[1] for cls in operators.CLASSES]
-    assert all("poll" in vars(cls) for cls in operators.CLASSES)
+    every = [cls for cls in addon.blender_addon.CLASSES if issubclass(cls, bpy.types.Operator)]
+    assert len(every) == 12 and all("poll" in vars(cls) for cls in every)  # the asset ones: their own test
 
     def disabled() -> dict:
         return {name: message for name in names if (message := _poll_message(name)) is not None}
@@ -836,3 +837,131 @@ def test_a_presets_folder_becomes_an_asset_library(addon, settings, infer_folder
     assert "not valid JSON" in reasons["broken.json"] and "newer" in reasons["future.json"]
     assert "flat-no-such-texture" in reasons["unknown.json"]
     assert len(built) == 3
+
+
+def _materials():
+    """Every object's material slots, by name, and the datablock counts."""
+    import bpy
+
+    return {o.name: [m.name if m else None for m in getattr(o.data, "materials", [])] for o in bpy.data.objects}
+
+
+def test_applying_an_asset_changes_exactly_the_roof_materials(addon, settings, infer_folder, bank):
+    import bpy
+
+    from meta_sim.sim.presets import save_preset
+
+    assets = addon.blender_addon.assets
+    bpy.ops.meta_sim.generate_city()
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[1], bank.ids("sloped")[1]
+    bpy.ops.meta_sim.apply_roofs()
+    settings.presets_folder = str(infer_folder)
+    bpy.ops.meta_sim.build_assets()
+    asset = _library_assets(infer_folder / "meta-sim-assets" / "meta-sim-designs.blend")["kampala-006"]
+    library = addon.blender_addon.library.require(settings)
+    before, counts = _materials(), _counts()
+    buildings = sys.modules[f"{MODULE}.meta_sim.blender.scene"].city_buildings(settings.city_key).name
+
+    assets.apply_asset(settings, library, asset)
+    after = _materials()
+    changed = {(name, slot) for name in before for slot, (a, b) in enumerate(zip(before[name], after[name])) if a != b}
+    assert changed == {(buildings, 1), (buildings, 2)} and _counts() == counts  # the old roofs are gone
+    assert after[buildings][1:] == [f"roof:{bank.ids('flat')[6]}", f"roof:{bank.ids('sloped')[2]}"]
+    assert (settings.flat_roof, settings.sloped_roof) == (bank.ids("flat")[6], bank.ids("sloped")[2])
+    assert addon.blender_addon.assets_ui.META_SIM_OT_apply_asset.bl_options >= {"UNDO"}
+
+    # the preset file is the truth: edited, the asset applies the edit; broken or gone, nothing changes
+    preset = load_preset(infer_folder / "presets" / "kampala-006.json")
+    preset.design = {"flat_roof": bank.ids("flat")[8], "sloped_roof": bank.ids("sloped")[2]}
+    save_preset(infer_folder / "presets" / "kampala-006.json", preset)
+    assets.apply_asset(settings, library, asset)
+    assert _materials()[buildings][1] == f"roof:{bank.ids('flat')[8]}"
+    applied = _materials()
+    (infer_folder / "presets" / "kampala-006.json").write_text("{")
+    with pytest.raises(Exception, match="not valid JSON"):
+        assets.apply_asset(settings, library, asset)
+    (infer_folder / "presets" / "kampala-006.json").unlink()
+    with pytest.raises(Exception, match="is gone; rebuild the asset library"):
+        assets.apply_asset(settings, library, asset)
+    escaping = SimpleNamespace(full_library_path=asset.full_library_path,
+                               metadata={**asset.metadata, "preset": "../../outside.json"})
+    with pytest.raises(Exception, match="points outside its folder"):
+        assets.apply_asset(settings, library, escaping)
+    assert _materials() == applied and settings.flat_roof == bank.ids("flat")[8]
+
+
+def test_saving_a_preset_adds_it_to_the_folders_asset_library(addon, settings, infer_folder, bank):
+    import bpy
+
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(infer_folder)
+    bpy.ops.meta_sim.load_presets()
+    bpy.ops.meta_sim.build_assets()
+    library_dir = infer_folder / "meta-sim-assets"
+    previews = {p: p.stat().st_mtime_ns for p in (library_dir / "previews").iterdir()}
+    settings.seed += 1  # a new city in the panel: the library keeps the city its previews show
+    bpy.ops.meta_sim.generate_city()
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[7], bank.ids("sloped")[3]
+    assert bpy.ops.meta_sim.save_preset(filepath=str(infer_folder / "presets" / "mine.json")) == {"FINISHED"}
+    found = _library_assets(library_dir / "meta-sim-designs.blend")
+    assert set(found) == {"kampala-005", "kampala-006", "population", "mine"}
+    assert json.loads(found["mine"].metadata["design"]) == {"flat_roof": bank.ids("flat")[7],
+                                                            "sloped_roof": bank.ids("sloped")[3]}
+    now = {p: p.stat().st_mtime_ns for p in (library_dir / "previews").iterdir()}
+    assert len(now) == len(previews) + 1 and all(now[p] == t for p, t in previews.items())  # one new render
+    assert "mine" in {row.name for row in settings.presets}  # the presets list shows it too
+
+    elsewhere = infer_folder.parent / f"{infer_folder.name}-elsewhere"
+    elsewhere.mkdir()
+    bpy.ops.meta_sim.save_preset(filepath=str(elsewhere / "other.json"))  # a folder without a library: none made
+    assert (elsewhere / "other.json").is_file() and not (elsewhere / "meta-sim-assets").exists()
+
+
+def test_the_asset_operators_poll_and_the_shelf_shows_only_design_assets(addon, settings, infer_folder):
+    import bpy
+
+    assets_ui = addon.blender_addon.assets_ui
+    for name in ("apply_asset", "drop_asset"):  # no asset in the context (as outside the Asset Browser)
+        assert "Select a Meta-Sim design asset" in _poll_message(name)
+    settings.presets_folder = ""
+    assert "Choose a presets folder" in _poll_message("build_assets")
+    settings.presets_folder = str(infer_folder)
+    assert _poll_message("build_assets") is None
+    settings.bank_source, settings.bank_folder = "FOLDER", str(infer_folder)
+    assert "Load a texture bank first" in _poll_message("build_assets")
+    settings.bank_source = "DEFAULT"
+
+    shelf = assets_ui.META_SIM_AST_designs
+    bpy.ops.meta_sim.build_assets()
+    design = _library_assets(infer_folder / "meta-sim-assets" / "meta-sim-designs.blend")["population"]
+    assert shelf.asset_poll(design)
+    assert not shelf.asset_poll(SimpleNamespace(metadata={}))  # the shelf lists no other assets
+    assert not shelf.asset_poll(SimpleNamespace(metadata={"meta_sim_format": "something else"}))
+    if addon.blender_addon.city.find(settings) is not None:
+        bpy.ops.meta_sim.remove_city()
+    assert not shelf.poll(bpy.context)  # the shelf shows while there is a city to drop designs on
+    bpy.ops.meta_sim.generate_city()
+    assert shelf.poll(bpy.context)
+
+
+def test_a_design_dropped_applies_only_over_the_city(addon, settings):
+    import bpy
+    from mathutils import Vector
+
+    assets_ui = addon.blender_addon.assets_ui
+    bpy.ops.meta_sim.generate_city()
+    scene, depsgraph = bpy.context.scene, bpy.context.evaluated_depsgraph_get()
+    down = Vector((0.0, 0.0, -1.0))
+    buildings = sys.modules[f"{MODULE}.meta_sim.blender.scene"].city_buildings(settings.city_key)
+    centre = sum((buildings.matrix_world @ Vector(corner) for corner in buildings.bound_box), Vector()) / 8
+    assert assets_ui.hits_city(scene, depsgraph, Vector((centre.x, centre.y, 500.0)), down, settings)
+    assert not assets_ui.hits_city(scene, depsgraph, Vector((1e5, 1e5, 500.0)), down, settings)
+    cube = bpy.data.objects.new("user's cube", bpy.data.meshes.new("user's cube"))
+    cube.data.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
+    cube.location = (1e5, 1e5, 10.0)
+    scene.collection.objects.link(cube)
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        assert not assets_ui.hits_city(scene, depsgraph, Vector((1e5, 1e5, 500.0)), down, settings)
+    finally:
+        bpy.data.objects.remove(cube)
