@@ -156,6 +156,10 @@ class Stepped(Reporting):
             return {"PASS_THROUGH"} if event.type in NAVIGATION else {"RUNNING_MODAL"}
         return self.guarded(lambda: self._advance(context))
 
+    def cancel(self, context):
+        """Blender ends the operation itself (a file is loaded, the window closes): as Esc, quietly."""
+        self._end(context)
+
     def _advance(self, context):
         """Steps for up to ``SLICE`` seconds, then the progress display."""
         deadline, share, text = time.monotonic() + SLICE, 0.0, ""

@@ -739,6 +739,12 @@ def test_a_long_operation_shows_progress_and_esc_undoes_it(addon, monkeypatch):
     assert {"event_timer_remove", "progress_end"} <= set(context.window_manager.calls)
     assert op.reports == [({"WARNING"}, "Test Operation cancelled: nothing was changed")]
 
+    op = Operation()  # Blender cancels it (a file is loaded): the same clean-up
+    op.invoke(context, None)
+    op.modal(context, timer)
+    op.cancel(context)
+    assert built == [] and tasks.busy() is None and status[-1] is None
+
     op = Operation()
     op.invoke(context, None)
     while (result := op.modal(context, timer)) == {"RUNNING_MODAL"}:
