@@ -11,18 +11,21 @@ So the add-on runs the very code the command line and the render farm run,
 and the manifest's ``[build] paths`` lists exactly those files: no torch side,
 CLI or tests in the zip.
 
-Modules: ``properties`` (scene settings), ``library`` (texture bank and
+Modules: ``preferences`` (the add-on's preferences), ``properties`` (scene settings), ``library`` (texture bank and
 design space), ``previews`` (thumbnails), ``city`` (the city in the user's
-file), ``presets_ui`` (preset rows and their list), ``operators``, ``panels``.
+file), ``presets_ui`` (preset rows and their list), ``assets`` and ``assets_ui`` (the presets as an
+asset library: Asset Browser, asset shelf), ``tasks`` (long operations: progress, Esc), ``operators``,
+``panels``.
 """
 
 from __future__ import annotations
 
 import bpy
 
-from . import library, operators, panels, presets_ui, previews, properties
+from . import assets_ui, library, operators, panels, preferences, presets_ui, previews, properties
 
-CLASSES = (*properties.CLASSES, *presets_ui.CLASSES, *operators.CLASSES, *panels.CLASSES)
+CLASSES = (*preferences.CLASSES, *properties.CLASSES, *presets_ui.CLASSES, *operators.CLASSES, *assets_ui.CLASSES,
+           *panels.CLASSES)
 
 
 def register() -> None:
@@ -30,9 +33,11 @@ def register() -> None:
         bpy.utils.register_class(cls)
     properties.register()
     previews.register()
+    assets_ui.register()
 
 
 def unregister() -> None:
+    assets_ui.unregister()
     previews.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):

@@ -7,6 +7,7 @@ The city is one collection; every datablock it made carries its key (see
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shlex
 import uuid
@@ -27,8 +28,7 @@ from ..meta_sim.sim.presets import DesignPreset, save_preset
 from ..meta_sim.sim.preview import label_image, to_srgb8
 from ..meta_sim.sim.quality import get_preset
 from ..meta_sim.sim.textures import write_png
-from . import library as libraries
-from . import previews
+from . import preferences, previews, tasks
 
 COLLECTION_NAME = "Meta-Sim City"
 PARAMS_TAG = "meta_sim_params"  # on the city collection: the knobs it was generated with (JSON)
@@ -81,26 +81,31 @@ def set_design(settings, library, chosen: dict) -> None:
             setattr(settings, prop, chosen[parameter.name])
 
 
-def generate(scene: bpy.types.Scene, settings, library) -> dict:
-    """Replace the scene's city with a new one from the panel's knobs, wearing the pickers' design."""
+def generate_steps(scene: bpy.types.Scene, settings, library):
+    """Steps (see ``tasks``): a new city from the panel's knobs, wearing the pickers' design, replaces the
+    scene's city; returns the report. The old city goes only once the new one is complete: cancelled,
+    the half-built one is removed and the old one stays."""
     chosen = design(settings, library)
-    remove(settings)
     params = knobs(settings)
-    layout, rects = _layout(library, params)
+    layout, rects = yield from tasks.Threaded(lambda progress: _layout(library, params)).wait(
+        "laying out the city", 0.0, 0.4)
     key = f"meta-sim-{uuid.uuid4().hex[:12]}"
     collection = bpy.data.collections.new(COLLECTION_NAME)
     collection[CITY_TAG] = key
-    scene.collection.children.link(collection)
     try:
+        scene.collection.children.link(collection)
+        yield 0.4, "building the city"
         city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
         city.close()
+        collection[PARAMS_TAG] = json.dumps(params)
+        yield 0.9, "putting the roofs on"
+        _put_roofs(key, library, chosen)
     except BaseException:
         remove_city(key)  # a half-built city must not stay behind as orphans
         raise
-    collection[PARAMS_TAG] = json.dumps(params)
+    remove(settings)
     settings.city_key = key
-    apply_design(settings, library, chosen)
-    return {"buildings": len(city.buildings), "trees": city.n_trees, "size_m": layout.width_m}
+    return f"city {layout.width_m:.0f} m wide: {len(city.buildings)} buildings, {city.n_trees} trees"
 
 
 def remove(settings) -> int:
@@ -112,8 +117,12 @@ def remove(settings) -> int:
 
 def apply_design(settings, library, chosen: dict) -> bool:
     """Put a design's roof textures on the city; False when there is no city (or it has no buildings)."""
+    return bool(settings.city_key) and _put_roofs(settings.city_key, library, chosen)
+
+
+def _put_roofs(key: str, library, chosen: dict) -> bool:
     textures = resolve_textures(library.space, chosen, [library.bank])
-    buildings = city_buildings(settings.city_key) if settings.city_key else None
+    buildings = city_buildings(key)
     if buildings is None:
         return False
     set_roofs(buildings, textures, drop_unused=True)
@@ -133,37 +142,47 @@ def roof_images(settings) -> dict:
     return out
 
 
-def render_preview(settings, library) -> tuple[bpy.types.Image, bpy.types.Image]:
-    """Render one tile of the city (or of the panel's knobs before a city exists), as the farm would.
+def render_preview_steps(settings, library):
+    """Steps (see ``tasks``): render one tile of the city (or of the panel's knobs before a city exists), as
+    the farm would; returns the two images (RGB and the colour-coded label pass).
 
-    The tile is rebuilt in a private, temporary collection and removed afterwards;
-    the results go to two images (RGB and the colour-coded label pass), PNGs in the
-    extension's user folder.
+    The tile is rebuilt in a private, temporary collection and removed afterwards (also when
+    cancelled); the images are PNGs in the extension's user folder, written at the end.
     """
     params = city_knobs(settings) or knobs(settings)
     tile = min(settings.preview_tile, params["tiles"] - 1)
-    chosen = design(settings, library)
-    textures = resolve_textures(library.space, chosen, [library.bank])
+    textures = resolve_textures(library.space, design(settings, library), [library.bank])
+    preset = get_preset(preferences.quality(settings))
+    with tile_city(library, params, tile) as city:
+        yield 0.05, "building the preview tile"
+        city.set_roofs(textures)
+        instance, roof_class = city.render_labels(city.rects[0])
+        yield 0.15, "rendering the label pass"
+        rgb = yield from tasks.scaled(city.render_rgb_in_strips(city.rects[0], preset),
+                                      f"rendering the tile ({preset.name})", 0.15, 1.0)
+    folder = preferences.user_dir("preview")
+    paths = (folder / "preview.png", folder / "preview_labels.png")
+    write_png(paths[0], to_srgb8(preset.tone_map(rgb)))
+    write_png(paths[1], label_image(instance, roof_class))
+    return tuple(_show(name, path) for name, path in zip(PREVIEW_IMAGES, paths))
+
+
+@contextlib.contextmanager
+def tile_city(library, params: dict, tile: int, pixel_size_m: float | None = None):
+    """One tile of the city of ``params`` in a private, temporary collection (its own render scene),
+    removed when the block ends; ``pixel_size_m`` renders it at another resolution than the knobs'."""
     layout, rects = _layout(library, params, [tile])
     key = f"meta-sim-preview-{uuid.uuid4().hex[:8]}"
     collection = bpy.data.collections.new("Meta-Sim Preview Tile")
     collection[CITY_TAG] = key
     city = None
     try:
-        city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
-        city.set_roofs(textures)
-        instance, roof_class = city.render_labels(city.rects[0])
-        preset = get_preset(settings.render_preset)
-        rgb = preset.tone_map(city.render_rgb(city.rects[0], preset))
+        city = CityScene(layout, rects, pixel_size_m=pixel_size_m or params["gsd"], collection=collection, key=key)
+        yield city
     finally:
         if city is not None:
             city.close()
         remove_city(key)
-    folder = libraries.user_dir("preview")
-    paths = (folder / "preview.png", folder / "preview_labels.png")
-    write_png(paths[0], to_srgb8(rgb))
-    write_png(paths[1], label_image(instance, roof_class))
-    return tuple(_show(name, path) for name, path in zip(PREVIEW_IMAGES, paths))
 
 
 def _show(name: str, path: Path) -> bpy.types.Image:
@@ -204,8 +223,8 @@ def export_job(settings, library, job_dir: Path, population: DesignPreset | None
     space["layout"] = {**{name: params[name] for name in ("building_density", "sloped_share", "tree_density")},
                        **space["layout"]}
     space_path, out = job_dir / "design-space.json", job_dir / "tiles"
-    options = {"seed": params["seed"], "tiles": params["tiles"], "preset": settings.render_preset, "out": str(out),
-               "space": str(space_path), "tile_px": params["tile_px"], "gsd": params["gsd"],
+    options = {"seed": params["seed"], "tiles": params["tiles"], "preset": preferences.quality(settings),
+               "out": str(out), "space": str(space_path), "tile_px": params["tile_px"], "gsd": params["gsd"],
                "bank": None if settings.bank_source == "DEFAULT" else str(library.bank.root)}
     if population is None:
         chosen = design(settings, library)

@@ -2,13 +2,12 @@
 
 The default bank is the command line's (`meta-sim textures build`): byte-identical
 on every machine, so presets written by `meta-sim infer` name the same texture
-ids. It lives under ``$META_SIM_CACHE`` when that is set (shared with the
-command line), else in the extension's user folder.
+ids. It lives in the cache folder of the preferences (see ``preferences.cache_dir``).
+A scene's Folder source without a folder of its own uses the preferences' default bank folder.
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,19 +15,8 @@ import bpy
 
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.sim.design import DesignSpace
-from ..meta_sim.sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank
-
-# The extension's root package (``bl_ext.<repository>.meta_sim``): Blender keys user folders by it.
-EXTENSION = __package__.rpartition(".")[0]
-
-
-def user_dir(sub: str = "") -> Path:
-    return Path(bpy.utils.extension_path_user(EXTENSION, path=sub, create=True))
-
-
-def cache_dir() -> Path:
-    env = os.environ.get("META_SIM_CACHE")
-    return Path(env) if env else user_dir()
+from ..meta_sim.sim.textures import MANIFEST, TextureBank, default_bank_dir, ensure_default_bank, load_bank, procedural
+from . import preferences, tasks
 
 
 @dataclass(frozen=True)
@@ -45,12 +33,21 @@ class Library:
 _loaded: dict[str, Library] = {}  # bank folder -> library; banks are immutable once built
 
 
+def bank_folder(settings) -> Path | None:
+    """The folder of a scene's Folder source: its own, else the preferences' default; None when neither is set."""
+    if settings.bank_folder.strip():
+        return Path(bpy.path.abspath(settings.bank_folder)).resolve()
+    return preferences.default_bank_folder()
+
+
 def _folder(settings) -> Path:
     if settings.bank_source == "DEFAULT":
-        return default_bank_dir(cache_dir=cache_dir())
-    if not settings.bank_folder.strip():
-        raise MetaSimError("choose a texture bank folder (one written by `meta-sim textures build`)")
-    return Path(bpy.path.abspath(settings.bank_folder)).resolve()
+        return default_bank_dir(cache_dir=preferences.cache_dir())
+    folder = bank_folder(settings)
+    if folder is None:
+        raise MetaSimError("choose a texture bank folder (one written by `meta-sim textures build`), here or as "
+                           "the default bank folder in the add-on's preferences")
+    return folder
 
 
 def get(settings, build: bool = False) -> Library | None:
@@ -60,17 +57,28 @@ def get(settings, build: bool = False) -> Library | None:
     bank from disk; without it nothing slow happens (panels and enum callbacks call this).
     """
     folder = _folder(settings)
-    key = str(folder)
-    if key in _loaded:
-        return _loaded[key]
+    if str(folder) in _loaded:
+        return _loaded[str(folder)]
     if not build and not (folder / MANIFEST).is_file():
         return None
+    return tasks.run(load_steps(settings))
+
+
+def load_steps(settings):
+    """Steps (see ``tasks``): load the library, building the default bank first on first use (on a thread:
+    Blender stays responsive, and a cancelled build leaves no bank behind); returns the library."""
+    folder = _folder(settings)
+    if str(folder) in _loaded:
+        return _loaded[str(folder)]
     if settings.bank_source == "DEFAULT":
-        library = Library(ensure_default_bank(cache_dir=cache_dir()), DesignSpace.load())
+        cache = preferences.cache_dir()
+        work = tasks.Threaded(lambda progress: ensure_default_bank(cache_dir=cache, progress=progress),
+                              total=len(procedural.recipes()))
+        library = Library((yield from work.wait("building the default texture bank")), DesignSpace.load())
     else:
         bank = load_bank(folder)
         library = Library(bank, DesignSpace.for_textures(f"bank:{bank.name}", bank.ids("flat"), bank.ids("sloped")))
-    _loaded[key] = library
+    _loaded[str(folder)] = library
     return library
 
 

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import bpy
 
-from . import city, presets_ui, previews
+from . import assets, city, preferences, presets_ui, previews
 from . import library as libraries
 
 
@@ -50,6 +51,9 @@ class META_SIM_PT_textures(_MetaSimPanel, bpy.types.Panel):
         layout.prop(settings, "bank_source", expand=True)
         if settings.bank_source == "FOLDER":
             layout.prop(settings, "bank_folder")
+            default = libraries.bank_folder(settings) if not settings.bank_folder.strip() else None
+            if default is not None:
+                layout.label(text=f"Default from the preferences: {default}", icon="PREFERENCES")
         library = libraries.get_quietly(settings)
         if library is None:
             layout.operator("meta_sim.load_bank", icon="IMPORT")
@@ -76,6 +80,8 @@ class META_SIM_PT_render(_MetaSimPanel, bpy.types.Panel):
         settings = context.scene.meta_sim
         row = layout.row(align=True)
         row.prop(settings, "render_preset")
+        if settings.render_preset == "DEFAULT":
+            row.label(text=preferences.quality(settings).title())
         row.prop(settings, "preview_tile")
         layout.operator("meta_sim.render_preview", icon="RENDER_STILL")
         shown = [bpy.data.images.get(name) for name in city.PREVIEW_IMAGES]
@@ -116,6 +122,11 @@ class META_SIM_PT_presets(_MetaSimPanel, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("meta_sim.apply_preset", icon="CHECKMARK")
         row.operator("meta_sim.save_preset", icon="FILE_TICK")
+        layout.operator("meta_sim.build_assets", icon="ASSET_MANAGER")
+        if settings.presets_folder.strip():
+            entry = assets.find_library(Path(bpy.path.abspath(settings.presets_folder)))
+            if entry is not None:
+                layout.label(text=f"In the Asset Browser as {entry.name!r}", icon="CHECKMARK")
 
 
 def draw_preset_details(box, settings, item):

@@ -13,6 +13,7 @@ from pathlib import Path
 import bpy
 
 from ..meta_sim.core.errors import MetaSimError
+from ..meta_sim.sim.design_assets import preset_files
 from ..meta_sim.sim.presets import DesignPreset, load_preset
 from . import library as libraries
 from . import previews
@@ -21,14 +22,9 @@ TOP_CHOICES = 3  # of a population's distribution, per parameter
 
 
 def read_folder(folder: Path, library) -> list[dict]:
-    """One row per ``*.json`` in the folder (sorted), each validated against the library's design space."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise MetaSimError(f"preset folder {folder} does not exist; choose the --out folder of `meta-sim infer`")
-    rows = [_row(path, library) for path in sorted(folder.glob("*.json"))]
-    if not rows:
-        raise MetaSimError(f"no presets (*.json) in {folder}")
-    return rows
+    """One row per preset file of the folder (``design_assets.preset_files``), each validated against the
+    library's design space."""
+    return [_row(path, library) for path in preset_files(folder)]
 
 
 def load(path: str, library) -> DesignPreset:

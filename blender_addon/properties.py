@@ -8,8 +8,7 @@ from bpy.props import CollectionProperty, EnumProperty, FloatProperty, IntProper
 from ..meta_sim.render.options import RENDER_OPTIONS
 from ..meta_sim.render.plan import LIMITS, MAX_DESIGNS
 from ..meta_sim.sim.layout import LayoutParams
-from ..meta_sim.sim.quality import PRESETS
-from . import library, previews
+from . import library, preferences, previews
 
 _DEFAULTS = LayoutParams()
 _RENDER_DEFAULTS = {opt.dest: opt.default for opt in RENDER_OPTIONS}  # a population job's, as the CLI's
@@ -65,8 +64,9 @@ class MetaSimSettings(bpy.types.PropertyGroup):
     flat_roof: EnumProperty(name="Flat Roof", description="Texture of every flat roof", items=_flat_items)
     sloped_roof: EnumProperty(name="Sloped Roof", description="Texture of every sloped roof", items=_sloped_items)
 
-    render_preset: EnumProperty(name="Quality", items=[(p.name, p.name.title(), p.description)
-                                                       for p in PRESETS.values()])
+    render_preset: EnumProperty(name="Quality", items=[
+        ("DEFAULT", "Default", "The default preview quality of the add-on's preferences"),
+        *preferences.QUALITY_ITEMS])
     preview_tile: IntProperty(name="Tile", description="Which tile of the city to preview (0 = south-west)",
                               min=0, default=0)
     job_dir: StringProperty(name="Job Folder", description="Where the render job file goes; the farm "

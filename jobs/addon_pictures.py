@@ -1,9 +1,14 @@
-"""The README's add-on picture: a preview tile before and after applying an inferred design preset.
+"""The README's add-on pictures: a preview tile before and after applying an inferred design preset, and the
+previews of a design asset library.
 
     python jobs/addon_pictures.py --presets out/demo/infer/presets --out blender_addon/docs/before-after.png
+    python jobs/addon_pictures.py --assets [--presets FOLDER] --out blender_addon/docs/asset-previews.png
 
-Drives the built extension headless (the bpy module), as an artist would in the panel: generate a
-city, render a preview tile, load the presets `meta-sim infer` wrote, apply the first, preview again.
+Drives the built extension headless (the bpy module), as an artist would in the panel. Before/after:
+generate a city, render a preview tile, load the presets `meta-sim infer` wrote, apply the first,
+preview again. ``--assets``: load a presets folder (without ``--presets``: the designs of
+``EXAMPLE_DESIGNS``, each saved with Save Design Preset, and their population), Build Asset Library,
+and lay the assets' previews, as the library file holds them, side by side with their names.
 """
 
 import argparse
@@ -17,20 +22,30 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+# (preset name, flat roof, sloped roof): the demo's two designs and three more, for --assets without --presets
+EXAMPLE_DESIGNS = (
+    ("demo-hidden", "flat-gravel-dark", "sloped-seam-green"),
+    ("demo-city", "flat-membrane-white-tpo", "sloped-clay-terracotta"),
+    ("sedum-slate", "flat-green-sedum", "sloped-slate-grey"),
+    ("metal-shingle", "flat-metal-deck-galvanised", "sloped-shingle-charcoal"),
+    ("tar-corrugated", "flat-tar-gravel", "sloped-corrugated-rusty"),
+)
+
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--presets", type=Path, required=True, help="a folder of presets from meta-sim infer")
+    parser.add_argument("--presets", type=Path, help="a folder of presets from meta-sim infer")
+    parser.add_argument("--assets", action="store_true", help="the asset previews instead of before/after")
     parser.add_argument("--out", type=Path, required=True, help="PNG to write")
     parser.add_argument("--seed", type=int, default=4242, help="city seed")
     args = parser.parse_args()
+    if args.presets is None and not args.assets:
+        parser.error("--presets is needed for the before/after picture")
 
     import bpy  # isort: skip (first: it puts Blender's script modules, addon_utils among them, on the path)
     import addon_utils  # isort: skip
 
-    from meta_sim.sim.imageio import read_rgb8
     from meta_sim.sim.textures.pngio import write_png
-    from meta_sim.sim.textures.sheet import render_sheet
 
     with tempfile.TemporaryDirectory() as tmp:
         subprocess.run([sys.executable, str(ROOT / "jobs" / "build_addon.py"), "--out", tmp], check=True,
@@ -47,23 +62,73 @@ def main() -> int:
         settings.render_preset = "fast"
         bpy.ops.meta_sim.load_bank()
         bpy.ops.meta_sim.generate_city()
-        shots = []
-        bpy.ops.meta_sim.render_preview()
-        shots.append(("BEFORE: " + settings.flat_roof[5:] + " + " + settings.sloped_roof[7:],
-                      read_rgb8(bpy.data.images["Meta-Sim Preview"].filepath)))
-        settings.presets_folder = str(args.presets.resolve())
-        bpy.ops.meta_sim.load_presets()
-        row = next(i for i, r in enumerate(settings.presets) if not r.error and r.flat)
-        bpy.ops.meta_sim.apply_preset(index=row)
-        bpy.ops.meta_sim.render_preview()
-        shots.append(("AFTER: " + settings.flat_roof[5:] + " + " + settings.sloped_roof[7:],
-                      read_rgb8(bpy.data.images["Meta-Sim Preview"].filepath)))
-        labels = read_rgb8(bpy.data.images["Meta-Sim Preview Labels"].filepath)
-        shots.append(("LABELS", labels))
+        if args.assets:
+            picture = asset_previews(settings, args.presets or _example_presets(settings, Path(tmp) / "presets"))
+        else:
+            picture = before_after(settings, args.presets)
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        write_png(args.out, render_sheet([shots], 384, 3))
+        write_png(args.out, picture)
     print(f"wrote {args.out}")
     return 0
+
+
+def before_after(settings, presets: Path):
+    import bpy
+
+    from meta_sim.sim.imageio import read_rgb8
+    from meta_sim.sim.textures.sheet import render_sheet
+
+    shots = []
+    bpy.ops.meta_sim.render_preview()
+    shots.append(("BEFORE: " + settings.flat_roof[5:] + " + " + settings.sloped_roof[7:],
+                  read_rgb8(bpy.data.images["Meta-Sim Preview"].filepath)))
+    settings.presets_folder = str(presets.resolve())
+    bpy.ops.meta_sim.load_presets()
+    settings.presets_index = next(i for i, r in enumerate(settings.presets) if not r.error and r.flat)
+    bpy.ops.meta_sim.apply_preset()
+    bpy.ops.meta_sim.render_preview()
+    shots.append(("AFTER: " + settings.flat_roof[5:] + " + " + settings.sloped_roof[7:],
+                  read_rgb8(bpy.data.images["Meta-Sim Preview"].filepath)))
+    labels = read_rgb8(bpy.data.images["Meta-Sim Preview Labels"].filepath)
+    shots.append(("LABELS", labels))
+    return render_sheet([shots], 384, 3)
+
+
+def _example_presets(settings, folder: Path) -> Path:
+    """``EXAMPLE_DESIGNS`` saved from the panel (Save Design Preset), and the population of them."""
+    import bpy
+
+    from meta_sim.sim.design import DesignSpace
+    from meta_sim.sim.presets import load_preset, population, save_preset
+
+    for name, flat, sloped in EXAMPLE_DESIGNS:
+        settings.flat_roof, settings.sloped_roof = flat, sloped
+        bpy.ops.meta_sim.save_preset(filepath=str(folder / f"{name}.json"))
+    groups = [load_preset(folder / f"{name}.json") for name, _, _ in EXAMPLE_DESIGNS]
+    save_preset(folder / "population.json", population(groups, DesignSpace.load(), "examples-population"))
+    return folder
+
+
+def asset_previews(settings, presets: Path):
+    """Build Asset Library on ``presets``; the previews the library file holds, named, in one row."""
+    import bpy
+    import numpy as np
+
+    from meta_sim.sim import design_assets
+    from meta_sim.sim.textures.sheet import render_sheet
+
+    settings.presets_folder = str(presets.resolve())
+    bpy.ops.meta_sim.build_assets()
+    shots = []
+    with bpy.data.temp_data() as data:
+        blend = presets / design_assets.LIBRARY_DIR / design_assets.BLEND_FILE
+        with data.libraries.load(str(blend), assets_only=True) as (source, target):
+            target.scenes = source.scenes
+        for scene in sorted(target.scenes, key=lambda s: (s.asset_data.get("kind") == "population", s.name)):
+            width, height = scene.preview.image_size
+            rgba = np.asarray(scene.preview.image_pixels_float[:], dtype=np.float32).reshape(height, width, 4)
+            shots.append((scene.name, np.round(rgba[::-1, :, :3] * 255).astype(np.uint8)))
+    return render_sheet([shots], design_assets.PREVIEW_PX, len(shots))
 
 
 if __name__ == "__main__":

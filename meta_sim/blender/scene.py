@@ -235,6 +235,10 @@ def city_buildings(key: str) -> bpy.types.Object | None:
     return next((o for o in bpy.data.objects if o.get(CITY_TAG) == key and o.get(ROLE_TAG) == "buildings"), None)
 
 
+def _exposed(rgb: np.ndarray, preset: RenderPreset) -> np.ndarray:
+    return rgb if preset.exposure == 1.0 else rgb * np.float32(preset.exposure)
+
+
 @contextlib.contextmanager
 def _quiet(log_path: str):
     """Send Blender's per-frame chatter (and GL warnings) to a log file instead of the terminal.
@@ -504,7 +508,8 @@ class CityScene:
         self.camera.rotation_euler = (0.0, 0.0, 0.0)
         return width, height
 
-    def _render_to_array(self, rect: Rect, name: str) -> np.ndarray:
+    def _render_to_array(self, rect: Rect, name: str, strip: bool = False) -> np.ndarray:
+        """The render of ``rect``; a ``strip`` (a border render) is as wide as it, its height Blender's."""
         width, height = self._frame(rect)
         path = os.path.join(self._tmp, f"{name}.exr")
         self.scene.render.filepath = path
@@ -518,7 +523,7 @@ class CityScene:
         finally:
             image.close()
             os.remove(path)
-        if pixels is None or pixels.shape[:2] != (height, width):
+        if pixels is None or pixels.shape[1] != width or (not strip and pixels.shape[0] != height):
             raise RuntimeError(f"render of {name} has an unexpected shape")
         return np.asarray(pixels, dtype=np.float32)
 
@@ -539,6 +544,39 @@ class CityScene:
 
     def render_rgb(self, rect: Rect, preset: RenderPreset) -> np.ndarray:
         """Linear RGB (float32) of a rectangle with a quality preset, scaled by its exposure."""
+        self._set_quality(preset)
+        return _exposed(self._render_to_array(rect, "rgb")[..., :3], preset)
+
+    def render_rgb_in_strips(self, rect: Rect, preset: RenderPreset, rows: int = 64):
+        """`render_rgb` as a generator that renders path-traced images in horizontal strips of about
+        ``rows`` rows, yielding the share done after each, so a caller can show progress and stop between
+        strips; returns the image. Cycles samples each pixel on its own, so the strips join into the same
+        pixels as one render (not so with denoising, and Workbench is fast: both render whole)."""
+        height = self._frame(rect)[1]
+        strips = -(-height // rows)
+        if preset.engine != "CYCLES" or preset.denoise or strips < 2:
+            rgb = self.render_rgb(rect, preset)
+            yield 1.0
+            return rgb
+        self._set_quality(preset)
+        render = self.scene.render
+        render.use_border = render.use_crop_to_border = True
+        parts = []
+        try:
+            edges = [round(k * height / strips) / height for k in range(strips + 1)]
+            for k in range(strips):
+                render.border_min_x, render.border_max_x = 0.0, 1.0
+                render.border_min_y, render.border_max_y = 1.0 - edges[k + 1], 1.0 - edges[k]
+                parts.append(self._render_to_array(rect, "rgb", strip=True)[..., :3])
+                yield (k + 1) / strips
+        finally:
+            render.use_border = render.use_crop_to_border = False
+        rgb = np.concatenate(parts)
+        if rgb.shape[0] != height:
+            raise RuntimeError("the strips of the render do not add up to the image")
+        return _exposed(rgb, preset)
+
+    def _set_quality(self, preset: RenderPreset) -> None:
         scene = self.scene
         scene.render.film_transparent = False
         if preset.engine == "BLENDER_WORKBENCH":
@@ -568,8 +606,6 @@ class CityScene:
             # Spelled out: a new scene (the add-on's) would otherwise pick another pattern than the factory one
             # and its preview would not be the farm's pixels.
             cycles.sampling_pattern = "TABULATED_SOBOL"
-        rgb = self._render_to_array(rect, "rgb")[..., :3]
-        return rgb if preset.exposure == 1.0 else rgb * np.float32(preset.exposure)
 
     def close(self) -> None:
         """Remove the temporary files (the city itself stays; `remove_city` deletes it)."""

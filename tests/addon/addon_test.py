@@ -68,6 +68,19 @@ def test_manifest_passes_blenders_validator():
     assert "bl_info" not in (ROOT / "__init__.py").read_text()
 
 
+def test_manifest_has_what_the_extension_platform_asks_for():
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert manifest["license"] == ["SPDX:GPL-3.0-or-later"] and project["license"] == "GPL-3.0-or-later"
+    assert (ROOT / "LICENSE").read_text().lstrip().startswith("GNU GENERAL PUBLIC LICENSE\n                       "
+                                                               "Version 3, 29 June 2007")
+    assert manifest["website"].startswith("https://")
+    assert all(line.split(" ", 1)[0].isdigit() and line.split(" ", 1)[1] for line in manifest["copyright"])
+    assert "<" in manifest["maintainer"] and "@" in manifest["maintainer"].split("<")[1]  # a contact address
+    # the platform shows each permission's reason before install: a short phrase, no trailing full stop
+    assert all(0 < len(why) <= 64 and not why.endswith(".") for why in manifest["permissions"].values())
+
+
 def _imported_modules(source: str) -> set[str]:
     names = set()
     for node in ast.walk(ast.parse(source)):
@@ -84,7 +97,7 @@ def test_zip_holds_exactly_the_addon_and_the_pure_layers(zip_path):
         sources = {n: archive.read(n).decode() for n in names if n.endswith(".py")}
     shipped = {str(p.relative_to(ROOT)) for folder in SHIPPED for p in (ROOT / folder).rglob("*")
                if p.is_file() and "__pycache__" not in p.parts and "docs" not in p.parts}
-    assert names == {"blender_manifest.toml", "__init__.py", "meta_sim/__init__.py", *shipped}
+    assert names == {"blender_manifest.toml", "LICENSE", "__init__.py", "meta_sim/__init__.py", *shipped}
     assert {n.split("/")[1] for n in names if n.startswith("meta_sim/") and n.count("/") > 1} == {
         "core", "sim", "blender", "render"}
     imported = {n: {m.split(".")[0] for m in _imported_modules(text)} for n, text in sources.items()}
@@ -259,15 +272,16 @@ def test_presets_browser_applies_good_presets_and_rejects_bad_ones(addon, settin
     shares = json.loads(rows["population.json"].distribution)["flat_roof"]
     assert shares[0][0] == bank.ids("flat")[5] and abs(shares[0][1] - 2 / 3) < 1e-6
 
-    index = list(settings.presets).index(good)
-    assert bpy.ops.meta_sim.apply_preset(index=index) == {"FINISHED"}
+    settings.presets_index = list(settings.presets).index(good)
+    assert bpy.ops.meta_sim.apply_preset() == {"FINISHED"}
     applied = _roof_images_on_polygons(addon)
     assert applied[1] == str(bank.image_path(bank.ids("flat")[5]))
     assert settings.flat_roof == bank.ids("flat")[5]
     for name, message in (("broken.json", "not valid JSON"), ("future.json", "newer"),
                           ("unknown.json", "flat-no-such-texture")):
-        with pytest.raises(RuntimeError, match=message):
-            bpy.ops.meta_sim.apply_preset(index=list(settings.presets).index(rows[name]))
+        settings.presets_index = list(settings.presets).index(rows[name])
+        with pytest.raises(RuntimeError, match=message):  # the button is greyed out, saying why
+            bpy.ops.meta_sim.apply_preset()
         assert _roof_images_on_polygons(addon) == applied and settings.flat_roof == bank.ids("flat")[5]
 
 
@@ -414,7 +428,7 @@ def test_user_errors_are_reported_not_raised_as_tracebacks(settings, tmp_path):
 
     settings.job_dir = ""
     bpy.ops.meta_sim.generate_city()
-    with pytest.raises(RuntimeError, match="choose a job folder"):
+    with pytest.raises(RuntimeError, match="Choose a job folder"):
         bpy.ops.meta_sim.export_job()
     settings.presets_folder = str(tmp_path / "missing")
     with pytest.raises(RuntimeError, match="does not exist"):
@@ -488,3 +502,472 @@ def test_panels_draw_in_every_state(addon, settings, preset_folder, tmp_path):
             assert "Distribution over the target's groups:" in labels
     names = {name for name, _, _ in calls}
     assert {"template_icon_view", "template_list", "template_icon", "operator", "prop"} <= names
+
+
+@pytest.fixture
+def prefs(addon):
+    """The add-on's preferences, back to their defaults afterwards."""
+    import bpy
+
+    yield bpy.context.preferences.addons[MODULE].preferences
+    prefs = bpy.context.preferences.addons[MODULE].preferences  # read again: reading the preferences frees the old
+    prefs.cache_folder = prefs.bank_folder = ""
+    prefs.preview_quality = "fast"
+
+
+def test_preferences_round_trip_through_the_saved_preferences(prefs, tmp_path, heldout_bank):
+    import bpy
+
+    prefs.cache_folder, prefs.bank_folder, prefs.preview_quality = str(tmp_path), str(heldout_bank.root), "balanced"
+    assert bpy.ops.wm.save_userpref() == {"FINISHED"}
+    prefs.cache_folder, prefs.bank_folder, prefs.preview_quality = "", "", "quality"
+    assert bpy.ops.wm.read_userpref() == {"FINISHED"}
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    assert (prefs.cache_folder, prefs.bank_folder, prefs.preview_quality) == (
+        str(tmp_path), str(heldout_bank.root), "balanced")
+
+
+def test_preferences_are_used_where_the_environment_variable_was(addon, settings, prefs, tmp_path, heldout_bank):
+    import bpy
+
+    library = addon.blender_addon.library
+    preferences = addon.blender_addon.preferences
+    assert preferences.cache_dir_and_source() == (Path(os.environ["META_SIM_CACHE"]), "$META_SIM_CACHE")  # farms
+    prefs.cache_folder = str(tmp_path / "cache")
+    assert preferences.cache_dir_and_source() == (tmp_path / "cache", "preferences")
+    assert library._folder(settings).parent == tmp_path / "cache" / "banks"  # where Load would build the bank
+    prefs.cache_folder = ""
+
+    settings.bank_source, settings.bank_folder = "FOLDER", ""
+    with pytest.raises(RuntimeError, match="default bank folder in the add-on's preferences"):
+        bpy.ops.meta_sim.load_bank()
+    prefs.bank_folder = str(heldout_bank.root)
+    assert bpy.ops.meta_sim.load_bank() == {"FINISHED"}
+    assert library.require(settings).bank.root == heldout_bank.root
+    settings.bank_source = "DEFAULT"
+
+    settings.render_preset = "DEFAULT"
+    prefs.preview_quality = "balanced"
+    assert preferences.quality(settings) == "balanced"
+    bpy.ops.meta_sim.generate_city()
+    settings.job_dir = str(tmp_path / "job")
+    bpy.ops.meta_sim.export_job()
+    assert json.loads((tmp_path / "job" / "render-job.json").read_text())["options"]["preset"] == "balanced"
+    settings.render_preset = "quality"  # a scene's own quality wins over the default
+    assert preferences.quality(settings) == "quality"
+
+
+def _poll_message(name: str) -> str | None:
+    """None when the operator can run, else the message its greyed-out button shows."""
+    import bpy
+
+    operator = getattr(bpy.ops.meta_sim, name)
+    if operator.poll():
+        return None
+    with pytest.raises(RuntimeError) as raised:
+        operator()
+    return str(raised.value)
+
+
+def test_every_operator_polls_and_says_why_it_is_disabled(addon, settings, preset_folder, tmp_path):
+    import bpy
+
+    operators, tasks = addon.blender_addon.operators, addon.blender_addon.tasks
+    names = [cls.bl_idname.split(".")[1] for cls in operators.CLASSES]
+    every = [cls for cls in addon.blender_addon.CLASSES if issubclass(cls, bpy.types.Operator)]
+    assert len(every) == 12 and all("poll" in vars(cls) for cls in every)  # the asset ones: their own test
+
+    def disabled() -> dict:
+        return {name: message for name in names if (message := _poll_message(name)) is not None}
+
+    settings.job_dir, settings.presets_folder = "", ""
+    settings.presets.clear()
+    bpy.ops.meta_sim.generate_city()
+    bpy.ops.meta_sim.remove_city()
+    settings.job_designs = "CURRENT"
+    states = disabled()  # a bank, but no city, no job folder, no presets folder, no preset
+    assert set(states) == {"remove_city", "apply_roofs", "export_job", "load_presets", "apply_preset"}
+    assert "Generate a city first" in states["remove_city"] and "Generate a city first" in states["apply_roofs"]
+    assert "Choose a job folder" in states["export_job"]
+    assert "Choose a presets folder" in states["load_presets"]
+    assert "select a preset" in states["apply_preset"]
+
+    settings.job_dir = str(tmp_path / "job")
+    assert "Generate a city first: the job renders the current city" in disabled()["export_job"]
+    settings.presets_folder = str(preset_folder)
+    bpy.ops.meta_sim.load_presets()
+    settings.presets_index = next(k for k, row in enumerate(settings.presets) if row.error)
+    assert "The selected preset cannot be applied: " in disabled()["apply_preset"]
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_index = next(k for k, row in enumerate(settings.presets) if not row.error)
+    assert disabled() == {}
+
+    settings.bank_source, settings.bank_folder = "FOLDER", str(tmp_path)  # not a bank: nothing loaded from it
+    states = disabled()
+    assert set(states) == set(names) - {"load_bank", "generate_city", "remove_city"}
+    assert all("Load a texture bank first" in message for message in states.values())
+    settings.bank_folder = ""  # no folder at all: nothing to load a bank from either
+    assert "Choose a texture bank folder" in disabled()["load_bank"]
+    assert "Choose a texture bank folder" in disabled()["generate_city"]
+    settings.bank_source = "DEFAULT"
+
+    tasks._running["meta_sim.test"] = "rendering the tile"  # while a long operation runs, nothing else can
+    try:
+        states = disabled()
+        assert set(states) == set(names)
+        assert all("Wait until Meta-Sim has finished (rendering the tile)" in m for m in states.values())
+    finally:
+        tasks._running.clear()
+    bpy.ops.meta_sim.remove_city()
+
+
+def _step_through(steps, n: int):
+    """Advance a generator of steps ``n`` times (or to its end); True when it ended."""
+    for _ in range(n):
+        try:
+            next(steps)
+        except StopIteration:
+            return True
+    return False
+
+
+def test_cancelling_a_city_build_at_any_step_keeps_the_old_city(addon, settings):
+    import bpy
+
+    city, libraries = addon.blender_addon.city, addon.blender_addon.library
+    bpy.ops.meta_sim.generate_city()
+    old_key, before = settings.city_key, _counts()
+    settings.seed = 11
+    for n in range(1, 100):
+        steps = city.generate_steps(bpy.context.scene, settings, libraries.require(settings))
+        if _step_through(steps, n):
+            break
+        steps.close()  # Esc
+        assert settings.city_key == old_key and _counts() == before, n
+    assert n >= 3 and settings.city_key != old_key and _counts() == before  # the last run went to the end
+    bpy.ops.meta_sim.remove_city()
+
+
+def test_cancelling_a_preview_at_any_step_leaves_nothing(addon, settings):
+    import bpy
+
+    city, libraries = addon.blender_addon.city, addon.blender_addon.library
+    settings.render_preset = "balanced"  # Cycles: rendered in strips, Esc between them
+    settings.tile_px, settings.gsd = 160, 0.72
+    bpy.ops.meta_sim.generate_city()
+    for image in [bpy.data.images.get(name) for name in city.PREVIEW_IMAGES]:
+        if image is not None:
+            bpy.data.images.remove(image)
+    before = _counts()
+    for n in range(1, 100):
+        steps = city.render_preview_steps(settings, libraries.require(settings))
+        if _step_through(steps, n):
+            break
+        steps.close()
+        assert _counts() == before and not any(bpy.data.images.get(name) for name in city.PREVIEW_IMAGES), n
+    assert n > 4 and bpy.data.images.get(city.PREVIEW_IMAGES[0]).size[:] == (160, 160)
+    settings.render_preset = "fast"
+    bpy.ops.meta_sim.remove_city()
+
+
+def test_cancelling_the_default_bank_build_leaves_no_bank(addon, settings, prefs, tmp_path):
+    import time
+
+    libraries = addon.blender_addon.library
+    prefs.cache_folder = str(tmp_path)
+    steps = libraries.load_steps(settings)
+    share, text = next(steps)
+    assert text == "building the default texture bank" and 0 <= share < 1
+    steps.close()  # the build stops at its next texture and removes its temporary folder
+    for _ in range(300):  # the UI waits a second for that; a busy machine may take longer
+        if not [p for p in tmp_path.rglob("*") if p.is_file()]:
+            break
+        time.sleep(0.1)
+    assert not list((tmp_path / "banks").iterdir())
+
+
+class _FakeWindowManager:
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        return lambda *args, **kwargs: self.calls.append(name) or name
+
+
+def test_a_long_operation_shows_progress_and_esc_undoes_it(addon, monkeypatch):
+    """The modal side of `tasks.Stepped`, driven by hand with timer events and Esc (no window headless)."""
+    import time
+
+    tasks = addon.blender_addon.tasks
+    monkeypatch.setattr(tasks, "interactive", lambda context: True)  # as in Blender with a window
+    built = []
+
+    class Operation(tasks.Stepped):
+        bl_idname, bl_label = "meta_sim.test", "Test Operation"
+
+        def __init__(self):
+            self.reports = []
+
+        def report(self, kind, message):
+            self.reports.append((kind, message))
+
+        def steps(self, context, settings):
+            try:
+                for k in range(6):
+                    built.append(k)
+                    time.sleep(tasks.SLICE / 2.5)  # about three steps per timer event
+                    yield (k + 1) / 6, f"step {k}"
+            except GeneratorExit:
+                built.clear()  # what a cancelled operation does: remove what it built
+                raise
+            return "done"
+
+    status = []
+    context = SimpleNamespace(window=object(), window_manager=_FakeWindowManager(),
+                              scene=SimpleNamespace(meta_sim=None),
+                              workspace=SimpleNamespace(status_text_set=status.append))
+    op = Operation()
+    assert op.invoke(context, None) == {"RUNNING_MODAL"} and tasks.busy() == "test operation"
+    timer = SimpleNamespace(type="TIMER", value="NOTHING", timer=op._timer)
+    assert op.modal(context, SimpleNamespace(type="LEFTMOUSE", value="PRESS", timer=None)) == {"RUNNING_MODAL"}
+    assert op.modal(context, SimpleNamespace(type="WHEELUPMOUSE", value="PRESS", timer=None)) == {"PASS_THROUGH"}
+    assert op.modal(context, timer) == {"RUNNING_MODAL"} and 0 < len(built) < 6
+    assert status[-1].startswith("Meta-Sim: step ") and "Esc to cancel" in status[-1]
+    assert tasks.busy().startswith("step ")
+    assert op.modal(context, SimpleNamespace(type="ESC", value="PRESS", timer=None)) == {"CANCELLED"}
+    assert built == [] and tasks.busy() is None and status[-1] is None
+    assert {"event_timer_remove", "progress_end"} <= set(context.window_manager.calls)
+    assert op.reports == [({"WARNING"}, "Test Operation cancelled: nothing was changed")]
+
+    op = Operation()  # Blender cancels it (a file is loaded): the same clean-up
+    op.invoke(context, None)
+    op.modal(context, timer)
+    op.cancel(context)
+    assert built == [] and tasks.busy() is None and status[-1] is None
+
+    op = Operation()
+    op.invoke(context, None)
+    while (result := op.modal(context, timer)) == {"RUNNING_MODAL"}:
+        pass
+    assert result == {"FINISHED"} and built == list(range(6)) and op.reports[-1] == ({"INFO"}, "done")
+    assert tasks.busy() is None
+
+
+def _library_assets(blend: Path) -> dict:
+    """The assets of a library file as read back: name -> metadata, tags, description, catalog, preview."""
+    import bpy
+    import numpy as np
+
+    out = {}
+    with bpy.data.temp_data() as data:
+        with data.libraries.load(str(blend), assets_only=True) as (source, target):
+            target.scenes = source.scenes
+        for scene in target.scenes:
+            meta, preview = scene.asset_data, scene.preview
+            width, height = preview.image_size
+            pixels = np.asarray(preview.image_pixels_float[:], dtype=np.float32).reshape(height, width, 4)
+            out[scene.name] = SimpleNamespace(
+                name=scene.name, full_library_path=str(blend), metadata={k: meta[k] for k in meta.keys()},
+                tags={t.name for t in meta.tags}, description=meta.description, catalog_id=meta.catalog_id,
+                size=(width, height), pixels=pixels[::-1])  # top row first, as the PNGs
+    return out
+
+
+@pytest.fixture
+def infer_folder(preset_folder, tmp_path_factory, bank):
+    """A `meta-sim infer` output: population.json and report.json at the top, group presets in presets/,
+    and the bad files of ``preset_folder``; the asset library it gets is unlisted afterwards."""
+    import shutil
+
+    import bpy
+
+    folder = tmp_path_factory.mktemp("inferred")
+    (folder / "presets").mkdir()
+    for path in preset_folder.glob("*.json"):
+        shutil.copy(path, folder / ("presets" if path.name.startswith("kampala") else ".") / path.name)
+    (folder / "report.json").write_text(json.dumps({"target_dir": "/data/kampala", "groups": []}))
+    yield folder
+    libraries = bpy.context.preferences.filepaths.asset_libraries
+    for entry in [e for e in libraries if Path(e.path).resolve() == (folder / "meta-sim-assets").resolve()]:
+        libraries.remove(entry)
+
+
+def test_a_presets_folder_becomes_an_asset_library(addon, settings, infer_folder, bank):
+    import bpy
+    import numpy as np
+
+    from meta_sim.sim.imageio import read_rgb8
+
+    assets, tasks = addon.blender_addon.assets, addon.blender_addon.tasks
+    settings.tile_px, settings.gsd = 256, 0.45  # the preview's pixels: a preview tile renders the same
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(infer_folder)
+    assert bpy.ops.meta_sim.build_assets() == {"FINISHED"}
+    blend = infer_folder / "meta-sim-assets" / "meta-sim-designs.blend"
+    found = _library_assets(blend)
+    assert set(found) == {"kampala-005", "kampala-006", "population"}  # report.json and the bad files: none
+    assert [Path(e.path).resolve() for e in bpy.context.preferences.filepaths.asset_libraries].count(
+        blend.parent.resolve()) == 1
+    for asset in found.values():
+        assert asset.size == (256, 256) and (asset.pixels[..., 3] == 1).all() and asset.pixels.std() > 0.02
+        assert assets.is_design(asset) and "Meta-Sim" in asset.tags
+
+    group = found["kampala-005"]  # its preview is a rendered tile of its design
+    bpy.ops.meta_sim.build_assets()  # again: the same library (previews from the cache), listed once
+    assert (_library_assets(blend)["kampala-005"].pixels == group.pixels).all()
+    assert [Path(e.path).resolve() for e in bpy.context.preferences.filepaths.asset_libraries].count(
+        blend.parent.resolve()) == 1
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[5], bank.ids("sloped")[2]
+    settings.render_preset = "fast"
+    bpy.ops.meta_sim.render_preview()
+    tile = read_rgb8(bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath))
+    assert (np.round(group.pixels[..., :3] * 255) == tile).all()
+    assert np.abs(found["kampala-006"].pixels - group.pixels).mean() > 0.005  # another flat roof, another tile
+
+    metadata = group.metadata
+    assert metadata["preset"] == "presets/kampala-005.json" and metadata["model_id"] == "abc"
+    assert json.loads(metadata["vote_shares"])["flat_roof"][bank.ids("flat")[5]] == 0.62
+    assert metadata["source_images"] == 3 and metadata["target"] == "3 images in /data/kampala"
+    assert json.loads(metadata["design"]) == {"flat_roof": bank.ids("flat")[5], "sloped_roof": bank.ids("sloped")[2]}
+    assert f"flat_roof {bank.ids('flat')[5]} (62% of votes)" in group.description
+    assert {"group", bank.ids("flat")[5], bank.ids("sloped")[2]} <= group.tags
+    assert "population" in found["population"].tags and found["population"].metadata["kind"] == "population"
+    catalogs = (blend.parent / "blender_assets.cats.txt").read_text()
+    assert f"{group.catalog_id}:Meta-Sim/kampala:Meta-Sim-kampala" in catalogs.splitlines()
+    assert {a.catalog_id for a in found.values()} == {group.catalog_id}
+
+    library = addon.blender_addon.library.require(settings)
+    built, bad = tasks.run(assets.build_steps(settings, library, infer_folder))
+    reasons = {path.name: why for path, why in bad}
+    assert set(reasons) == {"broken.json", "future.json", "unknown.json"}
+    assert "not valid JSON" in reasons["broken.json"] and "newer" in reasons["future.json"]
+    assert "flat-no-such-texture" in reasons["unknown.json"]
+    assert len(built) == 3
+
+
+def _materials():
+    """Every object's material slots, by name, and the datablock counts."""
+    import bpy
+
+    return {o.name: [m.name if m else None for m in getattr(o.data, "materials", [])] for o in bpy.data.objects}
+
+
+def test_applying_an_asset_changes_exactly_the_roof_materials(addon, settings, infer_folder, bank):
+    import bpy
+
+    from meta_sim.sim.presets import save_preset
+
+    assets = addon.blender_addon.assets
+    bpy.ops.meta_sim.generate_city()
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[1], bank.ids("sloped")[1]
+    bpy.ops.meta_sim.apply_roofs()
+    settings.presets_folder = str(infer_folder)
+    bpy.ops.meta_sim.build_assets()
+    asset = _library_assets(infer_folder / "meta-sim-assets" / "meta-sim-designs.blend")["kampala-006"]
+    library = addon.blender_addon.library.require(settings)
+    before, counts = _materials(), _counts()
+    buildings = sys.modules[f"{MODULE}.meta_sim.blender.scene"].city_buildings(settings.city_key).name
+
+    assets.apply_asset(settings, library, asset)
+    after = _materials()
+    changed = {(name, slot) for name in before for slot, (a, b) in enumerate(zip(before[name], after[name])) if a != b}
+    assert changed == {(buildings, 1), (buildings, 2)} and _counts() == counts  # the old roofs are gone
+    assert after[buildings][1:] == [f"roof:{bank.ids('flat')[6]}", f"roof:{bank.ids('sloped')[2]}"]
+    assert (settings.flat_roof, settings.sloped_roof) == (bank.ids("flat")[6], bank.ids("sloped")[2])
+    assert addon.blender_addon.assets_ui.META_SIM_OT_apply_asset.bl_options >= {"UNDO"}
+
+    # the preset file is the truth: edited, the asset applies the edit; broken or gone, nothing changes
+    preset = load_preset(infer_folder / "presets" / "kampala-006.json")
+    preset.design = {"flat_roof": bank.ids("flat")[8], "sloped_roof": bank.ids("sloped")[2]}
+    save_preset(infer_folder / "presets" / "kampala-006.json", preset)
+    assets.apply_asset(settings, library, asset)
+    assert _materials()[buildings][1] == f"roof:{bank.ids('flat')[8]}"
+    applied = _materials()
+    (infer_folder / "presets" / "kampala-006.json").write_text("{")
+    with pytest.raises(Exception, match="not valid JSON"):
+        assets.apply_asset(settings, library, asset)
+    (infer_folder / "presets" / "kampala-006.json").unlink()
+    with pytest.raises(Exception, match="is gone; rebuild the asset library"):
+        assets.apply_asset(settings, library, asset)
+    escaping = SimpleNamespace(full_library_path=asset.full_library_path,
+                               metadata={**asset.metadata, "preset": "../../outside.json"})
+    with pytest.raises(Exception, match="points outside its folder"):
+        assets.apply_asset(settings, library, escaping)
+    assert _materials() == applied and settings.flat_roof == bank.ids("flat")[8]
+
+
+def test_saving_a_preset_adds_it_to_the_folders_asset_library(addon, settings, infer_folder, bank):
+    import bpy
+
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(infer_folder)
+    bpy.ops.meta_sim.load_presets()
+    bpy.ops.meta_sim.build_assets()
+    library_dir = infer_folder / "meta-sim-assets"
+    previews = {p: p.stat().st_mtime_ns for p in (library_dir / "previews").iterdir()}
+    settings.seed += 1  # a new city in the panel: the library keeps the city its previews show
+    bpy.ops.meta_sim.generate_city()
+    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[7], bank.ids("sloped")[3]
+    assert bpy.ops.meta_sim.save_preset(filepath=str(infer_folder / "presets" / "mine.json")) == {"FINISHED"}
+    found = _library_assets(library_dir / "meta-sim-designs.blend")
+    assert set(found) == {"kampala-005", "kampala-006", "population", "mine"}
+    assert json.loads(found["mine"].metadata["design"]) == {"flat_roof": bank.ids("flat")[7],
+                                                            "sloped_roof": bank.ids("sloped")[3]}
+    now = {p: p.stat().st_mtime_ns for p in (library_dir / "previews").iterdir()}
+    assert len(now) == len(previews) + 1 and all(now[p] == t for p, t in previews.items())  # one new render
+    assert "mine" in {row.name for row in settings.presets}  # the presets list shows it too
+
+    elsewhere = infer_folder.parent / f"{infer_folder.name}-elsewhere"
+    elsewhere.mkdir()
+    bpy.ops.meta_sim.save_preset(filepath=str(elsewhere / "other.json"))  # a folder without a library: none made
+    assert (elsewhere / "other.json").is_file() and not (elsewhere / "meta-sim-assets").exists()
+
+
+def test_the_asset_operators_poll_and_the_shelf_shows_only_design_assets(addon, settings, infer_folder):
+    import bpy
+
+    assets_ui = addon.blender_addon.assets_ui
+    for name in ("apply_asset", "drop_asset"):  # no asset in the context (as outside the Asset Browser)
+        assert "Select a Meta-Sim design asset" in _poll_message(name)
+    settings.presets_folder = ""
+    assert "Choose a presets folder" in _poll_message("build_assets")
+    settings.presets_folder = str(infer_folder)
+    assert _poll_message("build_assets") is None
+    settings.bank_source, settings.bank_folder = "FOLDER", str(infer_folder)
+    assert "Load a texture bank first" in _poll_message("build_assets")
+    settings.bank_source = "DEFAULT"
+
+    shelf = assets_ui.META_SIM_AST_designs
+    bpy.ops.meta_sim.build_assets()
+    design = _library_assets(infer_folder / "meta-sim-assets" / "meta-sim-designs.blend")["population"]
+    assert shelf.asset_poll(design)
+    assert not shelf.asset_poll(SimpleNamespace(metadata={}))  # the shelf lists no other assets
+    assert not shelf.asset_poll(SimpleNamespace(metadata={"meta_sim_format": "something else"}))
+    if addon.blender_addon.city.find(settings) is not None:
+        bpy.ops.meta_sim.remove_city()
+    assert not shelf.poll(bpy.context)  # the shelf shows while there is a city to drop designs on
+    bpy.ops.meta_sim.generate_city()
+    assert shelf.poll(bpy.context)
+
+
+def test_a_design_dropped_applies_only_over_the_city(addon, settings):
+    import bpy
+    from mathutils import Vector
+
+    assets_ui = addon.blender_addon.assets_ui
+    bpy.ops.meta_sim.generate_city()
+    scene, depsgraph = bpy.context.scene, bpy.context.evaluated_depsgraph_get()
+    down = Vector((0.0, 0.0, -1.0))
+    buildings = sys.modules[f"{MODULE}.meta_sim.blender.scene"].city_buildings(settings.city_key)
+    centre = sum((buildings.matrix_world @ Vector(corner) for corner in buildings.bound_box), Vector()) / 8
+    assert assets_ui.hits_city(scene, depsgraph, Vector((centre.x, centre.y, 500.0)), down, settings)
+    assert not assets_ui.hits_city(scene, depsgraph, Vector((1e5, 1e5, 500.0)), down, settings)
+    cube = bpy.data.objects.new("user's cube", bpy.data.meshes.new("user's cube"))
+    cube.data.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
+    cube.location = (1e5, 1e5, 10.0)
+    scene.collection.objects.link(cube)
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        assert not assets_ui.hits_city(scene, depsgraph, Vector((1e5, 1e5, 500.0)), down, settings)
+    finally:
+        bpy.data.objects.remove(cube)

@@ -280,6 +280,32 @@ def test_scene_builds_only_what_the_tiles_see(space):
         scene.close()
 
 
+@pytest.mark.parametrize("preset, strips", [("balanced", 3), ("fast", 1)])
+def test_a_render_in_strips_has_the_pixels_of_one_render(space, bank, preset, strips):
+    """The add-on renders path-traced previews in strips (progress, Esc between them): the same pixels."""
+    from meta_sim.blender.scene import CityScene
+    from meta_sim.render.loop import resolve_textures
+
+    layout, rects = layout_for_tiles(SEED, 1, 115.2)
+    scene = CityScene(layout, rects, pixel_size_m=115.2 / 150)  # 150 rows: strips of 50
+    try:
+        scene.set_roofs(resolve_textures(space, space.validate(_design(space, 3, 5)), [bank]))
+        whole = scene.render_rgb(scene.rects[0], get_preset(preset))
+        steps = scene.render_rgb_in_strips(scene.rects[0], get_preset(preset), rows=64)
+        shares = []
+        while True:
+            try:
+                shares.append(next(steps))
+            except StopIteration as done:
+                striped = done.value
+                break
+        assert shares == [(k + 1) / strips for k in range(strips)]
+        assert striped.shape == whole.shape == (150, 150, 3) and (striped == whole).all()
+        assert not scene.scene.render.use_border  # the next whole render is whole again
+    finally:
+        scene.close()
+
+
 def test_training_set_manifest_lists_every_design(tmp_path):
     result = _cli("render", "--random-designs", 3, "--tiles", 1, "--seed", 4, "--cities", 2,
                   "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path)

@@ -34,6 +34,7 @@ from ...core.cache import cache_root
 from ...core.errors import MetaSimError
 from ...core.fileio import atomic_dir, write_bytes_atomic
 from ...core.names import inside, safe_name
+from ...core.progress import Progress
 from ..imageio import read_rgb8, read_rgb8_square
 from . import procedural
 from .pngio import write_png
@@ -243,17 +244,24 @@ def check_size(size) -> int:
     return size
 
 
-def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: bool = False) -> TextureBank:
+def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: bool = False,
+                       progress: Progress | None = None) -> TextureBank:
     """Generate the default (or held-out) procedural bank into ``out_dir``.
 
     Writes ``<kind>/<id>.png``, ``manifest.json`` and ``similarity.json``
     (bank against itself); the held-out bank also gets
     ``similarity_to_default.json`` (held-out rows, default-bank columns).
+    ``progress`` is told of each texture generated (``len(procedural.recipes(heldout))`` in all);
+    an exception it raises (a cancel) stops the build.
     """
     check_size(size)
     out = Path(out_dir)
     recipes = procedural.recipes(heldout=heldout)
-    images = [procedural.generate(r, size) for r in recipes]
+    images = []
+    for recipe in recipes:
+        images.append(procedural.generate(recipe, size))
+        if progress is not None:
+            progress(1)
     by_id = {r.id: r for r in recipes}
     bank = _write_bank(
         out,
@@ -389,9 +397,10 @@ def _ensure(final: Path, build: Callable[[Path], TextureBank]) -> TextureBank:
     return load_bank(final)
 
 
-def ensure_default_bank(size: int = 256, cache_dir: str | os.PathLike | None = None) -> TextureBank:
-    """The cached default bank, built on first use."""
-    return _ensure(default_bank_dir(size, cache_dir), lambda d: build_default_bank(d, size))
+def ensure_default_bank(size: int = 256, cache_dir: str | os.PathLike | None = None,
+                        progress: Progress | None = None) -> TextureBank:
+    """The cached default bank, built on first use (``progress`` as in `build_default_bank`)."""
+    return _ensure(default_bank_dir(size, cache_dir), lambda d: build_default_bank(d, size, progress=progress))
 
 
 def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = None) -> TextureBank:
