@@ -1,5 +1,6 @@
 """Street details, clutter and real-sized trees: placement rules, streams, JSON, validation."""
 
+import hashlib
 import json
 import math
 
@@ -59,6 +60,21 @@ def test_same_seed_same_clutter_and_the_first_stages_are_untouched(city):
     # Small trees with clutter: today's trees, untouched by the clutter stream.
     small = generate_layout(7, 700.0, 600.0, LayoutParams(street_details=True, car_density=0.5))
     assert small.trees == base.trees and small.cars
+
+
+# sha256 of suburban layouts with clutter, taken before clutter came to styled cities: those must not move.
+CLUTTER_HASHES = [
+    ((7, 700.0, 600.0), ALL_ON, "6adca8e718319f36741fd110e7666de3aad45b44e3e61fcefe1f81cd883aae34"),
+    ((1, 345.6, 345.6), ALL_ON, "b3b196a4e32cb50c971fe7d63ce267076a1a22a8e7733ee74ca02087e94c8365"),
+    ((1, 345.6, 345.6), LayoutParams(street_details=True, car_density=0.4),
+     "a51a11ad6888658c72fc5243d5179dacb56cf52e9f92b104cd4b5d924a3f1c71"),
+]
+
+
+@pytest.mark.parametrize("size,params,digest", CLUTTER_HASHES)
+def test_suburban_clutter_is_byte_identical_to_before_styled_clutter(size, params, digest):
+    text = json.dumps(generate_layout(*size, params).to_dict(), sort_keys=True)
+    assert hashlib.sha256(text.encode()).hexdigest() == digest
 
 
 def test_every_kind_of_item_is_there(city):
