@@ -1065,60 +1065,9 @@ class _Region:
     angle_deg: float  # direction of a dense region's long lanes
 
 
-class _Occupancy:
-    """Convex polygons hashed into square cells, to ask quickly whether a new one keeps clear of them."""
-
-    def __init__(self, polygons_: list[Polygon] = (), cell_m: float = 16.0):
-        self.cell_m = cell_m
-        self.items: list[tuple[Polygon, Rect]] = []
-        self.grid: dict[tuple[int, int], list[int]] = {}
-        for polygon in polygons_:
-            self.add(polygon)
-
-    def _keys(self, box: Rect):
-        x0, y0, x1, y1 = box
-        c = self.cell_m
-        return itertools.product(range(math.floor(x0 / c), math.floor(x1 / c) + 1),
-                                 range(math.floor(y0 / c), math.floor(y1 / c) + 1))
-
-    def add(self, polygon: Polygon) -> None:
-        box = polygon_bbox(polygon)
-        self.items.append((polygon, box))
-        for key in self._keys(box):
-            self.grid.setdefault(key, []).append(len(self.items) - 1)
-
-    def clear(self, polygon: Polygon, gap: float) -> bool:
-        """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching)."""
-        box = polygon_bbox(polygon)
-        seen = set()
-        for key in self._keys(box):
-            for i in self.grid.get(key, ()):
-                if i in seen:
-                    continue
-                seen.add(i)
-                other, (x0, y0, x1, y1) = self.items[i]
-                # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
-                if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
-                    continue
-                if not polygons.apart(polygon, other, gap):
-                    return False
-        return True
-
-
-def _rounded(points) -> Polygon:
-    out: list[Point] = []
-    for x, y in points:
-        p = (_r(x), _r(y))
-        if not out or p != out[-1]:
-            out.append(p)
-    while len(out) > 1 and out[0] == out[-1]:
-        out.pop()
-    return tuple(out)
-
-
 def _piece(polygon, window) -> Polygon | None:
     """The part of a convex polygon inside a convex window, rounded; None if (almost) nothing is left."""
-    piece = _rounded(polygons.clip(polygon, window))
+    piece = polygons.rounded_polygon(polygons.clip(polygon, window))
     return piece if len(piece) >= 3 and polygons.area(piece) > 1.0 else None
 
 
@@ -1156,7 +1105,7 @@ def _style_regions(rng: np.random.Generator, width: float, height: float,
     styles = [""] * len(cells)
     for k, middle in zip(order, middles):
         styles[k] = mix[min(int(np.searchsorted(edges, middle, side="right")), len(mix) - 1)][0]
-    regions = [_Region(style, _rounded(cell), _r(rng.uniform(0.0, 180.0)) if style == "dense" else 0.0)
+    regions = [_Region(style, polygons.rounded_polygon(cell), _r(rng.uniform(0.0, 180.0)) if style == "dense" else 0.0)
                for style, cell in zip(styles, cells)]
     roads = []
     for i, cell in enumerate(cells):
@@ -1238,7 +1187,7 @@ class _Placed:
 
 
 def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[tuple[Point, Point, float]],
-                     roads: _Occupancy, built: _Occupancy, density: float, width: float,
+                     roads: polygons.Occupancy, built: polygons.Occupancy, density: float, width: float,
                      height: float) -> list[_Placed]:
     """Packed houses of one dense region: rows along both sides of every lane, then infill behind them.
 
@@ -1326,7 +1275,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
     return placed
 
 
-def _dense_trees(rng: np.random.Generator, region: _Region, roads: _Occupancy, built: _Occupancy,
+def _dense_trees(rng: np.random.Generator, region: _Region, roads: polygons.Occupancy, built: polygons.Occupancy,
                  density: float, width: float, height: float) -> list[Tree]:
     """A few trees in the yards left between a dense region's houses, clear of roofs and roads."""
     window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
@@ -1360,7 +1309,7 @@ class _Frame:
         return wx, wy
 
     def polygon(self, polygon: Polygon) -> Polygon:
-        return _rounded(self.point(x, y) for x, y in polygon)
+        return polygons.rounded_polygon(self.point(x, y) for x, y in polygon)
 
     def sketch(self, sketch: _Sketch) -> _Sketch:
         """The sketch moved so its footprint's centre lands where the frame puts it, turned with the frame."""
@@ -1405,7 +1354,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
             roads += lane_roads
     # Dirt first: where a track meets a paved street, the street is drawn over it.
     roads.sort(key=lambda road: road.surface != "dirt")
-    road_space = _Occupancy([road.polygon for road in roads])
+    road_space = polygons.Occupancy([road.polygon for road in roads])
 
     # A lot across a region's border keeps its part inside (most of it, or it is dropped).
     plans, lot_styles, lots, first_block = [], [], [], 0
@@ -1434,14 +1383,14 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     placed = [frames[lot_styles[s.lot_index]].sketch(s) if lot_styles[s.lot_index] in frames else s for s in local]
     kept = [i for i, sketch in enumerate(placed) if fits(sketch)]
     local, sketches = [local[i] for i in kept], [placed[i] for i in kept]
-    built = _Occupancy()
+    built = polygons.Occupancy()
     dense = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
             dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
                                         params.building_density, width, height)
             for house in dense[k]:
-                lots.append(Lot(_rounded(house.outline), -1))
+                lots.append(Lot(polygons.rounded_polygon(house.outline), -1))
                 sketches.append(_Sketch(len(lots) - 1, house.kind, house.footprint, "rect", house.height_m,
                                         house.rotation_deg, outline_placed=True))
     buildings = _roof_buildings(roof_rng, sketches, params.sloped_share)
