@@ -43,7 +43,22 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from . import polygons
-from .clutter import TREE_SIZES, Car, Marking, Paving, Pool, Shrub, generate_clutter, real_trees
+from .clutter import (
+    CUT_CORNERS,
+    GRID_RULES,
+    TREE_SIZES,
+    Car,
+    Marking,
+    Paving,
+    Pool,
+    Shrub,
+    gap_bushes,
+    gap_trees,
+    generate_clutter,
+    lane_cars,
+    real_trees,
+    through_roads,
+)
 
 LAYOUT_VERSION = 1
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
@@ -1329,6 +1344,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     """
     road_rng, lot_rng, building_rng, roof_rng, tree_rng, region_rng = stage_generators(seed, 6)
     regions, roads = _style_regions(region_rng, width, height, params.style)
+    through = list(roads)
     grid_styles = [style for style, _ in params.style if style != "dense"]
     cells = {style: [r.cell for r in regions if r.style == style] for style in grid_styles}
     side = math.hypot(width, height)
@@ -1343,10 +1359,15 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
         return any(polygons.inside(polygon, c) for c in cells[style])
 
     blocks: dict[str, list[_Block]] = {}
+    streets: dict[str, list[Rect]] = {}  # each grid's streets that made it into the city, in its frame
     for style in grid_styles:
         blocks[style], grid_roads = _blocks_and_roads(road_rng, *extent[style], params)
-        roads += [Road(piece) for road in grid_roads for cell in cells[style]
-                  if (piece := _piece(world(style, road.polygon), cell))]
+        streets[style] = []
+        for road in grid_roads:
+            pieces = [Road(piece) for cell in cells[style] if (piece := _piece(world(style, road.polygon), cell))]
+            roads += pieces
+            if pieces:
+                streets[style].append(road.bbox)
     lanes = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
@@ -1357,8 +1378,9 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     road_space = polygons.Occupancy([road.polygon for road in roads])
 
     # A lot across a region's border keeps its part inside (most of it, or it is dropped).
-    plans, lot_styles, lots, first_block = [], [], [], 0
+    plans, lot_styles, lots, first_block, firsts = [], [], [], 0, {}
     for style in grid_styles:
+        firsts[style] = first_block
         for index, block in enumerate(blocks[style]):
             for plan in _plan_block(lot_rng, block, first_block + index, *extent[style], style):
                 outline = world(style, rect_polygon(*plan.rect))
@@ -1399,7 +1421,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     local_buildings = {s.lot_index: replace(b, footprint=s.footprint, rotation_deg=0.0)
                        for s, b in zip(local, buildings)}
     trees: list[Tree] = []
-    for style in grid_styles:
+    for style in grid_styles if params.tree_size == "small" else ():  # real trees come with the clutter
         density = params.tree_density * STYLE_TREES[style]
         planted = [tree for block in blocks[style] for tree in _street_trees(tree_rng, block, density)]
         for index, plan in enumerate(plans):
@@ -1413,11 +1435,154 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
             crown = rect_polygon(*tree.bbox)
             if inside_cells(style, crown) and road_space.clear(crown, 0.0):
                 trees.append(tree)
-    for k in dense:
+    for k in dense if params.tree_size == "small" else ():
         trees += _dense_trees(tree_rng, regions[k], road_space, built, params.tree_density * STYLE_TREES["dense"],
                               width, height)
+    details: dict[str, list] = {}
+    if params.clutter or params.tree_size == "real":
+        grids = {}
+        for style in grid_styles:
+            mine = [i for i, s in enumerate(lot_styles) if s == style]
+            renumber = {i: j for j, i in enumerate(mine)}
+            grids[style] = _Grid(
+                frames.get(style), cells[style], extent[style],
+                [(block.rect, block.road_sides) for block in blocks[style]], streets[style],
+                [(plans[i].rect, plans[i].block_index - firsts[style]) for i in mine],
+                [replace(b, lot_index=renumber[i]) for i, b in local_buildings.items() if i in renumber])
+        details, real = _styled_clutter(seed, params, width, height, regions, lanes, through, grids, road_space,
+                                        buildings)
+        trees += real
     return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
-                      tuple(trees))
+                      tuple(trees), **{name: tuple(items) for name, items in details.items()})
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """One street-grid style of a styled city, in its own frame (see `_Frame`), for its clutter."""
+
+    frame: _Frame | None  # None: the city's own frame (suburban)
+    cells: list[Polygon]  # the regions of the style, in the world
+    extent: tuple[float, float]  # of the frame
+    blocks: list[tuple[Rect, frozenset]]
+    streets: list[Rect]  # the streets that lie in the cells
+    lots: list[tuple[Rect, int]]  # (rect, index into blocks)
+    buildings: list[Building]  # unturned, lot_index into lots
+
+    def polygon(self, polygon: Polygon) -> Polygon:
+        return self.frame.polygon(polygon) if self.frame else polygon
+
+    def point(self, x: float, y: float) -> Point:
+        return self.frame.point(x, y) if self.frame else (x, y)
+
+    @property
+    def angle_deg(self) -> float:
+        return self.frame.angle_deg if self.frame else 0.0
+
+    def cut(self, polygon: Polygon) -> list[Polygon]:
+        """The pieces of a (small, convex) world polygon inside the cells."""
+        x0, y0, x1, y1 = polygon_bbox(polygon)
+        out = []
+        for cell in self.cells:
+            cx0, cy0, cx1, cy1 = polygon_bbox(cell)
+            if x1 <= cx0 or cx1 <= x0 or y1 <= cy0 or cy1 <= y0:
+                continue
+            if polygons.inside(polygon, cell, 0.0):
+                return [polygon]
+            piece = polygons.rounded_polygon(polygons.clip(polygon, cell))
+            if CUT_CORNERS[0] <= len(piece) <= CUT_CORNERS[1] and polygons.area(piece) > 0.05:
+                out.append(piece)
+        return out
+
+    def holds(self, polygon: Polygon) -> bool:
+        return any(polygons.inside(polygon, cell, 0.0) for cell in self.cells)
+
+
+CLUTTER_STREAM = 18  # after the seed in the clutter streams of styled cities: [seed, 18, part, index, what]
+
+
+def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float, regions: list[_Region],
+                    lanes: dict, through: list[Road], grids: dict[str, _Grid], road_space: polygons.Occupancy,
+                    buildings: list[Building]) -> tuple[dict[str, list], list[Tree]]:
+    """Street details, clutter and real trees of a styled city, region by region as its style has them.
+
+    Each grid style's are made in its own frame by `clutter.generate_clutter` and `clutter.real_trees`
+    with the style's `GRID_RULES`, then moved into the world and kept inside the style's regions (pavings
+    and markings cut at their borders); dense towns get cars by their lanes, trees in the gaps between
+    houses and bushes in the yards; the through roads between regions get centre lines and traffic. Every
+    part draws from a generator of its own (`CLUTTER_STREAM`), so the city's stages keep their draws and
+    a styled city without clutter stays as it was.
+    """
+    def rng(*part: int) -> np.random.Generator:
+        return np.random.default_rng([seed, CLUTTER_STREAM, *part])
+
+    city = (0.0, 0.0, width, height)
+    roofs = polygons.Occupancy([b.roof_outline for b in buildings])
+    borders = polygons.Occupancy([road.polygon for road in through])
+    taken = polygons.Occupancy()  # vehicles and bushes placed so far, in the world
+    out: dict[str, list] = {name: [] for name in _DETAILS}
+    trees: list[Tree] = []
+
+    def plant(x: float, y: float, radius: float, height_m: float, window) -> None:
+        """A real tree if its trunk stands in the window and off the roads and its crown in the city, clear of roofs."""
+        trunk = rect_polygon(x - 0.5, y - 0.5, x + 0.5, y + 0.5)
+        if (window((x, y)) and radius <= x <= width - radius and radius <= y <= height - radius
+                and road_space.clear(trunk, 0.0) and roofs.clear(polygons.disc(x, y, radius + TREE_CLEARANCE_M), 0.0)):
+            trees.append(Tree(_r(x), _r(y), radius, height_m))
+
+    for style, grid in grids.items():
+        part, rules = STYLES.index(style), GRID_RULES[style]
+        clutter = generate_clutter(rng(0, part, 0), params, grid.blocks, grid.lots, grid.buildings, grid.streets,
+                                   VERGE_M, params.road_width_m, rules) if params.clutter else None
+        if clutter:
+            for paving in clutter.pavings:
+                out["pavings"] += [Paving(piece, paving.kind) for piece in grid.cut(grid.polygon(paving.polygon))]
+            for marking in clutter.markings:  # not over the through roads the grid's streets run into
+                out["markings"] += [Marking(piece) for piece in grid.cut(grid.polygon(marking.polygon))
+                                    if borders.clear(piece, 0.0)]
+            for car in clutter.cars:
+                x, y = grid.point(car.x, car.y)
+                moved = replace(car, x=_r(x), y=_r(y), heading_deg=_r(car.heading_deg + grid.angle_deg))
+                if grid.holds(moved.corners) and borders.clear(polygons.grown_box(moved.corners, 0.3), 0.0):
+                    out["cars"].append(moved)
+                    taken.add(moved.corners)
+            out["pools"] += [pool for pool in clutter.pools if grid.holds(pool.polygon)]
+            out["shrubs"] += [shrub for shrub in clutter.shrubs
+                              if grid.holds(shrub.polygon) and borders.clear(shrub.polygon, 0.0)]
+        if params.tree_size == "real":
+            # Street trees stand in the planting strip between kerb and sidewalk when there are sidewalks.
+            row_offset = 1.6 if params.street_details else VERGE_M / 2
+            built = {b.lot_index for b in grid.buildings}
+            yards = [(rect, index in built) for index, (rect, _) in enumerate(grid.lots)]
+            for x, y, radius, height_m in real_trees(
+                    rng(0, part, 1), params.tree_density, grid.blocks, yards, [b.bbox for b in grid.buildings],
+                    clutter.no_trunks if clutter else (), *grid.extent, VERGE_M, row_offset, rules):
+                plant(*grid.point(x, y), radius, height_m, lambda p, grid=grid: grid.holds((p,)))
+    for k, region in enumerate(regions):
+        if region.style != "dense":
+            continue
+        window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
+        if params.car_density > 0:
+            out["cars"] += lane_cars(rng(1, k, 0), params.car_density, lanes[k], window, roofs, taken)
+        if params.tree_size == "real":
+            for x, y, radius, height_m in gap_trees(rng(1, k, 1), params.tree_density, lanes[k], window, city,
+                                                    roofs, road_space, taken):
+                plant(x, y, radius, height_m, lambda p, window=window: polygons.inside((p,), window, 0.0))
+        if params.shrub_density > 0:
+            out["shrubs"] += gap_bushes(rng(1, k, 2), params.shrub_density, window, roofs, road_space, taken)
+    if through and (params.street_details or params.car_density > 0):
+        dense_cells = [region.cell for region in regions if region.style == "dense"]
+        plan = [(road.polygon,
+                 params.street_details and road.surface == "asphalt" and not _between(road.polygon, dense_cells),
+                 params.car_density * (0.5 if road.surface == "dirt" else 1.0)) for road in through]
+        markings, cars = through_roads(rng(2, 0, 0), plan, road_space, taken)
+        out["markings"] += markings
+        out["cars"] += cars
+    return {name: items for name, items in out.items() if items}, trees
+
+
+def _between(polygon: Polygon, cells: list[Polygon]) -> bool:
+    """Whether a through road runs between two of the cells (it lies on their shared border)."""
+    return sum(not polygons.apart(polygon, cell, 0.0) for cell in cells) >= 2
 
 
 # ---------------------------------------------------------------- entry points

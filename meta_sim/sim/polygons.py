@@ -150,6 +150,21 @@ def strip(x0: float, y0: float, x1: float, y1: float, width: float, extend: floa
     return ((ax - nx, ay - ny), (bx - nx, by - ny), (bx + nx, by + ny), (ax + nx, ay + ny))
 
 
+def disc(x: float, y: float, r: float, sides: int = 12) -> tuple[Point, ...]:
+    """A regular polygon holding the disc of radius r about (x, y) (its edges touch the circle)."""
+    R = r / math.cos(math.pi / sides)
+    return tuple((x + R * math.cos(2 * math.pi * k / sides), y + R * math.sin(2 * math.pi * k / sides))
+                 for k in range(sides))
+
+
+def grown_box(points, margin: float) -> tuple[Point, ...]:
+    """The bounding box of the points grown by ``margin``, as a polygon (what `Occupancy` asks with
+    to keep a clearance)."""
+    x0, y0, x1, y1 = bbox(points)
+    return ((x0 - margin, y0 - margin), (x1 + margin, y0 - margin), (x1 + margin, y1 + margin),
+            (x0 - margin, y1 + margin))
+
+
 class Occupancy:
     """Convex polygons hashed into square cells, to ask quickly whether a new one keeps clear of them."""
 
@@ -172,8 +187,9 @@ class Occupancy:
         for key in self._keys(box):
             self.grid.setdefault(key, []).append(len(self.items) - 1)
 
-    def clear(self, polygon, gap: float) -> bool:
-        """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching).
+    def clear(self, polygon, gap: float, skip=None) -> bool:
+        """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching)
+        but ``skip`` (a stored polygon itself, say the road a marking lies on).
 
         Only polygons filed in the cells under the polygon's box are looked at: to keep a positive gap
         from all of them, ask with the polygon grown by it and a gap of zero."""
@@ -185,6 +201,8 @@ class Occupancy:
                     continue
                 seen.add(i)
                 other, (x0, y0, x1, y1) = self.items[i]
+                if other is skip:
+                    continue
                 # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
                 if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
                     continue
