@@ -753,8 +753,7 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
         if rules.trucks and building.kind == "industrial" and params.car_density > 0:
             busy = [p.bbox for p in lot_pavings if p.kind != "yard"] + [c.bbox for c in lot_cars]
             trucks = _loading_bay(car_rng, frame, roof, busy, params.car_density)
-            cars += trucks
-            here += [_grow(t.bbox, 0.3) for t in trucks]
+            cars += trucks  # on the paved lot, where no trunk stands anyway
         if (rules.pools and building.kind == "residential" and params.pool_share > 0
                 and pool_rng.random() < params.pool_share):
             pool = _pool(pool_rng, frame, roof)
@@ -897,9 +896,9 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
 # Places without a street grid: items are turned any way, and tested against the exact roof and road
 # outlines (`polygons.Occupancy`) rather than boxes.
 
-DENSE_M2_PER_TREE = 25.0  # tries per area at tree_density 1: few find a gap wide enough
+DENSE_M2_PER_TREE = 12.0  # tries per area at tree_density 1: few find a gap wide enough
 LANE_TREE_SHARE = 0.4  # of the tries: beside a lane
-DENSE_CARS_PER_100M = 1.5  # cars parked per 100 m of lane at car_density 1
+DENSE_CARS_PER_100M = 3.0  # cars parked per 100 m of lane at car_density 1
 DENSE_M2_PER_BUSH = 40.0  # tries per area at shrub_density 1
 
 
@@ -909,7 +908,7 @@ def _lane_spot(rng: np.random.Generator, lane) -> tuple[float, float, float, flo
     (ax, ay), (bx, by), _ = lane
     length = math.hypot(bx - ax, by - ay)
     dx, dy = (bx - ax) / length, (by - ay) / length
-    t, side = rng.uniform(0.0, length), rng.choice((-1.0, 1.0))
+    t, side = rng.uniform(0.0, length), (1.0 if rng.random() < 0.5 else -1.0)
     return ax + dx * t, ay + dy * t, -side * dy, side * dx, math.degrees(math.atan2(dy, dx))
 
 
@@ -936,12 +935,18 @@ def lane_cars(rng: np.random.Generator, density: float, lanes, window: Polygon, 
     return out
 
 
+def _crown_fits(x: float, y: float, r: float, xyr: np.ndarray, city: Rect, roofs: polygons.Occupancy) -> bool:
+    """Whether a crown stays in the city, clear of every roof, and apart from the crowns `xyr` (x, y, r)."""
+    inside = city[0] <= x - r and city[1] <= y - r and x + r <= city[2] and y + r <= city[3]
+    apart = not len(xyr) or np.all(np.hypot(xyr[:, 0] - x, xyr[:, 1] - y) >= 0.4 * (xyr[:, 2] + r))
+    return inside and apart and roofs.clear(polygons.disc(x, y, r + CLEARANCE_M), 0.0)
+
+
 def gap_trees(rng: np.random.Generator, density: float, lanes, window: Polygon, city: Rect,
-              roofs: polygons.Occupancy, roads: polygons.Occupancy,
-              taken: polygons.Occupancy) -> list[tuple[float, float, float, float]]:
+              roofs: polygons.Occupancy, roads: polygons.Occupancy) -> list[tuple[float, float, float, float]]:
     """Real-sized trees of a dense town as (x, y, crown radius, height): in the gaps between its houses
-    and beside its lanes, a crown too big for its gap tried smaller. Trunks stand inside `window`, off
-    the roads and `taken`; crowns stay inside the city and clear of every roof, and may reach over lanes."""
+    and beside its lanes, a crown too big for its gap tried smaller. Trunks stand inside `window` and
+    off the roads; crowns stay inside the city and clear of every roof, and may reach over lanes."""
     x0, y0, x1, y1 = _polygon_bbox(window)
     placed: list[tuple[float, float, float, float]] = []
     xyr = np.zeros((0, 3))
@@ -954,20 +959,15 @@ def gap_trees(rng: np.random.Generator, density: float, lanes, window: Polygon, 
         else:
             x, y = rng.uniform(x0, x1), rng.uniform(y0, y1)
         trunk = _rect_polygon(x - 0.5, y - 0.5, x + 0.5, y + 0.5)
-        if not (polygons.inside(((x, y),), window, 0.0) and roads.clear(trunk, 0.0) and taken.clear(trunk, 0.0)):
+        if not (polygons.inside(((x, y),), window, 0.0) and roads.clear(trunk, 0.0)):
             continue
         d0 = _diameter(rng)
-        for attempt in range(4):
-            d = max(TREE_DIAMETER_M[0], d0 * 0.8 ** attempt)
-            r = d / 2
-            inside = city[0] <= x - r and city[1] <= y - r and x + r <= city[2] and y + r <= city[3]
-            apart = not len(xyr) or np.all(np.hypot(xyr[:, 0] - x, xyr[:, 1] - y) >= 0.4 * (xyr[:, 2] + r))
-            if inside and apart and roofs.clear(polygons.disc(x, y, r + CLEARANCE_M), 0.0):
-                placed.append((_r(x), _r(y), _r(r), _r(_height(rng, d))))
-                xyr = np.vstack([xyr, (x, y, r)])
-                break
-            if d <= TREE_DIAMETER_M[0]:
-                break
+        if not _crown_fits(x, y, TREE_DIAMETER_M[0] / 2, xyr, city, roofs):  # most tries: no gap for any crown
+            continue
+        d = next((d for d in (d0, 0.8 * d0, 0.64 * d0)
+                  if d > TREE_DIAMETER_M[0] and _crown_fits(x, y, d / 2, xyr, city, roofs)), TREE_DIAMETER_M[0])
+        placed.append((_r(x), _r(y), _r(d / 2), _r(_height(rng, d))))
+        xyr = np.vstack([xyr, (x, y, d / 2)])
     return placed
 
 

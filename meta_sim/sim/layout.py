@@ -1523,11 +1523,13 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
     trees: list[Tree] = []
 
     def plant(x: float, y: float, radius: float, height_m: float, window) -> None:
-        """A real tree if its trunk stands in the window and off the roads and its crown in the city, clear of roofs."""
+        """A real tree if its trunk stands in the window and off the roads and its crown in the city,
+        clear of roofs; its trunk is taken (bushes and cars placed later keep off it)."""
         trunk = rect_polygon(x - 0.5, y - 0.5, x + 0.5, y + 0.5)
         if (window((x, y)) and radius <= x <= width - radius and radius <= y <= height - radius
                 and road_space.clear(trunk, 0.0) and roofs.clear(polygons.disc(x, y, radius + TREE_CLEARANCE_M), 0.0)):
             trees.append(Tree(_r(x), _r(y), radius, height_m))
+            taken.add(trunk)
 
     for style, grid in grids.items():
         part, rules = STYLES.index(style), GRID_RULES[style]
@@ -1561,14 +1563,15 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
         if region.style != "dense":
             continue
         window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
-        if params.car_density > 0:
-            out["cars"] += lane_cars(rng(1, k, 0), params.car_density, lanes[k], window, roofs, taken)
+        # Trees, bushes, cars: each keeps off those before it, so more cars move no tree or bush.
         if params.tree_size == "real":
             for x, y, radius, height_m in gap_trees(rng(1, k, 1), params.tree_density, lanes[k], window, city,
-                                                    roofs, road_space, taken):
+                                                    roofs, road_space):
                 plant(x, y, radius, height_m, lambda p, window=window: polygons.inside((p,), window, 0.0))
         if params.shrub_density > 0:
             out["shrubs"] += gap_bushes(rng(1, k, 2), params.shrub_density, window, roofs, road_space, taken)
+        if params.car_density > 0:
+            out["cars"] += lane_cars(rng(1, k, 0), params.car_density, lanes[k], window, roofs, taken)
     if through and (params.street_details or params.car_density > 0):
         dense_cells = [region.cell for region in regions if region.style == "dense"]
         plan = [(road.polygon,
