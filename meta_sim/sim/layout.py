@@ -1543,7 +1543,7 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
                                     if borders.clear(piece, 0.0)]
             for car in clutter.cars:
                 x, y = grid.point(car.x, car.y)
-                moved = replace(car, x=_r(x), y=_r(y), heading_deg=_r(car.heading_deg + grid.angle_deg))
+                moved = replace(car, x=_r(x), y=_r(y), heading_deg=_r((car.heading_deg + grid.angle_deg) % 360.0))
                 if grid.holds(moved.corners) and borders.clear(polygons.grown_box(moved.corners, 0.3), 0.0):
                     out["cars"].append(moved)
                     taken.add(moved.corners)

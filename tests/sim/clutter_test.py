@@ -428,3 +428,14 @@ def test_a_styled_city_with_everything_on_is_quick():
     start = time.perf_counter()
     generate_layout(5, 700.0, 600.0, LayoutParams(style=MIX, **KNOBS))
     assert time.perf_counter() - start < 8.0
+
+
+def test_greenness_tints_the_foliage_atlas_as_it_turns_the_small_trees():
+    from meta_sim.sim.appearance import TREE_COLOUR, foliage_tint, vegetation_colour
+
+    assert foliage_tint(None) is None  # the atlas stays as it is
+    for g in (0.0, 0.4, 1.0):
+        assert np.allclose(np.multiply(foliage_tint(g), TREE_COLOUR), vegetation_colour("tree", g, TREE_COLOUR))
+    atlas = surfaces.foliage_atlas()
+    dry, lush = (atlas * np.asarray(foliage_tint(g), np.float32) for g in (0.0, 1.0))
+    assert dry[..., 0].mean() / dry[..., 1].mean() > 1.5 * lush[..., 0].mean() / lush[..., 1].mean()
