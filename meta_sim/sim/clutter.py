@@ -896,10 +896,9 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
 # Places without a street grid: items are turned any way, and tested against the exact roof and road
 # outlines (`polygons.Occupancy`) rather than boxes.
 
-DENSE_M2_PER_TREE = 12.0  # tries per area at tree_density 1: few find a gap wide enough
-LANE_TREE_SHARE = 0.4  # of the tries: beside a lane
+DENSE_M2_PER_TREE = 6.0  # of open ground (room for the smallest crown) per try at tree_density 1
 DENSE_CARS_PER_100M = 3.0  # cars parked per 100 m of lane at car_density 1
-DENSE_M2_PER_BUSH = 40.0  # tries per area at shrub_density 1
+DENSE_M2_PER_BUSH = 12.0  # of open ground per try at shrub_density 1
 
 
 def _lane_spot(rng: np.random.Generator, lane) -> tuple[float, float, float, float, float]:
@@ -942,27 +941,75 @@ def _crown_fits(x: float, y: float, r: float, xyr: np.ndarray, city: Rect, roofs
     return inside and apart and roofs.clear(polygons.disc(x, y, r + CLEARANCE_M), 0.0)
 
 
-def gap_trees(rng: np.random.Generator, density: float, lanes, window: Polygon, city: Rect,
+class OpenGround:
+    """A raster of a dense town's ground in cells of `CELL_M`: which cell centres lie in its window, under
+    a roof or on a road, so tries are drawn where there is room (each try is then checked exactly)."""
+
+    CELL_M = 0.5
+
+    def __init__(self, window: Polygon, roofs: polygons.Occupancy, roads: polygons.Occupancy):
+        x0, y0, x1, y1 = _polygon_bbox(window)
+        c = self.CELL_M
+        self.xs = x0 + (np.arange(max(1, math.ceil((x1 - x0) / c))) + 0.5) * c
+        self.ys = y0 + (np.arange(max(1, math.ceil((y1 - y0) / c))) + 0.5) * c
+        self.inside = self._fill([window])
+        self.roofs = self._fill([p for p, box in roofs.items if _overlaps(box, (x0, y0, x1, y1), 8.0)])
+        self.roads = self._fill([p for p, box in roads.items if _overlaps(box, (x0, y0, x1, y1), 8.0)])
+
+    def _fill(self, outlines) -> np.ndarray:
+        """Cells whose centres lie inside any of the (counter-clockwise, convex) outlines."""
+        mask = np.zeros((len(self.ys), len(self.xs)), bool)
+        c = self.CELL_M
+        for outline in outlines:
+            x0, y0, x1, y1 = _polygon_bbox(outline)
+            i0, i1 = np.searchsorted(self.xs, (x0, x1))
+            j0, j1 = np.searchsorted(self.ys, (y0, y1))
+            if i0 >= i1 or j0 >= j1:
+                continue
+            gx, gy = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
+            inside = np.ones(gx.shape, bool)
+            for (ax, ay), (bx, by) in zip(outline, outline[1:] + outline[:1]):
+                inside &= (bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= -1e-9 * c
+            mask[j0:j1, i0:i1] |= inside
+        return mask
+
+    def _grown(self, mask: np.ndarray, reach: float) -> np.ndarray:
+        """Cells within `reach` of a set cell."""
+        out = mask.copy()
+        k = reach / self.CELL_M
+        n, (ny, nx) = math.ceil(k), mask.shape
+        for dy in range(-n, n + 1):
+            for dx in range(-n, n + 1):
+                if (dx or dy) and dx * dx + dy * dy <= k * k:
+                    out[max(dy, 0):ny + min(dy, 0), max(dx, 0):nx + min(dx, 0)] |= \
+                        mask[max(-dy, 0):ny - max(dy, 0), max(-dx, 0):nx - max(dx, 0)]
+        return out
+
+    def open(self, roof_gap: float, road_gap: float) -> np.ndarray:
+        """Flat indices of the cells in the window at least about `roof_gap` from roofs and `road_gap` from roads."""
+        return np.flatnonzero(self.inside & ~self._grown(self.roofs, roof_gap) & ~self._grown(self.roads, road_gap))
+
+    def spot(self, rng: np.random.Generator, cells: np.ndarray) -> tuple[float, float]:
+        """A random point in a random one of the cells."""
+        j, i = divmod(int(cells[rng.integers(len(cells))]), len(self.xs))
+        h = self.CELL_M / 2
+        return self.xs[i] + rng.uniform(-h, h), self.ys[j] + rng.uniform(-h, h)
+
+
+def gap_trees(rng: np.random.Generator, density: float, ground: OpenGround, window: Polygon, city: Rect,
               roofs: polygons.Occupancy, roads: polygons.Occupancy) -> list[tuple[float, float, float, float]]:
     """Real-sized trees of a dense town as (x, y, crown radius, height): in the gaps between its houses
-    and beside its lanes, a crown too big for its gap tried smaller. Trunks stand inside `window` and
-    off the roads; crowns stay inside the city and clear of every roof, and may reach over lanes."""
-    x0, y0, x1, y1 = _polygon_bbox(window)
+    and by its lanes, a crown too big for its gap tried smaller. Trunks stand inside `window` and off the
+    roads; crowns stay inside the city and clear of every roof, and may reach over lanes."""
+    cells = ground.open(TREE_DIAMETER_M[0] / 2, 0.5)
     placed: list[tuple[float, float, float, float]] = []
     xyr = np.zeros((0, 3))
-    for _ in range(rng.poisson(density * polygons.area(window) / DENSE_M2_PER_TREE)):
-        if lanes and rng.random() < LANE_TREE_SHARE:
-            lane = lanes[int(rng.integers(len(lanes)))]
-            x, y, nx, ny, _ = _lane_spot(rng, lane)
-            off = lane[2] / 2 + rng.uniform(0.8, 3.0)
-            x, y = x + nx * off, y + ny * off
-        else:
-            x, y = rng.uniform(x0, x1), rng.uniform(y0, y1)
+    for _ in range(rng.poisson(density * len(cells) * ground.CELL_M ** 2 / DENSE_M2_PER_TREE) if len(cells) else 0):
+        x, y = ground.spot(rng, cells)
         trunk = _rect_polygon(x - 0.5, y - 0.5, x + 0.5, y + 0.5)
-        if not (polygons.inside(((x, y),), window, 0.0) and roads.clear(trunk, 0.0)):
-            continue
         d0 = _diameter(rng)
-        if not _crown_fits(x, y, TREE_DIAMETER_M[0] / 2, xyr, city, roofs):  # most tries: no gap for any crown
+        if not (polygons.inside(((x, y),), window, 0.0) and roads.clear(trunk, 0.0)
+                and _crown_fits(x, y, TREE_DIAMETER_M[0] / 2, xyr, city, roofs)):
             continue
         d = next((d for d in (d0, 0.8 * d0, 0.64 * d0)
                   if d > TREE_DIAMETER_M[0] and _crown_fits(x, y, d / 2, xyr, city, roofs)), TREE_DIAMETER_M[0])
@@ -971,15 +1018,16 @@ def gap_trees(rng: np.random.Generator, density: float, lanes, window: Polygon, 
     return placed
 
 
-def gap_bushes(rng: np.random.Generator, density: float, window: Polygon, roofs: polygons.Occupancy,
-               roads: polygons.Occupancy, taken: polygons.Occupancy) -> list[Shrub]:
+def gap_bushes(rng: np.random.Generator, density: float, ground: OpenGround, window: Polygon,
+               roofs: polygons.Occupancy, roads: polygons.Occupancy, taken: polygons.Occupancy) -> list[Shrub]:
     """Bushes in the yards of a dense town: inside `window`, clear of roofs, roads and `taken` (which
     gets them)."""
-    x0, y0, x1, y1 = _polygon_bbox(window)
+    cells = ground.open(1.0, 1.0)
     out = []
-    for _ in range(rng.poisson(density * polygons.area(window) / DENSE_M2_PER_BUSH)):
+    for _ in range(rng.poisson(density * len(cells) * ground.CELL_M ** 2 / DENSE_M2_PER_BUSH) if len(cells) else 0):
+        cx, cy = ground.spot(rng, cells)
         size = rng.uniform(0.8, 2.2)
-        cx, cy, w = rng.uniform(x0, x1), rng.uniform(y0, y1), size * rng.uniform(0.8, 1.25)
+        w = size * rng.uniform(0.8, 1.25)
         rect = _rect_polygon(cx - w / 2, cy - size / 2, cx + w / 2, cy + size / 2)
         height = rng.uniform(0.5, 1.8)
         room = polygons.grown_box(rect, 0.3)

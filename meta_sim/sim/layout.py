@@ -49,6 +49,7 @@ from .clutter import (
     TREE_SIZES,
     Car,
     Marking,
+    OpenGround,
     Paving,
     Pool,
     Shrub,
@@ -1564,12 +1565,14 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
             continue
         window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
         # Trees, bushes, cars: each keeps off those before it, so more cars move no tree or bush.
+        ground = OpenGround(window, roofs, road_space)
         if params.tree_size == "real":
-            for x, y, radius, height_m in gap_trees(rng(1, k, 1), params.tree_density, lanes[k], window, city,
+            for x, y, radius, height_m in gap_trees(rng(1, k, 1), params.tree_density, ground, window, city,
                                                     roofs, road_space):
                 plant(x, y, radius, height_m, lambda p, window=window: polygons.inside((p,), window, 0.0))
         if params.shrub_density > 0:
-            out["shrubs"] += gap_bushes(rng(1, k, 2), params.shrub_density, window, roofs, road_space, taken)
+            out["shrubs"] += gap_bushes(rng(1, k, 2), params.shrub_density, ground, window, roofs, road_space,
+                                        taken)
         if params.car_density > 0:
             out["cars"] += lane_cars(rng(1, k, 0), params.car_density, lanes[k], window, roofs, taken)
     if through and (params.street_details or params.car_density > 0):
