@@ -16,11 +16,23 @@ more than today's city (all of them are off by default):
 * trees of real sizes (``tree_size="real"``): rows along the verges and
   groups in yards and parks, their crowns clear of every roof.
 
+That is the suburban street grid. In a styled city each region gets what its
+style has: a street grid of another style is furnished in its own frame by
+the same functions under its `GridRules` (downtown: full-width sidewalks,
+rows of street trees, crossings, busy kerbs, parking lots on the empty lots;
+industrial: trucks at the halls and in truck stalls, few trees; neither gets
+pools or hedges); dense towns get real trees in the gaps between their houses,
+bushes and a few cars parked by the lanes, and no kerbs, sidewalks or paint
+(`gap_trees`, `gap_bushes`, `lane_cars`); the through roads between regions
+get centre lines and traffic (`through_roads`).
+
 Everything here is ground clutter: the label passes see it as background.
 This module knows nothing of `layout` (which imports it): it takes blocks,
 lots and roads as plain rectangles and buildings through their ``bbox``,
-``kind`` and ``lot_index``. Its items are axis-aligned rectangles, except
-cars, which carry a heading.
+``kind`` and ``lot_index`` (and, for dense towns and through roads, exact
+outlines in a `polygons.Occupancy`). Its items are axis-aligned rectangles,
+except vehicles, which carry a heading; `layout` turns a turned grid's items
+with it and cuts pavings and markings at region borders.
 """
 
 from __future__ import annotations

@@ -228,7 +228,8 @@ class LayoutParams:
         industrial and office buildings; highrises and L/T footprints are
         always flat, which caps the share reachable (about 0.82 with the default mix).
     tree_density: street-tree probability per planting spot and yard trees
-        per lot area; scaled down in downtown, industrial and dense regions.
+        per lot area; scaled down in downtown, industrial and dense regions
+        (real trees: as each style's rules say, see `clutter.GridRules`).
     road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider
         (grid styles; dense lanes have widths of their own).
     block_size_m: (min, max) side length of a block between streets (grid styles).
@@ -239,8 +240,8 @@ class LayoutParams:
 
     The knobs below add street details, clutter and real-sized trees (see
     ``sim/clutter.py``); at their defaults the city is today's, and `to_dict`
-    leaves them out. They are built in all-suburban cities (the street grid);
-    cities of other styles do not have them yet.
+    leaves them out. In a styled city each region gets them as its style has
+    them (`_styled_clutter`); a styled city without them stays as it was.
 
     tree_size: "small" (today's crowns of 1.2-4 m radius, scattered) or
         "real" (crown diameters 4-15 m, mostly 5-9 m, heights 5-20 m growing
