@@ -38,7 +38,7 @@ import OpenImageIO as oiio
 
 from ..core.errors import MetaSimError
 from ..sim import meshes, surfaces
-from ..sim.appearance import vegetation_colour
+from ..sim.appearance import TREE_COLOUR, foliage_tint, vegetation_colour
 from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.furniture import SURFACES, roof_furniture
 from ..sim.ground import COVERS, ground_image
@@ -282,6 +282,7 @@ class CityScene:
         self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
         self.sun_elevation_deg = sun_elevation_deg  # None: drawn from the city seed
         self.pixel_size_m = pixel_size_m
+        self._yard = None
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
         if collection is None:
             bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -357,16 +358,23 @@ class CityScene:
         if roads:
             repeat = surfaces.ASPHALT_REPEAT_M if params.street_details else 1.0
             _new_mesh_object(meshes.road_mesh(roads, repeat_m=repeat), [road, dirt], self.collection, key)
-        if paved:
+        if paved and params.street_details:  # the yards' weathered concrete, under the parking lots' asphalt
+            _new_mesh_object(meshes.lot_mesh(paved, z=0.01, repeat_m=surfaces.CONCRETE_REPEAT_M),
+                             [self._yard_material()], self.collection, key)
+        elif paved:
             concrete = _image_material("paved", _noise_image("paved", (0.36, 0.36, 0.35), 0.08, seed + 5, key), key)
             _new_mesh_object(meshes.lot_mesh(paved), [concrete], self.collection, key)
         foliage = None
         if params.tree_size == "real" or params.shrub_density > 0:
-            foliage = _image_material("foliage", _rgb_image("foliage", surfaces.foliage_atlas(), key), key)
+            atlas = surfaces.foliage_atlas()
+            tint = foliage_tint(self.greenness)
+            if tint is not None:  # the atlas's greens turned as the design's vegetation colour is
+                atlas = np.clip(atlas * np.asarray(tint, np.float32), 0.0, 1.0)
+            foliage = _image_material("foliage", _rgb_image("foliage", atlas, key), key)
         if trees and params.tree_size == "real":
             _new_mesh_object(meshes.crown_mesh(trees), [foliage], self.collection, key, closed=True, smooth=True)
         elif trees:
-            leaves = vegetation_colour("tree", self.greenness, (0.05, 0.13, 0.035))
+            leaves = vegetation_colour("tree", self.greenness, TREE_COLOUR)
             tree = _image_material("tree", _noise_image("tree", leaves, 0.35, seed + 3, key), key)
             _new_mesh_object(meshes.tree_mesh(trees), [tree], self.collection, key)
         self.n_trees, self.n_roads = len(trees), len(roads)
@@ -390,6 +398,13 @@ class CityScene:
                               surfaces.FURNITURE_ROUGHNESS["metal"])
         _new_mesh_object(arrays, [*materials, lid], self.collection, key, closed=True)
 
+    def _yard_material(self) -> bpy.types.Material:
+        """The paved yards' weathered concrete, made on first use."""
+        if self._yard is None:
+            image = _rgb_image("yard", surfaces.concrete_image() * np.float32(surfaces.YARD_SHADE), self.key)
+            self._yard = _image_material("yard", image, self.key)
+        return self._yard
+
     def _shadow_reach(self, height_m: float) -> float:
         """How far from its foot the shadow of something `height_m` tall falls in this city's sun."""
         return height_m / math.tan(self._elevation) + 0.5
@@ -401,7 +416,8 @@ class CityScene:
         flat = {name: self._visible(lambda *r, name=name: lay.details_in_rect(name, *r), 0.0)
                 for name in ("pavings", "pools", "markings")}
         low = min(margin, self._shadow_reach(2.0))
-        cars = self._visible(lambda *r: lay.details_in_rect("cars", *r), low)
+        vehicles = meshes.TRUCK_HEIGHT_M if any(car.kind == "truck" for car in lay.cars) else 2.0
+        cars = self._visible(lambda *r: lay.details_in_rect("cars", *r), min(margin, self._shadow_reach(vehicles)))
         shrubs = self._visible(lambda *r: lay.details_in_rect("shrubs", *r), low)
         self.n_details = {"cars": len(cars), "shrubs": len(shrubs), **{k: len(v) for k, v in flat.items()}}
         if any(flat.values()):
@@ -409,8 +425,7 @@ class CityScene:
             materials[meshes.CONCRETE] = _image_material(
                 "concrete", _rgb_image("concrete", surfaces.concrete_image(), key), key)
             materials[meshes.ASPHALT] = road  # parking lots: the streets' asphalt
-            materials[meshes.YARD] = _image_material(
-                "yard", _rgb_image("yard", surfaces.concrete_image() * np.float32(surfaces.YARD_SHADE), key), key)
+            materials[meshes.YARD] = self._yard_material()
             materials[meshes.PAINT] = _image_material(
                 "paint", _noise_image("paint", surfaces.ROAD_PAINT, 0.08, 6, key), key)
             materials[meshes.WATER] = _image_material(

@@ -33,6 +33,7 @@ FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
 LUSH = {"lawn": (0.11, 0.20, 0.06), "tree": (0.04, 0.12, 0.03)}
 DRY = {"lawn": (0.34, 0.29, 0.17), "tree": (0.12, 0.13, 0.06)}
+TREE_COLOUR = (0.05, 0.13, 0.035)  # small trees' leaves when greenness is not set
 
 
 @dataclass(frozen=True)
@@ -123,3 +124,11 @@ def vegetation_colour(kind: str, greenness: float | None, default) -> tuple:
     g = float(np.clip(greenness, 0.0, 1.0))
     return tuple(float(d + g * (lush - d)) for d, lush in zip(DRY[kind], LUSH[kind]))
 
+
+def foliage_tint(greenness: float | None) -> tuple | None:
+    """Per-channel factors that take the foliage atlas (real trees and shrubs, ``surfaces.foliage_atlas``)
+    from its own greens to ``greenness`` as the small trees' colour goes from `TREE_COLOUR` to
+    ``vegetation_colour("tree", greenness)``; None (the atlas as it is) when greenness is not set."""
+    if greenness is None:
+        return None
+    return tuple(t / d for t, d in zip(vegetation_colour("tree", greenness, TREE_COLOUR), TREE_COLOUR))

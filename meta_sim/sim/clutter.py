@@ -16,17 +16,29 @@ more than today's city (all of them are off by default):
 * trees of real sizes (``tree_size="real"``): rows along the verges and
   groups in yards and parks, their crowns clear of every roof.
 
+That is the suburban street grid. In a styled city each region gets what its
+style has: a street grid of another style is furnished in its own frame by
+the same functions under its `GridRules` (downtown: full-width sidewalks,
+rows of street trees, crossings, busy kerbs, parking lots on the empty lots;
+industrial: trucks at the halls and in truck stalls, few trees; neither gets
+pools or hedges); dense towns get real trees in the gaps between their houses,
+bushes and a few cars parked by the lanes, and no kerbs, sidewalks or paint
+(`gap_trees`, `gap_bushes`, `lane_cars`); the through roads between regions
+get centre lines and traffic (`through_roads`).
+
 Everything here is ground clutter: the label passes see it as background.
 This module knows nothing of `layout` (which imports it): it takes blocks,
 lots and roads as plain rectangles and buildings through their ``bbox``,
-``kind`` and ``lot_index``. Its items are axis-aligned rectangles, except
-cars, which carry a heading.
+``kind`` and ``lot_index`` (and, for dense towns and through roads, exact
+outlines in a `polygons.Occupancy`). Its items are axis-aligned rectangles,
+except vehicles, which carry a heading; `layout` turns a turned grid's items
+with it and cuts pavings and markings at region borders.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -44,6 +56,13 @@ PAVING_KINDS = ("kerb", "sidewalk", "driveway", "parking", "yard")
 PAVED_LOTS = ("office", "industrial", "highrise")  # their lots are paved all over (a "yard")
 CAR_LENGTH_M = (4.2, 4.9)
 CAR_WIDTH_M = (1.75, 1.9)
+VEHICLES = ("car", "truck")
+TRUCK_COLOURS = {"white": 0.55, "silver": 0.2, "grey": 0.1, "red": 0.08, "blue": 0.07}  # of CAR_COLOURS
+TRUCK_LENGTH_M = (7.0, 16.5)  # a box truck to a tractor with its trailer
+TRUCK_WIDTH_M = (2.45, 2.55)
+TRUCK_STALL_M = (4.0, 17.5)  # width, depth of a truck's stall
+TRUCK_AISLE_M = 15.0
+CUT_CORNERS = (3, 8)  # a rectangle cut by a region border keeps three to eight corners
 KERB_M = 0.3
 SIDEWALK_M = (1.5, 2.0)
 DRIVEWAY_M = (2.8, 3.4)
@@ -65,11 +84,15 @@ _rect_polygon = polygons.rect_polygon
 _polygon_bbox = polygons.bbox
 
 
-def _read_rect(data: Any, where: str) -> Polygon:
+def _read_rect(data: Any, where: str, corners: tuple[int, int] = (4, 4)) -> Polygon:
+    """A polygon of a layout file: a rectangle of four corners (or, for pavings and markings cut by a
+    region border, a convex polygon of three to eight)."""
     polygon = tuple((float(x), float(y)) for x, y in data)
     x0, y0, x1, y1 = _polygon_bbox(polygon) if polygon else (0.0, 0.0, 0.0, 0.0)
-    if len(polygon) != 4 or not (x1 > x0 and y1 > y0) or not all(map(math.isfinite, (x0, y0, x1, y1))):
-        raise MetaSimError(f"{where}: polygon must be a rectangle of four corners; the layout file is damaged")
+    if not (corners[0] <= len(polygon) <= corners[1] and x1 > x0 and y1 > y0
+            and all(map(math.isfinite, (x0, y0, x1, y1)))):
+        shape = "a rectangle of four corners" if corners == (4, 4) else "a convex polygon of three to eight corners"
+        raise MetaSimError(f"{where}: polygon must be {shape}; the layout file is damaged")
     return polygon
 
 
@@ -87,7 +110,8 @@ def _grow(rect: Rect, margin: float) -> Rect:
 @dataclass(frozen=True)
 class Paving:
     """A paved ground rectangle: kerb, sidewalk, driveway, yard (concrete; a yard is a whole paved
-    commercial or industrial lot, under its building) or parking lot (asphalt, off every roof)."""
+    commercial or industrial lot, under its building) or parking lot (asphalt, off every roof).
+    In a turned grid it is turned with it, and cut where it crosses a region border."""
 
     polygon: Polygon
     kind: str
@@ -103,12 +127,13 @@ class Paving:
     def from_dict(cls, data: dict[str, Any]) -> Paving:
         if data["kind"] not in PAVING_KINDS:
             raise MetaSimError(f"paving kind {data['kind']!r} is not one of {PAVING_KINDS}; the layout file is damaged")
-        return cls(_read_rect(data["polygon"], "paving"), str(data["kind"]))
+        return cls(_read_rect(data["polygon"], "paving", CUT_CORNERS), str(data["kind"]))
 
 
 @dataclass(frozen=True)
 class Marking:
-    """A painted line piece on a road or a parking lot (a thin white rectangle)."""
+    """A painted line piece on a road or a parking lot (a thin white rectangle, turned and cut like a
+    `Paving`)."""
 
     polygon: Polygon
 
@@ -121,7 +146,7 @@ class Marking:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Marking:
-        return cls(_read_rect(data["polygon"], "marking"))
+        return cls(_read_rect(data["polygon"], "marking", CUT_CORNERS))
 
 
 @dataclass(frozen=True)
@@ -171,8 +196,8 @@ class Shrub:
 
 @dataclass(frozen=True)
 class Car:
-    """A car: a `length_m` x `width_m` box centred on (x, y), its front towards `heading_deg`
-    (counter-clockwise from east), painted `colour`."""
+    """A car or a truck (`kind`): a `length_m` x `width_m` box centred on (x, y), its front towards
+    `heading_deg` (counter-clockwise from east), painted `colour`."""
 
     x: float
     y: float
@@ -180,6 +205,7 @@ class Car:
     length_m: float
     width_m: float
     colour: str
+    kind: str = "car"
 
     @property
     def corners(self) -> Polygon:
@@ -195,13 +221,18 @@ class Car:
         return _polygon_bbox(self.corners)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"x": self.x, "y": self.y, "heading_deg": self.heading_deg, "length_m": self.length_m,
-                "width_m": self.width_m, "colour": self.colour}
+        out = {"x": self.x, "y": self.y, "heading_deg": self.heading_deg, "length_m": self.length_m,
+               "width_m": self.width_m, "colour": self.colour}
+        if self.kind != "car":  # layouts from before trucks keep their JSON
+            out["kind"] = self.kind
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Car:
         car = cls(float(data["x"]), float(data["y"]), float(data["heading_deg"]), float(data["length_m"]),
-                  float(data["width_m"]), str(data["colour"]))
+                  float(data["width_m"]), str(data["colour"]), str(data.get("kind", "car")))
+        if car.kind not in VEHICLES:
+            raise MetaSimError(f"vehicle kind {car.kind!r} is not one of {VEHICLES}; the layout file is damaged")
         if car.colour not in CAR_COLOURS:
             raise MetaSimError(f"car colour {car.colour!r} is not one of {tuple(CAR_COLOURS)}; "
                                "the layout file is damaged")
@@ -220,6 +251,46 @@ class Clutter:
     pools: tuple[Pool, ...] = ()
     shrubs: tuple[Shrub, ...] = ()
     no_trunks: tuple[Rect, ...] = ()  # driveways, parking lots, pools: trunks stay off them
+
+
+# ---------------------------------------------------------------- the rules of each grid style
+
+
+@dataclass(frozen=True)
+class GridRules:
+    """How the streets and lots of one street-grid style are furnished (`SUBURBAN`: today's city).
+
+    kerb_cars, traffic: times `car_density`, the share of kerb spots taken and the cars driving per
+    `TRAFFIC_PER_100M`; zebra: share of junctions with crossings; sidewalk_m: the sidewalk's width range;
+    pools, hedges: whether houses get pools and lots hedges and bushes; paved_lots: the lots are paved
+    already (no yard pavings; an empty lot is a parking lot); trucks: trucks at the halls' loading bays
+    and in the empty lots' truck stalls; tree_rows: (a, b), the chance a verge gets a row of trees is
+    a + b * tree_density; yard_trees: times the groups of trees in yards and parks.
+    """
+
+    kerb_cars: float = 0.6
+    traffic: float = 1.0
+    zebra: float = 0.5
+    sidewalk_m: tuple[float, float] = SIDEWALK_M
+    pools: bool = True
+    hedges: bool = True
+    paved_lots: bool = False
+    trucks: bool = False
+    tree_rows: tuple[float, float] = (0.25, 0.9)
+    yard_trees: float = 1.0
+
+
+SUBURBAN = GridRules()
+GRID_RULES = {
+    "suburban": SUBURBAN,
+    # Busy streets: full-width sidewalks with street trees in pits, crossings at most junctions, surface
+    # parking lots on the empty lots.
+    "downtown": GridRules(kerb_cars=0.85, traffic=2.0, zebra=0.85, sidewalk_m=(4.4, 4.4), pools=False,
+                          hedges=False, paved_lots=True, tree_rows=(0.45, 1.2), yard_trees=0.0),
+    # Quiet streets, trucks at the halls, few trees.
+    "industrial": GridRules(kerb_cars=0.25, traffic=0.6, zebra=0.15, pools=False, hedges=False, paved_lots=True,
+                            trucks=True, tree_rows=(0.1, 0.4), yard_trees=0.3),
+}
 
 
 # ---------------------------------------------------------------- lot frames
@@ -324,7 +395,8 @@ def _crosswalk(road: Rect, a0: float, a1: float) -> list[Marking]:
     return [Marking(_rect_polygon(*_strip(road, a0, a1, c, c + ZEBRA_M[0]))) for c in bars]
 
 
-def _road_markings(rng: np.random.Generator, roads: Sequence[Rect], road_width: float) -> list[Marking]:
+def _road_markings(rng: np.random.Generator, roads: Sequence[Rect], road_width: float,
+                   zebra: float) -> list[Marking]:
     """A dashed centre line on streets; a double centre line and two dashed lane lines on avenues;
     zebra crossings at some junctions, where the lines stop short."""
     out = []
@@ -335,7 +407,7 @@ def _road_markings(rng: np.random.Generator, roads: Sequence[Rect], road_width: 
         centre, width = (c_lo + c_hi) / 2, c_hi - c_lo
         cuts = []
         for a, b in _junctions(road, roads):
-            if rng.random() < 0.5:
+            if rng.random() < zebra:
                 for z0, z1 in ((a - 1.0 - ZEBRA_DEPTH_M, a - 1.0), (b + 1.0, b + 1.0 + ZEBRA_DEPTH_M)):
                     if lo <= z0 and z1 <= hi:
                         out += _crosswalk(road, z0, z1)
@@ -359,12 +431,12 @@ def _road_markings(rng: np.random.Generator, roads: Sequence[Rect], road_width: 
     return out
 
 
-def _sidewalks(rng: np.random.Generator, blocks, verge: float) -> list[Paving]:
+def _sidewalks(rng: np.random.Generator, blocks, verge: float, widths: tuple[float, float]) -> list[Paving]:
     """A kerb at the road edge and a sidewalk at the lot side of the verge, along every street side."""
     out = []
     for rect, sides in blocks:
         x0, y0, x1, y1 = rect
-        width = rng.uniform(*SIDEWALK_M)
+        width = rng.uniform(*widths)
         for side in sorted(sides):
             for kind, near, far in (("kerb", 0.0, KERB_M), ("sidewalk", verge - 0.3 - width, verge - 0.3)):
                 strip = {"S": (x0, y0 + near, x1, y0 + far), "N": (x0, y1 - far, x1, y1 - near),
@@ -376,6 +448,13 @@ def _sidewalks(rng: np.random.Generator, blocks, verge: float) -> list[Paving]:
 def _colour(rng: np.random.Generator) -> str:
     names = list(CAR_COLOURS)
     return names[int(rng.choice(len(names), p=list(CAR_COLOURS.values())))]
+
+
+def _truck(rng: np.random.Generator, x: float, y: float, heading: float, longest: float) -> Car:
+    names = list(TRUCK_COLOURS)
+    length = min(rng.uniform(*TRUCK_LENGTH_M), longest)
+    colour = names[int(rng.choice(len(names), p=list(TRUCK_COLOURS.values())))]
+    return Car(_r(x), _r(y), _r(heading), _r(length), _r(rng.uniform(*TRUCK_WIDTH_M)), colour, "truck")
 
 
 def _car(rng: np.random.Generator, x: float, y: float, heading: float) -> Car:
@@ -471,14 +550,19 @@ def _driveway(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Fr
     return frame.world(a, a + width, -verge, end), cars
 
 
-def _parking_lot(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Frame, roof: Rect, verge: float,
-                 density: float) -> tuple[list[Paving], list[Marking], list[Car]]:
-    """The largest free strip of a lot beside its building, paved, with stalls and parked cars."""
-    u0, u1, v0, v1 = frame.local(roof)
+def _parking_lot(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Frame, roof: Rect | None,
+                 verge: float, density: float, trucks: bool = False) -> tuple[list[Paving], list[Marking], list[Car]]:
+    """The largest free strip of a lot beside its building (the whole lot if it has none), paved, with
+    stalls and parked cars (or, with `trucks`, wide deep stalls with trucks)."""
     f, d = frame.frontage, frame.depth
-    candidates = [(0.5, f - 0.5, 0.5, v0 - 0.5), (0.5, f - 0.5, v1 + 0.5, d - 0.5),
-                  (0.5, u0 - 0.5, 0.5, d - 0.5), (u1 + 0.5, f - 0.5, 0.5, d - 0.5)]
-    module = STALL_M[1] + AISLE_M
+    if roof is None:
+        candidates = [(0.5, f - 0.5, 0.5, d - 0.5)]
+    else:
+        u0, u1, v0, v1 = frame.local(roof)
+        candidates = [(0.5, f - 0.5, 0.5, v0 - 0.5), (0.5, f - 0.5, v1 + 0.5, d - 0.5),
+                      (0.5, u0 - 0.5, 0.5, d - 0.5), (u1 + 0.5, f - 0.5, 0.5, d - 0.5)]
+    stall, aisle = (TRUCK_STALL_M, TRUCK_AISLE_M) if trucks else (STALL_M, AISLE_M)
+    module = stall[1] + aisle
     fitting = [c for c in candidates if min(c[1] - c[0], c[3] - c[2]) >= module]
     if not fitting:
         return [], [], []
@@ -496,28 +580,61 @@ def _parking_lot(rng: np.random.Generator, car_rng: np.random.Generator, frame: 
     rows = []  # (near, far, +1 if its aisle lies on the far side else -1)
     pos = c_lo
     while pos + module <= c_hi + 1e-9:
-        double = pos + module + STALL_M[1] <= c_hi + 1e-9
-        rows.append((pos, pos + STALL_M[1], 1))
+        double = pos + module + stall[1] <= c_hi + 1e-9
+        rows.append((pos, pos + stall[1], 1))
         if double:
-            rows.append((pos + module, pos + module + STALL_M[1], -1))
-        pos += module + STALL_M[1] * double
-    n = int((hi - lo - 1.0) // STALL_M[0])
-    start = lo + (hi - lo - n * STALL_M[0]) / 2
+            rows.append((pos + module, pos + module + stall[1], -1))
+        pos += module + stall[1] * double
+    n = int((hi - lo - 1.0) // stall[0])
+    start = lo + (hi - lo - n * stall[0]) / 2
     markings, cars = [], []
     for near, far, facing in rows:
         for i in range(n + 1):
-            a = start + i * STALL_M[0]
+            a = start + i * stall[0]
             markings.append(Marking(_rect_polygon(*_strip(region, a - LINE_M / 2, a + LINE_M / 2, near, far))))
         for i in range(n):
             if car_rng.random() >= density:
                 continue
-            along = start + (i + 0.5) * STALL_M[0] + car_rng.uniform(-0.15, 0.15)
+            along = start + (i + 0.5) * stall[0] + car_rng.uniform(-0.15, 0.15)
+            if trucks:  # backed in: the trailer's end at the back of the stall, the cab towards the aisle
+                heading = (90.0 if k == 0 else 0.0) + (0.0 if facing > 0 else 180.0) + car_rng.uniform(-1.0, 1.0)
+                truck = _truck(car_rng, 0.0, 0.0, heading, stall[1] - 0.5)
+                half = truck.length_m / 2 + 0.25
+                across = near + half if facing > 0 else far - half
+                x, y = (along, across) if k == 0 else (across, along)
+                cars.append(replace(truck, x=_r(x), y=_r(y)))
+                continue
             across = (near + far) / 2  # a 4.9 m car all but fills a 5 m stall
             nose_in = car_rng.random() < 0.8
             heading = (90.0 if k == 0 else 0.0) + (0.0 if (facing > 0) == nose_in else 180.0)
             x, y = (along, across) if k == 0 else (across, along)
             cars.append(_car(car_rng, x, y, heading + car_rng.uniform(-1.5, 1.5)))
     return pavings, markings, cars
+
+
+def _loading_bay(rng: np.random.Generator, frame: _Frame, roof: Rect, taken: Sequence[Rect],
+                 density: float) -> list[Car]:
+    """Trucks backed up to the hall side with the deepest free yard, side by side, clear of `taken`."""
+    u0, u1, v0, v1 = frame.local(roof)
+    f, d = frame.frontage, frame.depth
+    # (wall along lo..hi, free depth in front of it, local (u, v) of a point at `along` and `out` from the wall)
+    sides = [(u0, u1, v0 - 0.5, lambda a, o: (a, v0 - o)), (u0, u1, d - 0.5 - v1, lambda a, o: (a, v1 + o)),
+             (v0, v1, u0 - 0.5, lambda a, o: (u0 - o, a)), (v0, v1, f - 0.5 - u1, lambda a, o: (u1 + o, a))]
+    lo, hi, depth, at = max(sides, key=lambda side: side[2])
+    out: list[Car] = []
+    if depth < TRUCK_LENGTH_M[0] + 1.0:
+        return out
+    pitch = TRUCK_STALL_M[0] + rng.uniform(-0.3, 0.5)
+    for a in np.arange(lo + 1.0 + pitch / 2, hi - 1.0 - pitch / 2, pitch):
+        if rng.random() >= density:
+            continue
+        truck = _truck(rng, 0.0, 0.0, 0.0, depth - 0.5)
+        (x0, y0), (x1, y1) = (frame.world(u, u, v, v)[:2] for u, v in (at(a, 0.3), at(a, 0.3 + truck.length_m)))
+        heading = math.degrees(math.atan2(y1 - y0, x1 - x0)) + rng.uniform(-2.0, 2.0)
+        placed = replace(truck, x=_r((x0 + x1) / 2), y=_r((y0 + y1) / 2), heading_deg=_r(heading))
+        if not any(_overlaps(placed.bbox, t, 0.2) for t in taken):
+            out.append(placed)
+    return out
 
 
 def _pool(rng: np.random.Generator, frame: _Frame, roof: Rect) -> Pool | None:
@@ -582,8 +699,8 @@ def _shrubs(rng: np.random.Generator, frame: _Frame, roof: Rect | None, density:
 
 
 def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, roads: Sequence[Rect],
-                     verge_m: float, road_width_m: float) -> Clutter:
-    """Street details, cars, pools and shrubs for a city (see the module docstring).
+                     verge_m: float, road_width_m: float, rules: GridRules = SUBURBAN) -> Clutter:
+    """Street details, cars, pools and shrubs for a street grid of one style (see the module docstring).
 
     `blocks` are (rect, road sides) pairs, `lots` (rect, block index) pairs. Each knob draws from its
     own stream, so changing `params.car_density` moves no pool, shrub or paving.
@@ -600,11 +717,22 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
     no_trunks: list[Rect] = []
     taken: dict[int, list[Rect]] = {}
     if params.street_details:
-        pavings += _sidewalks(street_rng, blocks, verge_m)
-        markings += _road_markings(street_rng, roads, road_width_m)
+        pavings += _sidewalks(street_rng, blocks, verge_m, rules.sidewalk_m)
+        markings += _road_markings(street_rng, roads, road_width_m, rules.zebra)
     for index, (rect, block_index) in enumerate(lots):
         building = by_lot.get(index)
         if building is None:
+            if rules.paved_lots:  # an empty paved lot is a parking lot
+                block_rect, sides = blocks[block_index]
+                front = _front(rect, block_rect, sides, verge_m, None)
+                if front is not None:
+                    lot_pavings, lot_markings, lot_cars = _parking_lot(
+                        street_rng, car_rng, _Frame(rect, front), None, verge_m, params.car_density, rules.trucks)
+                    no_trunks += [p.bbox for p in lot_pavings]
+                    if params.street_details:
+                        pavings += lot_pavings
+                        markings += lot_markings
+                        cars += lot_cars
             continue
         block_rect, sides = blocks[block_index]
         roof = building.bbox
@@ -630,11 +758,16 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
             lot_pavings.insert(0, Paving(_rect_polygon(*rect), "yard"))
         here += [p.bbox for p in lot_pavings]
         if params.street_details:
-            pavings += lot_pavings
+            pavings += [p for p in lot_pavings if not (rules.paved_lots and p.kind == "yard")]
             markings += lot_markings
             if params.car_density > 0:
                 cars += lot_cars
-        if building.kind == "residential" and params.pool_share > 0 and pool_rng.random() < params.pool_share:
+        if rules.trucks and building.kind == "industrial" and params.car_density > 0:
+            busy = [p.bbox for p in lot_pavings if p.kind != "yard"] + [c.bbox for c in lot_cars]
+            trucks = _loading_bay(car_rng, frame, roof, busy, params.car_density)
+            cars += trucks  # on the paved lot, where no trunk stands anyway
+        if (rules.pools and building.kind == "residential" and params.pool_share > 0
+                and pool_rng.random() < params.pool_share):
             pool = _pool(pool_rng, frame, roof)
             if pool is not None:
                 pools.append(pool)
@@ -642,9 +775,9 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
         no_trunks += here
     if params.car_density > 0:
         mouths = [p.bbox for p in pavings if p.kind == "driveway"]
-        parked = _kerb_cars(car_rng, roads, mouths, 0.6 * params.car_density)
-        cars += parked + _traffic(car_rng, roads, cars + parked, road_width_m, params.car_density)
-    if params.shrub_density > 0:
+        parked = _kerb_cars(car_rng, roads, mouths, rules.kerb_cars * params.car_density)
+        cars += parked + _traffic(car_rng, roads, cars + parked, road_width_m, rules.traffic * params.car_density)
+    if params.shrub_density > 0 and rules.hedges:
         for index, (rect, block_index) in enumerate(lots):
             building = by_lot.get(index)
             block_rect, sides = blocks[block_index]
@@ -729,17 +862,18 @@ class _Stand:
 
 
 def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Sequence[Rect], no_trunks,
-               width: float, height: float, verge_m: float,
-               row_offset_m: float) -> list[tuple[float, float, float, float]]:
+               width: float, height: float, verge_m: float, row_offset_m: float,
+               rules: GridRules = SUBURBAN) -> list[tuple[float, float, float, float]]:
     """Trees of real sizes as (x, y, crown radius, height): rows of one kind along verges (trunks
-    `row_offset_m` from the kerb) and groups in yards and parks. Crowns may reach over roads and
-    neighbouring yards but never over a roof outline (the roof boxes given)."""
+    `row_offset_m` from the kerb) and groups in yards and parks, as often as the grid's `rules` say.
+    Crowns may reach over roads and neighbouring yards but never over a roof outline (the roof boxes
+    given)."""
     stand = _Stand(np.asarray(roofs, float).reshape(-1, 4), np.asarray(no_trunks, float).reshape(-1, 4),
                    width, height)
     for rect, sides in blocks:
         x0, y0, x1, y1 = rect
         for side in sorted(sides):
-            if rng.random() >= min(1.0, 0.25 + 0.9 * density):
+            if rng.random() >= min(1.0, rules.tree_rows[0] + rules.tree_rows[1] * density):
                 continue
             lo, hi = (x0, x1) if side in "SN" else (y0, y1)
             across = {"S": y0 + row_offset_m, "N": y1 - row_offset_m,
@@ -754,7 +888,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
                 pos += d0 * rng.uniform(0.9, 1.3)
     for (x0, y0, x1, y1), built in lots:
         area = (x1 - x0) * (y1 - y0)
-        groups = rng.poisson(density * area / (250.0 if built else 120.0))
+        groups = rng.poisson(rules.yard_trees * density * area / (250.0 if built else 120.0))
         for _ in range(groups):
             cx, cy = rng.uniform(x0, x1), rng.uniform(y0, y1)
             d0 = _diameter(rng)
@@ -767,3 +901,201 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
                         stand.add(rng, x, y, d)
                         break
     return stand.trees
+
+
+# ---------------------------------------------------------------- dense towns and through roads
+#
+# Places without a street grid: items are turned any way, and tested against the exact roof and road
+# outlines (`polygons.Occupancy`) rather than boxes.
+
+DENSE_M2_PER_TREE = 6.0  # of open ground (room for the smallest crown) per try at tree_density 1
+DENSE_CARS_PER_100M = 3.0  # cars parked per 100 m of lane at car_density 1
+DENSE_M2_PER_BUSH = 12.0  # of open ground per try at shrub_density 1
+
+
+def _lane_spot(rng: np.random.Generator, lane) -> tuple[float, float, float, float, float]:
+    """A random point on a lane's centre line, the unit normal towards a random side of it, and the
+    lane's direction in degrees."""
+    (ax, ay), (bx, by), _ = lane
+    length = math.hypot(bx - ax, by - ay)
+    dx, dy = (bx - ax) / length, (by - ay) / length
+    t, side = rng.uniform(0.0, length), (1.0 if rng.random() < 0.5 else -1.0)
+    return ax + dx * t, ay + dy * t, -side * dy, side * dx, math.degrees(math.atan2(dy, dx))
+
+
+def lane_cars(rng: np.random.Generator, density: float, lanes, window: Polygon, roofs: polygons.Occupancy,
+              taken: polygons.Occupancy) -> list[Car]:
+    """A few cars parked at the edges of a dense town's lanes, as far off the lane as the houses leave
+    room for (from beside the lane to on its edge), inside `window`, clear of roofs and of `taken`
+    (which gets them)."""
+    out = []
+    for lane in lanes:
+        (ax, ay), (bx, by), width = lane
+        for _ in range(rng.poisson(density * DENSE_CARS_PER_100M * math.hypot(bx - ax, by - ay) / 100.0)):
+            x, y, nx, ny, angle = _lane_spot(rng, lane)
+            car = _car(rng, x, y, angle + (180.0 if rng.random() < 0.5 else 0.0) + rng.uniform(-4.0, 4.0))
+            for shift in (1.2, 0.6, 0.0, -0.6, -1.1):  # the car's centre this far beyond the lane's edge
+                off = width / 2 + shift
+                moved = replace(car, x=_r(x + nx * off), y=_r(y + ny * off))
+                outline = moved.corners
+                if (polygons.inside(outline, window, 0.0) and roofs.clear(polygons.grown_box(outline, 0.3), 0.0)
+                        and taken.clear(polygons.grown_box(outline, 0.3), 0.0)):
+                    out.append(moved)
+                    taken.add(outline)
+                    break
+    return out
+
+
+def _crown_fits(x: float, y: float, r: float, xyr: np.ndarray, city: Rect, roofs: polygons.Occupancy) -> bool:
+    """Whether a crown stays in the city, clear of every roof, and apart from the crowns `xyr` (x, y, r)."""
+    inside = city[0] <= x - r and city[1] <= y - r and x + r <= city[2] and y + r <= city[3]
+    apart = not len(xyr) or np.all(np.hypot(xyr[:, 0] - x, xyr[:, 1] - y) >= 0.4 * (xyr[:, 2] + r))
+    return inside and apart and roofs.clear(polygons.disc(x, y, r + CLEARANCE_M), 0.0)
+
+
+class OpenGround:
+    """A raster of a dense town's ground in cells of `CELL_M`: which cell centres lie in its window, under
+    a roof or on a road, so tries are drawn where there is room (each try is then checked exactly)."""
+
+    CELL_M = 0.5
+
+    def __init__(self, window: Polygon, roofs: polygons.Occupancy, roads: polygons.Occupancy):
+        x0, y0, x1, y1 = _polygon_bbox(window)
+        c = self.CELL_M
+        self.xs = x0 + (np.arange(max(1, math.ceil((x1 - x0) / c))) + 0.5) * c
+        self.ys = y0 + (np.arange(max(1, math.ceil((y1 - y0) / c))) + 0.5) * c
+        self.inside = self._fill([window])
+        self.roofs = self._fill([p for p, box in roofs.items if _overlaps(box, (x0, y0, x1, y1), 8.0)])
+        self.roads = self._fill([p for p, box in roads.items if _overlaps(box, (x0, y0, x1, y1), 8.0)])
+
+    def _fill(self, outlines) -> np.ndarray:
+        """Cells whose centres lie inside any of the (counter-clockwise, convex) outlines."""
+        mask = np.zeros((len(self.ys), len(self.xs)), bool)
+        c = self.CELL_M
+        for outline in outlines:
+            x0, y0, x1, y1 = _polygon_bbox(outline)
+            i0, i1 = np.searchsorted(self.xs, (x0, x1))
+            j0, j1 = np.searchsorted(self.ys, (y0, y1))
+            if i0 >= i1 or j0 >= j1:
+                continue
+            gx, gy = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
+            inside = np.ones(gx.shape, bool)
+            for (ax, ay), (bx, by) in zip(outline, outline[1:] + outline[:1]):
+                inside &= (bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= -1e-9 * c
+            mask[j0:j1, i0:i1] |= inside
+        return mask
+
+    def _grown(self, mask: np.ndarray, reach: float) -> np.ndarray:
+        """Cells within `reach` of a set cell."""
+        out = mask.copy()
+        k = reach / self.CELL_M
+        n, (ny, nx) = math.ceil(k), mask.shape
+        for dy in range(-n, n + 1):
+            for dx in range(-n, n + 1):
+                if (dx or dy) and dx * dx + dy * dy <= k * k:
+                    out[max(dy, 0):ny + min(dy, 0), max(dx, 0):nx + min(dx, 0)] |= \
+                        mask[max(-dy, 0):ny - max(dy, 0), max(-dx, 0):nx - max(dx, 0)]
+        return out
+
+    def open(self, roof_gap: float, road_gap: float) -> np.ndarray:
+        """Flat indices of the cells in the window at least about `roof_gap` from roofs and `road_gap` from roads."""
+        return np.flatnonzero(self.inside & ~self._grown(self.roofs, roof_gap) & ~self._grown(self.roads, road_gap))
+
+    def spot(self, rng: np.random.Generator, cells: np.ndarray) -> tuple[float, float]:
+        """A random point in a random one of the cells."""
+        j, i = divmod(int(cells[rng.integers(len(cells))]), len(self.xs))
+        h = self.CELL_M / 2
+        return self.xs[i] + rng.uniform(-h, h), self.ys[j] + rng.uniform(-h, h)
+
+
+def gap_trees(rng: np.random.Generator, density: float, ground: OpenGround, window: Polygon, city: Rect,
+              roofs: polygons.Occupancy, roads: polygons.Occupancy) -> list[tuple[float, float, float, float]]:
+    """Real-sized trees of a dense town as (x, y, crown radius, height): in the gaps between its houses
+    and by its lanes, a crown too big for its gap tried smaller. Trunks stand inside `window` and off the
+    roads; crowns stay inside the city and clear of every roof, and may reach over lanes."""
+    cells = ground.open(TREE_DIAMETER_M[0] / 2, 0.5)
+    placed: list[tuple[float, float, float, float]] = []
+    xyr = np.zeros((0, 3))
+    for _ in range(rng.poisson(density * len(cells) * ground.CELL_M ** 2 / DENSE_M2_PER_TREE) if len(cells) else 0):
+        x, y = ground.spot(rng, cells)
+        trunk = _rect_polygon(x - 0.5, y - 0.5, x + 0.5, y + 0.5)
+        d0 = _diameter(rng)
+        if not (polygons.inside(((x, y),), window, 0.0) and roads.clear(trunk, 0.0)
+                and _crown_fits(x, y, TREE_DIAMETER_M[0] / 2, xyr, city, roofs)):
+            continue
+        d = next((d for d in (d0, 0.8 * d0, 0.64 * d0)
+                  if d > TREE_DIAMETER_M[0] and _crown_fits(x, y, d / 2, xyr, city, roofs)), TREE_DIAMETER_M[0])
+        placed.append((_r(x), _r(y), _r(d / 2), _r(_height(rng, d))))
+        xyr = np.vstack([xyr, (x, y, d / 2)])
+    return placed
+
+
+def gap_bushes(rng: np.random.Generator, density: float, ground: OpenGround, window: Polygon,
+               roofs: polygons.Occupancy, roads: polygons.Occupancy, taken: polygons.Occupancy) -> list[Shrub]:
+    """Bushes in the yards of a dense town: inside `window`, clear of roofs, roads and `taken` (which
+    gets them)."""
+    cells = ground.open(1.0, 1.0)
+    out = []
+    for _ in range(rng.poisson(density * len(cells) * ground.CELL_M ** 2 / DENSE_M2_PER_BUSH) if len(cells) else 0):
+        cx, cy = ground.spot(rng, cells)
+        size = rng.uniform(0.8, 2.2)
+        w = size * rng.uniform(0.8, 1.25)
+        rect = _rect_polygon(cx - w / 2, cy - size / 2, cx + w / 2, cy + size / 2)
+        height = rng.uniform(0.5, 1.8)
+        room = polygons.grown_box(rect, 0.3)
+        if (polygons.inside(rect, window, 0.0) and roofs.clear(room, 0.0) and roads.clear(room, 0.0)
+                and taken.clear(polygons.grown_box(rect, 0.1), 0.0)):
+            out.append(Shrub(rect, _r(height)))
+            taken.add(rect)
+    return out
+
+
+def _road_frame(polygon: Polygon) -> tuple[float, float, float, float, float, float, float]:
+    """(cx, cy, direction in degrees, along lo, along hi, across lo, across hi) of a straight road:
+    its long edges' direction, and its extents along and across it about the centroid."""
+    edges = list(zip(polygon, polygon[1:] + polygon[:1]))
+    (ax, ay), (bx, by) = max(edges, key=lambda e: math.dist(*e))
+    angle = math.atan2(by - ay, bx - ax)
+    dx, dy = math.cos(angle), math.sin(angle)
+    cx, cy = sum(p[0] for p in polygon) / len(polygon), sum(p[1] for p in polygon) / len(polygon)
+    along = [(x - cx) * dx + (y - cy) * dy for x, y in polygon]
+    across = [-(x - cx) * dy + (y - cy) * dx for x, y in polygon]
+    return cx, cy, math.degrees(angle), min(along), max(along), min(across), max(across)
+
+
+def _on_road(frame, along: float, across: float) -> tuple[float, float]:
+    """The world point `along` and `across` a road's `_road_frame`."""
+    cx, cy, angle = frame[:3]
+    dx, dy = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    return cx + along * dx - across * dy, cy + along * dy + across * dx
+
+
+def through_roads(rng: np.random.Generator, roads, all_roads: polygons.Occupancy,
+                  taken: polygons.Occupancy) -> tuple[list[Marking], list[Car]]:
+    """Markings and traffic of the straight through roads between city regions, given as (polygon,
+    marked, car density) triples: a dashed centre line on the marked ones and cars driving on both sides
+    (right-hand traffic), stopping short of the other roads in `all_roads` that meet them, the cars
+    clear of `taken` (which gets them)."""
+    markings, cars = [], []
+    for road, mark, density in roads:
+        frame = _road_frame(road)
+        _, _, angle, lo, hi, c_lo, c_hi = frame
+        centre = (c_lo + c_hi) / 2
+        if mark:
+            s = lo + 1.0
+            while s + DASH_M[0] <= hi - 1.0:
+                dash = polygons.oriented_rect(*_on_road(frame, s + DASH_M[0] / 2, centre), DASH_M[0], LINE_M, angle)
+                if polygons.inside(dash, road, 0.0) and all_roads.clear(polygons.grown_box(dash, 1.0), 0.0, skip=road):
+                    markings.append(Marking(polygons.rounded_polygon(dash)))
+                s += DASH_M[0] + DASH_M[1]
+        half = (c_hi - c_lo) / 4
+        for offset, heading in ((centre - half, angle), (centre + half, angle + 180.0)):
+            for _ in range(rng.poisson(density * TRAFFIC_PER_100M * (hi - lo) / 100.0)):
+                car = _car(rng, *_on_road(frame, rng.uniform(lo, hi), offset), heading + rng.uniform(-1.0, 1.0))
+                outline = car.corners
+                if (polygons.inside(outline, road, 0.0)
+                        and all_roads.clear(polygons.grown_box(outline, 1.0), 0.0, skip=road)
+                        and taken.clear(polygons.grown_box(outline, 0.5), 0.0)):
+                    cars.append(car)
+                    taken.add(outline)
+    return markings, cars

@@ -43,7 +43,23 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from . import polygons
-from .clutter import TREE_SIZES, Car, Marking, Paving, Pool, Shrub, generate_clutter, real_trees
+from .clutter import (
+    CUT_CORNERS,
+    GRID_RULES,
+    TREE_SIZES,
+    Car,
+    Marking,
+    OpenGround,
+    Paving,
+    Pool,
+    Shrub,
+    gap_bushes,
+    gap_trees,
+    generate_clutter,
+    lane_cars,
+    real_trees,
+    through_roads,
+)
 
 LAYOUT_VERSION = 1
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
@@ -212,7 +228,8 @@ class LayoutParams:
         industrial and office buildings; highrises and L/T footprints are
         always flat, which caps the share reachable (about 0.82 with the default mix).
     tree_density: street-tree probability per planting spot and yard trees
-        per lot area; scaled down in downtown, industrial and dense regions.
+        per lot area; scaled down in downtown, industrial and dense regions
+        (real trees: as each style's rules say, see `clutter.GridRules`).
     road_width_m: kerb-to-kerb width of ordinary streets; avenues are wider
         (grid styles; dense lanes have widths of their own).
     block_size_m: (min, max) side length of a block between streets (grid styles).
@@ -223,8 +240,8 @@ class LayoutParams:
 
     The knobs below add street details, clutter and real-sized trees (see
     ``sim/clutter.py``); at their defaults the city is today's, and `to_dict`
-    leaves them out. They are built in all-suburban cities (the street grid);
-    cities of other styles do not have them yet.
+    leaves them out. In a styled city each region gets them as its style has
+    them (`_styled_clutter`); a styled city without them stays as it was.
 
     tree_size: "small" (today's crowns of 1.2-4 m radius, scattered) or
         "real" (crown diameters 4-15 m, mostly 5-9 m, heights 5-20 m growing
@@ -1073,60 +1090,9 @@ class _Region:
     angle_deg: float  # direction of a dense region's long lanes
 
 
-class _Occupancy:
-    """Convex polygons hashed into square cells, to ask quickly whether a new one keeps clear of them."""
-
-    def __init__(self, polygons_: list[Polygon] = (), cell_m: float = 16.0):
-        self.cell_m = cell_m
-        self.items: list[tuple[Polygon, Rect]] = []
-        self.grid: dict[tuple[int, int], list[int]] = {}
-        for polygon in polygons_:
-            self.add(polygon)
-
-    def _keys(self, box: Rect):
-        x0, y0, x1, y1 = box
-        c = self.cell_m
-        return itertools.product(range(math.floor(x0 / c), math.floor(x1 / c) + 1),
-                                 range(math.floor(y0 / c), math.floor(y1 / c) + 1))
-
-    def add(self, polygon: Polygon) -> None:
-        box = polygon_bbox(polygon)
-        self.items.append((polygon, box))
-        for key in self._keys(box):
-            self.grid.setdefault(key, []).append(len(self.items) - 1)
-
-    def clear(self, polygon: Polygon, gap: float) -> bool:
-        """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching)."""
-        box = polygon_bbox(polygon)
-        seen = set()
-        for key in self._keys(box):
-            for i in self.grid.get(key, ()):
-                if i in seen:
-                    continue
-                seen.add(i)
-                other, (x0, y0, x1, y1) = self.items[i]
-                # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
-                if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
-                    continue
-                if not polygons.apart(polygon, other, gap):
-                    return False
-        return True
-
-
-def _rounded(points) -> Polygon:
-    out: list[Point] = []
-    for x, y in points:
-        p = (_r(x), _r(y))
-        if not out or p != out[-1]:
-            out.append(p)
-    while len(out) > 1 and out[0] == out[-1]:
-        out.pop()
-    return tuple(out)
-
-
 def _piece(polygon, window) -> Polygon | None:
     """The part of a convex polygon inside a convex window, rounded; None if (almost) nothing is left."""
-    piece = _rounded(polygons.clip(polygon, window))
+    piece = polygons.rounded_polygon(polygons.clip(polygon, window))
     return piece if len(piece) >= 3 and polygons.area(piece) > 1.0 else None
 
 
@@ -1164,7 +1130,7 @@ def _style_regions(rng: np.random.Generator, width: float, height: float,
     styles = [""] * len(cells)
     for k, middle in zip(order, middles):
         styles[k] = mix[min(int(np.searchsorted(edges, middle, side="right")), len(mix) - 1)][0]
-    regions = [_Region(style, _rounded(cell), _r(rng.uniform(0.0, 180.0)) if style == "dense" else 0.0)
+    regions = [_Region(style, polygons.rounded_polygon(cell), _r(rng.uniform(0.0, 180.0)) if style == "dense" else 0.0)
                for style, cell in zip(styles, cells)]
     roads = []
     for i, cell in enumerate(cells):
@@ -1246,7 +1212,7 @@ class _Placed:
 
 
 def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[tuple[Point, Point, float]],
-                     roads: _Occupancy, built: _Occupancy, density: float, width: float,
+                     roads: polygons.Occupancy, built: polygons.Occupancy, density: float, width: float,
                      height: float) -> list[_Placed]:
     """Packed houses of one dense region: rows along both sides of every lane, then infill behind them.
 
@@ -1334,7 +1300,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
     return placed
 
 
-def _dense_trees(rng: np.random.Generator, region: _Region, roads: _Occupancy, built: _Occupancy,
+def _dense_trees(rng: np.random.Generator, region: _Region, roads: polygons.Occupancy, built: polygons.Occupancy,
                  density: float, width: float, height: float) -> list[Tree]:
     """A few trees in the yards left between a dense region's houses, clear of roofs and roads."""
     window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
@@ -1368,7 +1334,7 @@ class _Frame:
         return wx, wy
 
     def polygon(self, polygon: Polygon) -> Polygon:
-        return _rounded(self.point(x, y) for x, y in polygon)
+        return polygons.rounded_polygon(self.point(x, y) for x, y in polygon)
 
     def sketch(self, sketch: _Sketch) -> _Sketch:
         """The sketch moved so its footprint's centre lands where the frame puts it, turned with the frame."""
@@ -1388,6 +1354,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     """
     road_rng, lot_rng, building_rng, roof_rng, tree_rng, region_rng = stage_generators(seed, 6)
     regions, roads = _style_regions(region_rng, width, height, params.style)
+    through = list(roads)
     grid_styles = [style for style, _ in params.style if style != "dense"]
     cells = {style: [r.cell for r in regions if r.style == style] for style in grid_styles}
     side = math.hypot(width, height)
@@ -1402,10 +1369,15 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
         return any(polygons.inside(polygon, c) for c in cells[style])
 
     blocks: dict[str, list[_Block]] = {}
+    streets: dict[str, list[Rect]] = {}  # each grid's streets that made it into the city, in its frame
     for style in grid_styles:
         blocks[style], grid_roads = _blocks_and_roads(road_rng, *extent[style], params)
-        roads += [Road(piece) for road in grid_roads for cell in cells[style]
-                  if (piece := _piece(world(style, road.polygon), cell))]
+        streets[style] = []
+        for road in grid_roads:
+            pieces = [Road(piece) for cell in cells[style] if (piece := _piece(world(style, road.polygon), cell))]
+            roads += pieces
+            if pieces:
+                streets[style].append(road.bbox)
     lanes = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
@@ -1413,11 +1385,12 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
             roads += lane_roads
     # Dirt first: where a track meets a paved street, the street is drawn over it.
     roads.sort(key=lambda road: road.surface != "dirt")
-    road_space = _Occupancy([road.polygon for road in roads])
+    road_space = polygons.Occupancy([road.polygon for road in roads])
 
     # A lot across a region's border keeps its part inside (most of it, or it is dropped).
-    plans, lot_styles, lots, first_block = [], [], [], 0
+    plans, lot_styles, lots, first_block, firsts = [], [], [], 0, {}
     for style in grid_styles:
+        firsts[style] = first_block
         for index, block in enumerate(blocks[style]):
             for plan in _plan_block(lot_rng, block, first_block + index, *extent[style], style):
                 outline = world(style, rect_polygon(*plan.rect))
@@ -1442,14 +1415,14 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     placed = [frames[lot_styles[s.lot_index]].sketch(s) if lot_styles[s.lot_index] in frames else s for s in local]
     kept = [i for i, sketch in enumerate(placed) if fits(sketch)]
     local, sketches = [local[i] for i in kept], [placed[i] for i in kept]
-    built = _Occupancy()
+    built = polygons.Occupancy()
     dense = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
             dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
                                         params.building_density, width, height)
             for house in dense[k]:
-                lots.append(Lot(_rounded(house.outline), -1))
+                lots.append(Lot(polygons.rounded_polygon(house.outline), -1))
                 sketches.append(_Sketch(len(lots) - 1, house.kind, house.footprint, "rect", house.height_m,
                                         house.rotation_deg, outline_placed=True))
     buildings = _roof_buildings(roof_rng, sketches, params.sloped_share)
@@ -1458,7 +1431,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     local_buildings = {s.lot_index: replace(b, footprint=s.footprint, rotation_deg=0.0)
                        for s, b in zip(local, buildings)}
     trees: list[Tree] = []
-    for style in grid_styles:
+    for style in grid_styles if params.tree_size == "small" else ():  # real trees come with the clutter
         density = params.tree_density * STYLE_TREES[style]
         planted = [tree for block in blocks[style] for tree in _street_trees(tree_rng, block, density)]
         for index, plan in enumerate(plans):
@@ -1472,11 +1445,159 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
             crown = rect_polygon(*tree.bbox)
             if inside_cells(style, crown) and road_space.clear(crown, 0.0):
                 trees.append(tree)
-    for k in dense:
+    for k in dense if params.tree_size == "small" else ():
         trees += _dense_trees(tree_rng, regions[k], road_space, built, params.tree_density * STYLE_TREES["dense"],
                               width, height)
+    details: dict[str, list] = {}
+    if params.clutter or params.tree_size == "real":
+        grids = {}
+        for style in grid_styles:
+            mine = [i for i, s in enumerate(lot_styles) if s == style]
+            renumber = {i: j for j, i in enumerate(mine)}
+            grids[style] = _Grid(
+                frames.get(style), cells[style], extent[style],
+                [(block.rect, block.road_sides) for block in blocks[style]], streets[style],
+                [(plans[i].rect, plans[i].block_index - firsts[style]) for i in mine],
+                [replace(b, lot_index=renumber[i]) for i, b in local_buildings.items() if i in renumber])
+        details, real = _styled_clutter(seed, params, width, height, regions, lanes, through, grids, road_space,
+                                        buildings)
+        trees += real
     return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
-                      tuple(trees))
+                      tuple(trees), **{name: tuple(items) for name, items in details.items()})
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """One street-grid style of a styled city, in its own frame (see `_Frame`), for its clutter."""
+
+    frame: _Frame | None  # None: the city's own frame (suburban)
+    cells: list[Polygon]  # the regions of the style, in the world
+    extent: tuple[float, float]  # of the frame
+    blocks: list[tuple[Rect, frozenset]]
+    streets: list[Rect]  # the streets that lie in the cells
+    lots: list[tuple[Rect, int]]  # (rect, index into blocks)
+    buildings: list[Building]  # unturned, lot_index into lots
+
+    def polygon(self, polygon: Polygon) -> Polygon:
+        return self.frame.polygon(polygon) if self.frame else polygon
+
+    def point(self, x: float, y: float) -> Point:
+        return self.frame.point(x, y) if self.frame else (x, y)
+
+    @property
+    def angle_deg(self) -> float:
+        return self.frame.angle_deg if self.frame else 0.0
+
+    def cut(self, polygon: Polygon) -> list[Polygon]:
+        """The pieces of a (small, convex) world polygon inside the cells."""
+        x0, y0, x1, y1 = polygon_bbox(polygon)
+        out = []
+        for cell in self.cells:
+            cx0, cy0, cx1, cy1 = polygon_bbox(cell)
+            if x1 <= cx0 or cx1 <= x0 or y1 <= cy0 or cy1 <= y0:
+                continue
+            if polygons.inside(polygon, cell, 0.0):
+                return [polygon]
+            piece = polygons.rounded_polygon(polygons.clip(polygon, cell))
+            if CUT_CORNERS[0] <= len(piece) <= CUT_CORNERS[1] and polygons.area(piece) > 0.05:
+                out.append(piece)
+        return out
+
+    def holds(self, polygon: Polygon) -> bool:
+        return any(polygons.inside(polygon, cell, 0.0) for cell in self.cells)
+
+
+CLUTTER_STREAM = 18  # after the seed in the clutter streams of styled cities: [seed, 18, part, index, what]
+
+
+def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float, regions: list[_Region],
+                    lanes: dict, through: list[Road], grids: dict[str, _Grid], road_space: polygons.Occupancy,
+                    buildings: list[Building]) -> tuple[dict[str, list], list[Tree]]:
+    """Street details, clutter and real trees of a styled city, region by region as its style has them.
+
+    Each grid style's are made in its own frame by `clutter.generate_clutter` and `clutter.real_trees`
+    with the style's `GRID_RULES`, then moved into the world and kept inside the style's regions (pavings
+    and markings cut at their borders); dense towns get cars by their lanes, trees in the gaps between
+    houses and bushes in the yards; the through roads between regions get centre lines and traffic. Every
+    part draws from a generator of its own (`CLUTTER_STREAM`), so the city's stages keep their draws and
+    a styled city without clutter stays as it was.
+    """
+    def rng(*part: int) -> np.random.Generator:
+        return np.random.default_rng([seed, CLUTTER_STREAM, *part])
+
+    city = (0.0, 0.0, width, height)
+    roofs = polygons.Occupancy([b.roof_outline for b in buildings])
+    borders = polygons.Occupancy([road.polygon for road in through])
+    taken = polygons.Occupancy()  # vehicles and bushes placed so far, in the world
+    out: dict[str, list] = {name: [] for name in _DETAILS}
+    trees: list[Tree] = []
+
+    def plant(x: float, y: float, radius: float, height_m: float, window) -> None:
+        """A real tree if its trunk stands in the window and off the roads and its crown in the city,
+        clear of roofs; its trunk is taken (bushes and cars placed later keep off it)."""
+        trunk = rect_polygon(x - 0.5, y - 0.5, x + 0.5, y + 0.5)
+        if (window((x, y)) and radius <= x <= width - radius and radius <= y <= height - radius
+                and road_space.clear(trunk, 0.0) and roofs.clear(polygons.disc(x, y, radius + TREE_CLEARANCE_M), 0.0)):
+            trees.append(Tree(_r(x), _r(y), radius, height_m))
+            taken.add(trunk)
+
+    for style, grid in grids.items():
+        part, rules = STYLES.index(style), GRID_RULES[style]
+        clutter = generate_clutter(rng(0, part, 0), params, grid.blocks, grid.lots, grid.buildings, grid.streets,
+                                   VERGE_M, params.road_width_m, rules) if params.clutter else None
+        if clutter:
+            for paving in clutter.pavings:
+                out["pavings"] += [Paving(piece, paving.kind) for piece in grid.cut(grid.polygon(paving.polygon))]
+            for marking in clutter.markings:  # not over the through roads the grid's streets run into
+                out["markings"] += [Marking(piece) for piece in grid.cut(grid.polygon(marking.polygon))
+                                    if borders.clear(piece, 0.0)]
+            for car in clutter.cars:
+                x, y = grid.point(car.x, car.y)
+                moved = replace(car, x=_r(x), y=_r(y), heading_deg=_r((car.heading_deg + grid.angle_deg) % 360.0))
+                if grid.holds(moved.corners) and borders.clear(polygons.grown_box(moved.corners, 0.3), 0.0):
+                    out["cars"].append(moved)
+                    taken.add(moved.corners)
+            out["pools"] += [pool for pool in clutter.pools if grid.holds(pool.polygon)]
+            out["shrubs"] += [shrub for shrub in clutter.shrubs
+                              if grid.holds(shrub.polygon) and borders.clear(shrub.polygon, 0.0)]
+        if params.tree_size == "real":
+            # Street trees stand in the planting strip between kerb and sidewalk when there are sidewalks.
+            row_offset = 1.6 if params.street_details else VERGE_M / 2
+            built = {b.lot_index for b in grid.buildings}
+            yards = [(rect, index in built) for index, (rect, _) in enumerate(grid.lots)]
+            for x, y, radius, height_m in real_trees(
+                    rng(0, part, 1), params.tree_density, grid.blocks, yards, [b.bbox for b in grid.buildings],
+                    clutter.no_trunks if clutter else (), *grid.extent, VERGE_M, row_offset, rules):
+                plant(*grid.point(x, y), radius, height_m, lambda p, grid=grid: grid.holds((p,)))
+    for k, region in enumerate(regions):
+        if region.style != "dense":
+            continue
+        window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
+        # Trees, bushes, cars: each keeps off those before it, so more cars move no tree or bush.
+        ground = OpenGround(window, roofs, road_space)
+        if params.tree_size == "real":
+            for x, y, radius, height_m in gap_trees(rng(1, k, 1), params.tree_density, ground, window, city,
+                                                    roofs, road_space):
+                plant(x, y, radius, height_m, lambda p, window=window: polygons.inside((p,), window, 0.0))
+        if params.shrub_density > 0:
+            out["shrubs"] += gap_bushes(rng(1, k, 2), params.shrub_density, ground, window, roofs, road_space,
+                                        taken)
+        if params.car_density > 0:
+            out["cars"] += lane_cars(rng(1, k, 0), params.car_density, lanes[k], window, roofs, taken)
+    if through and (params.street_details or params.car_density > 0):
+        dense_cells = [region.cell for region in regions if region.style == "dense"]
+        plan = [(road.polygon,
+                 params.street_details and road.surface == "asphalt" and not _between(road.polygon, dense_cells),
+                 params.car_density * (0.5 if road.surface == "dirt" else 1.0)) for road in through]
+        markings, cars = through_roads(rng(2, 0, 0), plan, road_space, taken)
+        out["markings"] += markings
+        out["cars"] += cars
+    return {name: items for name, items in out.items() if items}, trees
+
+
+def _between(polygon: Polygon, cells: list[Polygon]) -> bool:
+    """Whether a through road runs between two of the cells (it lies on their shared border)."""
+    return sum(not polygons.apart(polygon, cell, 0.0) for cell in cells) >= 2
 
 
 # ---------------------------------------------------------------- entry points

@@ -185,13 +185,15 @@ def road_mesh(roads, z: float = 0.03, repeat_m: float = 1.0) -> MeshArrays:
     return mesh
 
 
-def lot_mesh(lots, z: float = 0.015) -> MeshArrays:
-    """Paved lots (parking, yards) a little above the ground and below the roads."""
+def lot_mesh(lots, z: float = 0.015, repeat_m: float = 1.0) -> MeshArrays:
+    """Paved lots (parking, yards) a little above the ground and below the roads; UVs in metres over
+    ``repeat_m``."""
     mesh = MeshArrays("paved")
     background = label_color(0, 0)
     for lot in lots:
         pts = _ccw([tuple(p) for p in lot.polygon])
-        mesh.add([(x, y, z) for x, y in pts], 0, pts, background)
+        uv = pts if repeat_m == 1.0 else [(x / repeat_m, y / repeat_m) for x, y in pts]
+        mesh.add([(x, y, z) for x, y in pts], 0, uv, background)
     return mesh
 
 
@@ -234,6 +236,7 @@ def tree_mesh(trees, segments: int = 10) -> MeshArrays:
 
 CONCRETE, ASPHALT, PAINT, WATER, COPING, YARD = range(6)  # material slots of ``detail_mesh``
 GLASS = len(CAR_COLOURS)  # material slot of car windows; slots before it are the colours of CAR_COLOURS
+TRUCK_HEIGHT_M = 3.9  # the top of a truck's trailer
 
 
 def _item_rng(*values: float) -> np.random.Generator:
@@ -367,8 +370,9 @@ def shrub_mesh(shrubs) -> MeshArrays:
 
 
 def car_mesh(cars) -> MeshArrays:
-    """Each car a box in its body colour with a dark windscreen and rear window on top. Material
-    slot = the colour's index in CAR_COLOURS; windows use slot GLASS."""
+    """Each car a box in its body colour with a dark windscreen and rear window on top; a truck a tall
+    box (its trailer or load) behind a lower cab with a windscreen. Material slot = the colour's index
+    in CAR_COLOURS; windows use slot GLASS."""
     mesh = MeshArrays("cars")
     background = label_color(0, 0)
     colours = list(CAR_COLOURS)
@@ -384,6 +388,13 @@ def car_mesh(cars) -> MeshArrays:
 
         def uv(x, y):
             return (x, y)
+        if c.kind == "truck":
+            cab = min(2.4, 0.3 * L)
+            _box(mesh, outline(-L / 2, L / 2 - cab - 0.3, W / 2), 0.9, TRUCK_HEIGHT_M, slot, uv, background, floor=True)
+            _box(mesh, outline(L / 2 - cab, L / 2, W / 2), 0.5, 2.9, slot, uv, background, floor=True)
+            front = L / 2 - 0.25 * cab
+            mesh.add([(*p, 2.91) for p in outline(front - 0.5, front, 0.44 * W)], GLASS, [(0, 0)] * 4, background)
+            continue
         _box(mesh, outline(-L / 2, L / 2, W / 2), 0.25, 1.4, slot, uv, background, floor=True)
         # Windscreen and rear window as dark panes on the roof: one closed box per car keeps shadows cheap.
         for back, front in ((0.05 * L, 0.22 * L), (-0.32 * L, -0.24 * L)):
@@ -397,27 +408,32 @@ def detail_mesh(pavings, pools, markings, paint_z: float) -> MeshArrays:
     mesh = MeshArrays("details")
     background = label_color(0, 0)
 
-    def quad(rect, z, slot, repeat):
-        x0, y0, x1, y1 = rect
-        pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    def flat(polygon, z, slot, repeat):
+        pts = [tuple(p) for p in polygon]
         mesh.add([(x, y, z) for x, y in pts], slot, [(x / repeat, y / repeat) for x, y in pts], background)
+
+    def rect(box):
+        x0, y0, x1, y1 = box
+        return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
 
     z_of = {"yard": 0.01, "sidewalk": 0.015, "kerb": 0.018, "parking": 0.015, "driveway": 0.021}
     for p in pavings:
         slot = {"parking": ASPHALT, "yard": YARD}.get(p.kind, CONCRETE)
-        x0, y0, x1, y1 = p.bbox
         # Strips along y cross those along x at block corners: a millimetre apart, never coplanar (a path
-        # tracer's shadow rays would hit the twin face and paint the overlap black).
-        lift = 0.001 if p.kind in ("sidewalk", "kerb") and y1 - y0 > x1 - x0 else 0.0
-        quad(p.bbox, z_of[p.kind] + lift, slot,
+        # tracer's shadow rays would hit the twin face and paint the overlap black). A strip's direction
+        # is its longest edge's (a turned grid's strips are turned).
+        (ax, ay), (bx, by) = max(zip(p.polygon, p.polygon[1:] + p.polygon[:1]), key=lambda e: math.dist(*e))
+        along_y = 45.0 <= math.degrees(math.atan2(by - ay, bx - ax)) % 180.0 < 135.0
+        lift = 0.001 if p.kind in ("sidewalk", "kerb") and along_y else 0.0
+        flat(p.polygon, z_of[p.kind] + lift, slot,
              surfaces.ASPHALT_REPEAT_M if slot == ASPHALT else surfaces.CONCRETE_REPEAT_M)
     for pool in pools:
         x0, y0, x1, y1 = pool.bbox
         c = pool.coping_m
-        quad((x0, y0, x1, y1), 0.03, COPING, surfaces.CONCRETE_REPEAT_M)
-        quad((x0 + c, y0 + c, x1 - c, y1 - c), 0.035, WATER, surfaces.WATER_REPEAT_M)
+        flat(rect((x0, y0, x1, y1)), 0.03, COPING, surfaces.CONCRETE_REPEAT_M)
+        flat(rect((x0 + c, y0 + c, x1 - c, y1 - c)), 0.035, WATER, surfaces.WATER_REPEAT_M)
     for m in markings:
-        quad(m.bbox, paint_z, PAINT, 1.0)
+        flat(m.polygon, paint_z, PAINT, 1.0)
     return mesh
 
 

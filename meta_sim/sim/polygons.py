@@ -1,4 +1,5 @@
-"""Plane geometry of convex polygons for the city layout: rotation, clipping and overlap tests.
+"""Plane geometry of convex polygons for the city layout: rotation, clipping, overlap tests and
+an occupancy grid.
 
 Pure Python (polygons here have a handful of vertices, where numpy's call overhead dominates).
 Polygons are sequences of (x, y) vertices, counter-clockwise.
@@ -6,6 +7,7 @@ Polygons are sequences of (x, y) vertices, counter-clockwise.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 Point = tuple[float, float]
@@ -146,3 +148,76 @@ def strip(x0: float, y0: float, x1: float, y1: float, width: float, extend: floa
     nx, ny = -dy * width / 2.0, dx * width / 2.0
     ax, ay, bx, by = x0 - dx * extend, y0 - dy * extend, x1 + dx * extend, y1 + dy * extend
     return ((ax - nx, ay - ny), (bx - nx, by - ny), (bx + nx, by + ny), (ax + nx, ay + ny))
+
+
+def disc(x: float, y: float, r: float, sides: int = 12) -> tuple[Point, ...]:
+    """A regular polygon holding the disc of radius r about (x, y) (its edges touch the circle)."""
+    R = r / math.cos(math.pi / sides)
+    return tuple((x + R * math.cos(2 * math.pi * k / sides), y + R * math.sin(2 * math.pi * k / sides))
+                 for k in range(sides))
+
+
+def grown_box(points, margin: float) -> tuple[Point, ...]:
+    """The bounding box of the points grown by ``margin``, as a polygon (what `Occupancy` asks with
+    to keep a clearance)."""
+    x0, y0, x1, y1 = bbox(points)
+    return ((x0 - margin, y0 - margin), (x1 + margin, y0 - margin), (x1 + margin, y1 + margin),
+            (x0 - margin, y1 + margin))
+
+
+class Occupancy:
+    """Convex polygons hashed into square cells, to ask quickly whether a new one keeps clear of them."""
+
+    def __init__(self, polygons_: list = (), cell_m: float = 16.0):
+        self.cell_m = cell_m
+        self.items: list[tuple[tuple[Point, ...], tuple[float, float, float, float]]] = []
+        self.grid: dict[tuple[int, int], list[int]] = {}
+        for polygon in polygons_:
+            self.add(polygon)
+
+    def _keys(self, box):
+        x0, y0, x1, y1 = box
+        c = self.cell_m
+        return itertools.product(range(math.floor(x0 / c), math.floor(x1 / c) + 1),
+                                 range(math.floor(y0 / c), math.floor(y1 / c) + 1))
+
+    def add(self, polygon) -> None:
+        box = bbox(polygon)
+        self.items.append((polygon, box))
+        for key in self._keys(box):
+            self.grid.setdefault(key, []).append(len(self.items) - 1)
+
+    def clear(self, polygon, gap: float, skip=None) -> bool:
+        """Whether the polygon keeps at least ``gap`` from every stored one (a negative gap allows touching)
+        but ``skip`` (a stored polygon itself, say the road a marking lies on).
+
+        Only polygons filed in the cells under the polygon's box are looked at: to keep a positive gap
+        from all of them, ask with the polygon grown by it and a gap of zero."""
+        box = bbox(polygon)
+        seen = set()
+        for key in self._keys(box):
+            for i in self.grid.get(key, ()):
+                if i in seen:
+                    continue
+                seen.add(i)
+                other, (x0, y0, x1, y1) = self.items[i]
+                if other is skip:
+                    continue
+                # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
+                if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
+                    continue
+                if not apart(polygon, other, gap):
+                    return False
+        return True
+
+
+def rounded_polygon(points) -> tuple[Point, ...]:
+    """The points rounded to 0.1 mm, without repeated neighbours (a clipped polygon's seams)."""
+    out: list[Point] = []
+    for x, y in points:
+        p = (rounded(x), rounded(y))
+        if not out or p != out[-1]:
+            out.append(p)
+    while len(out) > 1 and out[0] == out[-1]:
+        out.pop()
+    return tuple(out)

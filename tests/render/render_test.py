@@ -684,3 +684,78 @@ def test_roof_furniture_keeps_the_labels_and_shows_on_the_roofs(space, bank, tmp
     assert (pieces <= (on.instance > 0)).all()  # every piece stands on a roof
     roofs = on.instance > 0
     assert 0.03 < changed[roofs].mean() < 0.6  # furniture covers parts of the roofs, not whole roofs
+
+
+def _styled_render(space, bank, out, name, layout, extra=(), design=None, seed=2):
+    """One full-size tile of a styled city; `extra` parameters are added to the space."""
+    from dataclasses import replace
+
+    styled = DesignSpace.from_dict({**space.to_dict(), "name": name, "parameters": [
+        *space.to_dict()["parameters"], *extra]}) if extra else space
+    styled = replace(styled, layout=layout)
+    settings = RenderSettings(space=styled, banks=[bank], preset=get_preset("fast"), out_dir=out, n_tiles=1,
+                              tile_px=384, pixel_size_m=0.3)
+    job = single_job(styled, styled.validate({**_design(space, 5, 9), **(design or {})}), seed)
+    render_jobs([job], settings)
+    return tiles.read_tile(out / f"{job.name}_t00.exr")
+
+
+CLUTTER_KNOBS = {"tree_size": "real", "street_details": True, "car_density": 0.8, "pool_share": 1.0,
+                 "shrub_density": 0.8}
+
+
+def test_a_dense_town_with_clutter_keeps_its_labels_and_greenness_tints_the_tree_crowns(space, bank, tmp_path):
+    green = {"name": "greenness", "type": "continuous", "appearance": "greenness", "low": 0.0, "high": 1.0}
+    layout = {"style": "dense", **CLUTTER_KNOBS}
+    lush, dry = (_styled_render(space, bank, tmp_path / str(g), "dense-clutter", layout, [green], {"greenness": g})
+                 for g in (1.0, 0.0))
+    bare = _styled_render(space, bank, tmp_path / "bare", "dense-bare", {"style": "dense"})
+    for tile in (lush, dry):
+        assert np.array_equal(tile.instance, bare.instance) and np.array_equal(tile.roof_class, bare.roof_class)
+    layout_, (rect,) = layout_for_tiles(2, 1, 115.2, LayoutParams(style="dense", **CLUTTER_KNOBS))
+    crowns = _erode(_rasterise_polygons([polygons_disc(t) for t in layout_.trees], rect, 384, 0.3), 2)
+    crowns &= ~_paint(layout_, layout_.cars, rect, 384, 0.3) & (bare.instance == 0)
+    assert crowns.sum() > 300
+
+    def redness(tile):
+        r, g, _ = np.median(tile.rgb[crowns], axis=0)
+        return r / g
+    assert redness(dry) > 1.5 * redness(lush)  # dry-season crowns turn olive and brown, as the lawn does
+    assert not np.array_equal(lush.rgb, bare.rgb)
+
+
+def polygons_disc(tree):
+    from meta_sim.sim import polygons
+
+    return polygons.disc(tree.x, tree.y, tree.radius_m)
+
+
+def test_downtown_with_clutter_keeps_its_labels_and_shows_markings_cars_and_street_trees(space, bank, tmp_path):
+    layout = {"style": "downtown", **CLUTTER_KNOBS}
+    on = _styled_render(space, bank, tmp_path / "on", "downtown-clutter", layout)
+    bare = _styled_render(space, bank, tmp_path / "bare", "downtown-bare", {"style": "downtown"})
+    assert np.array_equal(on.instance, bare.instance) and np.array_equal(on.roof_class, bare.roof_class)
+    layout_, (rect,) = layout_for_tiles(2, 1, 115.2, LayoutParams(style="downtown", **CLUTTER_KNOBS))
+    assert len(layout_.cars) > 25 and len(layout_.trees) > 20
+    above = [*layout_.cars, *layout_.trees]
+    lines = _erode(_rasterise_polygons([m.polygon for m in layout_.markings], rect, 384, 0.3), 0)
+    lines &= ~_paint(layout_, above, rect, 384, 0.3)
+    road = _rasterise_polygons([r.polygon for r in layout_.roads], rect, 384, 0.3)
+    road &= ~_paint(layout_, [*above, *layout_.markings], rect, 384, 0.3)
+    assert lines.sum() > 100 and road.sum() > 1000
+    luminance = linear_luma(on.rgb)
+    assert np.median(luminance[lines]) > 2.5 * np.median(luminance[road])
+
+
+def test_the_scene_of_a_styled_clutter_city_builds_only_what_the_tiles_see():
+    from meta_sim.blender.scene import CityScene
+
+    layout, rects = layout_for_tiles(SEED, 9, 115.2, LayoutParams(style={"dense": 0.5, "downtown": 0.5},
+                                                                  **CLUTTER_KNOBS))
+    scene = CityScene(layout, [rects[4]], pixel_size_m=1.2, shadow_margin_m=20.0)
+    try:
+        assert 0 < scene.n_trees < len(layout.trees) / 2
+        for name in ("cars", "pavings", "markings", "shrubs"):
+            assert 0 < scene.n_details[name] < len(getattr(layout, name)) / 2, name
+    finally:
+        scene.close()

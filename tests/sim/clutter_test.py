@@ -1,13 +1,15 @@
 """Street details, clutter and real-sized trees: placement rules, streams, JSON, validation."""
 
+import hashlib
 import json
 import math
 
 import numpy as np
 import pytest
+from toys import distance_to_polygon
 
 from meta_sim.core.errors import MetaSimError
-from meta_sim.sim import meshes, surfaces
+from meta_sim.sim import meshes, polygons, surfaces
 from meta_sim.sim.clutter import CAR_COLOURS
 from meta_sim.sim.layout import VERGE_M, CityLayout, LayoutParams, generate_layout
 
@@ -59,6 +61,21 @@ def test_same_seed_same_clutter_and_the_first_stages_are_untouched(city):
     # Small trees with clutter: today's trees, untouched by the clutter stream.
     small = generate_layout(7, 700.0, 600.0, LayoutParams(street_details=True, car_density=0.5))
     assert small.trees == base.trees and small.cars
+
+
+# sha256 of suburban layouts with clutter, taken before clutter came to styled cities: those must not move.
+CLUTTER_HASHES = [
+    ((7, 700.0, 600.0), ALL_ON, "6adca8e718319f36741fd110e7666de3aad45b44e3e61fcefe1f81cd883aae34"),
+    ((1, 345.6, 345.6), ALL_ON, "b3b196a4e32cb50c971fe7d63ce267076a1a22a8e7733ee74ca02087e94c8365"),
+    ((1, 345.6, 345.6), LayoutParams(street_details=True, car_density=0.4),
+     "a51a11ad6888658c72fc5243d5179dacb56cf52e9f92b104cd4b5d924a3f1c71"),
+]
+
+
+@pytest.mark.parametrize("size,params,digest", CLUTTER_HASHES)
+def test_suburban_clutter_is_byte_identical_to_before_styled_clutter(size, params, digest):
+    text = json.dumps(generate_layout(*size, params).to_dict(), sort_keys=True)
+    assert hashlib.sha256(text.encode()).hexdigest() == digest
 
 
 def test_every_kind_of_item_is_there(city):
@@ -237,3 +254,188 @@ def test_a_sixth_stage_stream_leaves_the_first_five_as_they_were():
 
     five = [g.random(4).tolist() for g in stage_generators(11, 5)]
     assert [g.random(4).tolist() for g in stage_generators(11, 6)][:5] == five
+
+
+# --- clutter in styled cities ----------------------------------------------------------------------
+
+KNOBS = {k: v for k, v in ALL_ON.to_dict().items() if k in ("tree_size", "street_details", "car_density",
+                                                             "pool_share", "shrub_density")}
+MIX = {"suburban": 0.3, "dense": 0.3, "downtown": 0.2, "industrial": 0.2}
+STYLED = {"dense": (3, 345.6, 345.6, "dense"), "downtown": (2, 400.0, 300.0, "downtown"),
+          "industrial": (4, 400.0, 300.0, "industrial"), "mixed": (5, 700.0, 600.0, MIX)}
+
+
+@pytest.fixture(scope="module")
+def styled():
+    """name -> (city with everything on, the same city bare)"""
+    return {name: (generate_layout(seed, w, h, LayoutParams(style=style, **KNOBS)),
+                   generate_layout(seed, w, h, LayoutParams(style=style)))
+            for name, (seed, w, h, style) in STYLED.items()}
+
+
+def _near_pairs(items_a, items_b, margin=0.0):
+    return zip(*np.nonzero(_overlap(_boxes(items_a), _boxes(items_b), margin)))
+
+
+def _outline(item):
+    return item.corners if hasattr(item, "corners") else item.polygon
+
+
+@pytest.mark.parametrize("name", sorted(STYLED))
+def test_styled_clutter_keeps_the_bare_city_and_is_deterministic(styled, name):
+    city, bare = styled[name]
+    assert city.roads == bare.roads and city.lots == bare.lots and city.buildings == bare.buildings
+    seed, w, h, style = STYLED[name]
+    assert generate_layout(seed, w, h, LayoutParams(style=style, **KNOBS)) == city
+    assert CityLayout.from_dict(json.loads(json.dumps(city.to_dict()))) == city
+
+
+@pytest.mark.parametrize("name", sorted(STYLED))
+def test_styled_clutter_never_overlaps_a_building(styled, name):
+    city, _ = styled[name]
+    roofs = city.buildings
+    flat = [p for p in city.pavings if p.kind != "yard"] + list(city.markings) + list(city.pools)
+    for items in (flat, city.shrubs, city.cars):
+        for i, j in _near_pairs(items, roofs):
+            shared = polygons.overlap_area(_ccw(_outline(items[i])), roofs[j].roof_outline)
+            assert shared < 1e-6, (items[i], roofs[j])
+    for i, j in _near_pairs(city.trees, roofs):
+        t = city.trees[i]
+        assert distance_to_polygon(t.x, t.y, roofs[j].roof_outline) >= t.radius_m - TOL, (t, roofs[j])
+    for t in city.trees:  # trunks off the roads, crowns in the city
+        assert all(distance_to_polygon(t.x, t.y, city.roads[j].polygon) > 0.0
+                   for j in np.flatnonzero(_overlap(_boxes([t]), _boxes(city.roads))[0])), t
+        assert t.radius_m - TOL <= t.x <= city.width_m - t.radius_m + TOL
+        assert t.radius_m - TOL <= t.y <= city.height_m - t.radius_m + TOL
+    cars = city.cars
+    for i, j in _near_pairs(cars, cars):
+        if i < j:
+            assert polygons.overlap_area(cars[i].corners, cars[j].corners) < 1e-3, (cars[i], cars[j])
+
+
+def _ccw(polygon):
+    return polygon if polygons.area(polygon) > 0 else tuple(reversed(polygon))
+
+
+def _share_near_roads(city, items, reach):
+    roads = city.roads
+    near = _overlap(_boxes(items), _boxes(roads), reach)
+    return np.mean([any(distance_to_polygon(it.x, it.y, roads[j].polygon) < reach for j in np.flatnonzero(row))
+                    for it, row in zip(items, near)])
+
+
+def test_a_dense_town_gets_real_trees_in_its_gaps_few_cars_and_bushes_but_no_streets(styled):
+    city, bare = styled["dense"]
+    diameters = np.array([2 * t.radius_m for t in city.trees])
+    assert len(city.trees) > 100 and diameters.min() >= 4.0 - TOL and diameters.max() <= 15.0 + TOL
+    assert np.median(diameters) < 9.0 and diameters.max() > 8.0
+    assert 10 < len(city.cars) < 0.1 * len(city.buildings) and {c.kind for c in city.cars} == {"car"}
+    assert _share_near_roads(city, city.cars, 2.5) == 1.0  # parked by the lanes
+    assert len(city.shrubs) > 30 and not city.pools
+    assert not city.pavings and not city.markings  # tracks and lanes without kerbs or paint
+
+
+def test_downtown_gets_sidewalks_street_trees_busy_streets_and_parking_lots(styled):
+    city, _ = styled["downtown"]
+    kinds = {p.kind for p in city.pavings}
+    assert {"kerb", "sidewalk", "parking", "driveway"} <= kinds and "yard" not in kinds  # the lots are paved
+    area = city.width_m * city.height_m / 1e4
+    suburb = generate_layout(2, 400.0, 300.0, ALL_ON)
+    assert len(city.cars) > 1.5 * len(suburb.cars) and len(city.markings) > 2 * len(suburb.markings)
+    assert len(city.cars) / area > 30
+    assert not city.pools and not city.shrubs
+    assert _share_near_roads(city, city.trees, VERGE_M) > 0.9  # in rows along the streets
+    sidewalks = [p for p in city.pavings if p.kind == "sidewalk"]
+    assert np.median([polygons.area(p.polygon) / max(math.dist(*e) for e in zip(p.polygon, p.polygon[1:]))
+                      for p in sidewalks]) > 4.0  # kerb to lot, no planting strip
+    assert any(len(p.polygon) != 4 for p in city.pavings)  # cut at the border between its regions
+
+
+def test_industrial_gets_trucks_and_few_trees(styled):
+    city, _ = styled["industrial"]
+    trucks = [c for c in city.cars if c.kind == "truck"]
+    assert len(trucks) > 20 and all(7.0 - TOL <= t.length_m <= 16.5 + TOL for t in trucks)
+    assert not city.pools and not city.shrubs and city.markings
+    downtown, _ = styled["downtown"]
+    assert len(city.trees) < 0.5 * len(downtown.trees)
+
+
+def test_a_mixed_city_furnishes_each_region_by_its_style(styled):
+    city, bare = styled["mixed"]
+    assert city.pools and any(c.kind == "truck" for c in city.cars)
+    assert {"kerb", "sidewalk", "parking", "driveway", "yard"} <= {p.kind for p in city.pavings}
+    # Pools in suburban back yards only: on a lot of the street grid, next to a house.
+    houses = [b for b in city.buildings if b.kind == "residential" and city.lots[b.lot_index].block_index >= 0]
+    for pool in city.pools:
+        x0, y0, x1, y1 = pool.bbox
+        assert any(polygons.inside(pool.polygon, city.lots[b.lot_index].polygon, TOL) for b in houses), pool
+    # The through roads between regions have centre lines: markings that run along no axis.
+    turned = [m for m in city.markings if len({round(x, 2) for x, _ in m.polygon}) > 2]
+    assert len(turned) > 50
+
+
+def test_each_knob_moves_only_its_own_items_in_a_styled_city(styled):
+    city, bare = styled["mixed"]
+    seed, w, h, style = STYLED["mixed"]
+
+    def with_(**changes):
+        return generate_layout(seed, w, h, LayoutParams(style=style, **{**KNOBS, **changes}))
+    busier = with_(car_density=1.0)
+    assert len(busier.cars) > len(city.cars)
+    for name in ("pavings", "markings", "pools", "shrubs", "trees"):
+        assert getattr(busier, name) == getattr(city, name), name
+    assert not with_(car_density=0.0).cars and not with_(shrub_density=0.0).shrubs
+    assert not with_(pool_share=0.0).pools
+    plain = with_(street_details=False)
+    assert not plain.pavings and not plain.markings and plain.cars
+    assert with_(tree_size="small").trees == bare.trees  # small trees with clutter: the bare city's
+    real_only = generate_layout(seed, w, h, LayoutParams(style=style, tree_size="real"))
+    assert real_only.trees and not any(getattr(real_only, name) for name in ("pavings", "markings", "cars",
+                                                                            "pools", "shrubs"))
+
+
+def test_cut_pavings_and_trucks_round_trip_and_damage_is_rejected(styled):
+    city, _ = styled["mixed"]
+    data = json.loads(json.dumps(city.to_dict()))
+    assert any(c.get("kind") == "truck" for c in data["cars"]) and any("kind" not in c for c in data["cars"])
+    broken = json.loads(json.dumps(data))
+    broken["cars"][0]["kind"] = "tank"
+    with pytest.raises(MetaSimError, match="vehicle kind"):
+        CityLayout.from_dict(broken)
+    broken = json.loads(json.dumps(data))
+    broken["pavings"][0]["polygon"] = [[i, i * i] for i in range(9)]
+    with pytest.raises(MetaSimError, match="three to eight"):
+        CityLayout.from_dict(broken)
+
+
+def test_meshes_of_turned_pavings_and_trucks(styled):
+    city, _ = styled["mixed"]
+    turned = [p for p in city.pavings if len({round(x, 2) for x, _ in p.polygon}) > 2][:20]
+    arrays = meshes.detail_mesh(turned, (), (), 0.05).arrays()
+    assert np.allclose(arrays["vertices"][:, :2], [pt for p in turned for pt in p.polygon], atol=1e-3)
+    trucks = [c for c in city.cars if c.kind == "truck"][:5]
+    data = meshes.car_mesh(trucks).arrays()
+    assert np.all(data["label"] == np.asarray(meshes.label_color(0, 0), np.float32))
+    assert abs(data["vertices"][:, 2].max() - meshes.TRUCK_HEIGHT_M) < 1e-3
+    for t in trucks:  # each truck's mesh lies in its outline
+        mesh = meshes.car_mesh([t]).arrays()["vertices"][:, :2].astype(float)
+        assert polygons.inside([tuple(p) for p in mesh], t.corners, 1e-3)
+
+
+def test_a_styled_city_with_everything_on_is_quick():
+    import time
+
+    start = time.perf_counter()
+    generate_layout(5, 700.0, 600.0, LayoutParams(style=MIX, **KNOBS))
+    assert time.perf_counter() - start < 8.0
+
+
+def test_greenness_tints_the_foliage_atlas_as_it_turns_the_small_trees():
+    from meta_sim.sim.appearance import TREE_COLOUR, foliage_tint, vegetation_colour
+
+    assert foliage_tint(None) is None  # the atlas stays as it is
+    for g in (0.0, 0.4, 1.0):
+        assert np.allclose(np.multiply(foliage_tint(g), TREE_COLOUR), vegetation_colour("tree", g, TREE_COLOUR))
+    atlas = surfaces.foliage_atlas()
+    dry, lush = (atlas * np.asarray(foliage_tint(g), np.float32) for g in (0.0, 1.0))
+    assert dry[..., 0].mean() / dry[..., 1].mean() > 1.5 * lush[..., 0].mean() / lush[..., 1].mean()

@@ -34,6 +34,23 @@ def test_default_layouts_are_byte_identical_to_before_styles(seed, width, height
     assert _digest(generate_layout(seed, width, height)) == DEFAULT_HASHES[(seed, width, height)]
 
 
+# sha256 of styled layouts without street details or clutter, taken before those came to styled cities:
+# asking for clutter must not move what a styled city without it has.
+MIX = {"suburban": 0.3, "dense": 0.3, "downtown": 0.2, "industrial": 0.2}
+STYLED_HASHES = [
+    (3, 345.6, 345.6, "dense", "6ca7b713f5f4526c1c19fab8e86f7cd3958b7f45b79718a77ca7b955cf9432d2"),
+    (2, 400.0, 300.0, "downtown", "663ad337b63075981eafda6ff8a030e45eb64eb605e1bbf6d6683c1c1a6598f8"),
+    (4, 400.0, 300.0, "industrial", "b10835904489234952c33faa5b68d1b33ca5993f98192914fa118c5ee842b609"),
+    (5, 700.0, 600.0, MIX, "1053960323fb98912d64048faad0c578cf9f95e3c9784938bbda90d23b6c6f5f"),
+]
+
+
+@pytest.mark.parametrize("seed,width,height,style,digest", STYLED_HASHES)
+def test_styled_layouts_without_clutter_are_byte_identical_to_before_styled_clutter(seed, width, height, style,
+                                                                                      digest):
+    assert _digest(generate_layout(seed, width, height, LayoutParams(style=style))) == digest
+
+
 # --- the style mix as a parameter ------------------------------------------------------------------
 
 def test_style_accepts_a_name_a_mapping_and_pairs_and_normalises_the_shares():
