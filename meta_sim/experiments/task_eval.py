@@ -352,9 +352,11 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them.
     ``sensor`` is a sensor name for every domain's renders, or "auto" for the one matching the domain's
     imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation, ``ground``
-    the ground cover mix."""
+    the ground cover mix. Every segmenter is also scored on the domain's ``adapt`` scenes (row
+    "validation"): the scenes the designs were inferred from, where choices may be made; the ``test``
+    scenes only report."""
     from ..task.data import merge
-    from ..task.score import all_building, count
+    from ..task.score import all_building
 
     s = h.settings
     rows, picture, uniform = {}, [], {}
@@ -370,23 +372,24 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
         test_pool = _real_pool(f"{domain} test", test, s.train)
-        sim = [count(trained(h, None, rendered, seed, f"{domain} rendered only"), test_pool.images,
-                     test_pool.masks)[0] for seed in s.seeds]
-        real = [count(trained(h, other, None, seed, f"{'+'.join(others)}"), test_pool.images,
-                      test_pool.masks)[0] for seed in s.seeds]
+        adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
+        pools = (test_pool, adapt_pool)
+        sim = _scored(h, None, rendered, f"{domain} rendered only", pools)
+        real = _scored(h, other, None, f"{'+'.join(others)}", pools)
+        flat = _scored(h, None, uniform[seen_by], "uniform designs", pools)
         space = h.methods.nams.space
-        flat = [count(trained(h, None, uniform[seen_by], seed, "uniform designs"), test_pool.images,
-                      test_pool.masks)[0] for seed in s.seeds]
-        rows[domain] = {"rendered_only": _mean_iou(sim), "uniform_designs": _mean_iou(flat),
-                        "other_real": _mean_iou(real), "other_domains": others,
+        rows[domain] = {"rendered_only": _mean_iou(sim[0]), "uniform_designs": _mean_iou(flat[0]),
+                        "other_real": _mean_iou(real[0]), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
-                        "ground": ground, "space": space.name}
+                        "ground": ground, "space": space.name,
+                        "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
+                                       "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
+                                       "all_building": all_building(adapt_pool.masks).iou()}}
         for param in space.parameters:  # what the inferred designs set replaces the run's setting
             if getattr(param, "appearance", None) in ("sensor", "roof_jitter", "ground"):
                 rows[domain][param.appearance] = "inferred"
         if realness:
-            adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
             rows[domain]["colour"] = {"real": colour_stats(adapt_pool), "rendered": colour_stats(rendered)}
             picture.append([(f"REAL {domain}", _srgb8(i)) for i in adapt_pool.images[:3]] +
@@ -399,6 +402,14 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += "" if h.methods.nams.space.name == "rooftops-v1" else f"-{h.methods.nams.space.name}"
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
+
+
+def _scored(h: Harness, real: Pool | None, synthetic: Pool | None, label: str, pools) -> list[list]:
+    """Per pool of ``pools``: the counts of the segmenter of each seed trained on ``real`` and ``synthetic``."""
+    from ..task.score import count
+
+    models = [trained(h, real, synthetic, seed, label) for seed in h.settings.seeds]
+    return [[count(model, pool.images, pool.masks)[0] for model in models] for pool in pools]
 
 
 def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, rendered: Pool) -> dict:
@@ -611,6 +622,18 @@ def realism_markdown(result: dict) -> str:
                      f"| {100 * (r['iou'] - row['all_building']):+.1f} | "
                      + (f"{100 * r['precision']:.1f} / {100 * r['recall']:.1f} | " if "recall" in r else "- | ")
                      + (f"{acc['accuracy']:.2f} +- {acc['accuracy_std']:.2f} |" if acc else "- |"))
+    checked = [(domain, row) for domain, row in rows if "validation" in row]
+    if checked:
+        lines += ["", "The same segmenters on each domain's `adapt` scenes (validation: the scenes the designs were "
+                  "inferred from; settings may be chosen here, never on the test scenes above), IoU (%):", "",
+                  "| domain | space | sensor | roof jitter | ground | rendered only | rendered only, uniform designs "
+                  "| other real domains | all building |", "|---|---|---|---|---|---|---|---|---|"]
+        for domain, row in checked:
+            v = row["validation"]
+            lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
+                         f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
+                         f"{_iou_cell(v['rendered_only'])} | {_iou_cell(v['uniform_designs'])} | "
+                         f"{_iou_cell(v['other_real'])} | {100 * v['all_building']:.1f} |")
     coloured = [(domain, row) for domain, row in rows if "colour" in row]
     if coloured:
         lines += ["", "Plain colour, real (`adapt` scenes) against rendered: mean display brightness (0-1) and "

@@ -114,7 +114,8 @@ def test_quick_realism_benchmark_end_to_end_infers_the_look_in_overhead_v1(tmp_p
         assert row["space"] == "overhead-v1" and row["ground"] == row["sensor"] == "inferred"
         assert all(space.validate(d) == d for d in row["designs"])
         assert 0 <= row["rendered_only"]["iou"] <= 1 and 0 <= row["realness"]["accuracy"] <= 1
-        assert 0 <= row["uniform_designs"]["iou"] <= 1
+        assert 0 <= row["uniform_designs"]["iou"] <= 1 and row["validation"]["scenes"] == "adapt"
+        assert 0 <= row["validation"]["rendered_only"]["iou"] <= 1
     assert (tmp_path / "pictures" / "realism-overhead-v1.png").is_file()
     assert "| overhead-v1 | inferred |" in result.output
 
@@ -161,7 +162,11 @@ def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_meas
 
     row = {"rendered_only": {"iou": 0.5, "iou_std": 0.01}, "other_real": {"iou": 0.4, "iou_std": 0.02},
            "other_domains": ["rio"], "all_building": 0.3, "sensor": "drone"}
-    result = {"runs": {"a": {"banepa": {**row, "uniform_designs": {"iou": 0.25, "iou_std": 0.03}}},
+    validation = {"scenes": "adapt", "rendered_only": {"iou": 0.125, "iou_std": 0.0},
+                  "uniform_designs": {"iou": 0.5, "iou_std": 0.1}, "other_real": {"iou": 0.75, "iou_std": 0.0},
+                  "all_building": 0.2}
+    result = {"runs": {"a": {"banepa": {**row, "uniform_designs": {"iou": 0.25, "iou_std": 0.03},
+                                        "validation": validation}},
                        "b": {"kampala": row}}, "settings": {"seeds": [0, 1]}, "render_preset": "fast", "seconds": 60}
     lines = realism_markdown(result).splitlines()
     header = next(line for line in lines if line.startswith("| domain"))
@@ -170,3 +175,6 @@ def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_meas
     column = header.split(" | ").index("rendered only, uniform designs")
     assert banepa.split(" | ")[column] == "25.0 +- 3.0" and kampala.split(" | ")[column] == "-"
     assert len(banepa.split(" | ")) == len(header.split(" | "))
+    checked = [line for line in lines if line.startswith("| banepa")][1]  # the validation table's row
+    assert "| 12.5 +- 0.0 | 50.0 +- 10.0 | 75.0 +- 0.0 | 20.0 |" in checked
+    assert len([line for line in lines if line.startswith("| kampala")]) == 1  # measured before validation
