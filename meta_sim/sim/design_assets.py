@@ -85,14 +85,8 @@ def asset_names(found: list[Found]) -> list[str]:
 
 def target_folder(preset: DesignPreset) -> str:
     """The folder the preset's target images lie in (their common folder's name), or '' when unknown."""
-    images = [str(p) for p in preset.source_images]
-    if not images:
-        return ""
-    try:
-        common = os.path.commonpath(images) if len(images) > 1 else os.path.dirname(images[0])
-    except ValueError:  # absolute and relative paths mixed
-        return ""
-    return PurePosixPath(common.replace("\\", "/")).name
+    common = preset.common_folder()
+    return "" if common is None else PurePosixPath(common.replace("\\", "/")).name
 
 
 def catalog_path(preset: DesignPreset) -> str:

@@ -55,15 +55,24 @@ class DesignPreset:
         shares = self.vote_shares.get(parameter) or self.distribution.get(parameter) or {}
         return float(shares.get(str(self.design.get(parameter)), 1.0 if not shares else 0.0))
 
-    def target(self) -> str:
-        """Where the preset's images came from: how many, and their common folder."""
+    def common_folder(self) -> str | None:
+        """The folder the preset's images share ('' for bare file names); None when none is recorded or
+        absolute and relative paths are mixed."""
         images = [str(p) for p in self.source_images]
         if not images:
-            return "no target images recorded"
+            return None
         try:
-            common = os.path.commonpath(images) if len(images) > 1 else os.path.dirname(images[0])
+            return os.path.commonpath(images) if len(images) > 1 else os.path.dirname(images[0])
         except ValueError:  # absolute and relative paths mixed
-            common = "several folders"
+            return None
+
+    def target(self) -> str:
+        """Where the preset's images came from: how many, and their common folder."""
+        images = self.source_images
+        if not images:
+            return "no target images recorded"
+        common = self.common_folder()
+        common = "several folders" if common is None else common
         return f"{len(images)} image{'s' if len(images) != 1 else ''} in {common or '.'}"
 
     def to_dict(self) -> dict:
