@@ -46,13 +46,18 @@ def bench_render(out, docs, designs, tiles, repeats, presets):
 @bench.command("nams")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/nams.json"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="target groups per target seed of each split (3 seeds each: 300 groups per split and experiment)")
 @click.option("--adjoint-targets", type=int, default=20, show_default=True,
-              help="target groups for the (slow) neural-adjoint settings")
+              help="target groups for the (slow) neural-adjoint settings, spread over the seeds")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
 def bench_nams_command(out, docs, targets, adjoint_targets, cache):
-    """Training, feature and search time, and E1/E2 accuracy per method and search setting (default scale)."""
+    """Training, feature and search time, and E1/E2 accuracy per method and search setting (default scale), on
+    the test split with 95% intervals and on the validation split beside it."""
+    for name, value in (("--targets", targets), ("--adjoint-targets", adjoint_targets)):
+        if value < 1:
+            raise MetaSimError(f"{name} must be at least 1, not {value}")
     from ..experiments.bench import bench_nams, format_nams_table
 
     bars = _Bars()
