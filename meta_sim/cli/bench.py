@@ -84,6 +84,27 @@ def bench_appearance_command(out, docs, targets, pictures, cache):
     _publish(result, out, format_appearance_table(result), "appearance", docs, Path(pictures) / "sheet.png")
 
 
+@bench.command("stability")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/stability.json"), show_default=True)
+@click.option("--scratch", type=click.Path(path_type=Path), default=None,
+              help="folder for the run's tiny models, targets and outputs (default: a temporary one)")
+@_torch_threads
+def bench_stability_command(out, docs, scratch):
+    """The extreme cases (constant, black, white, HDR and NaN targets; one-tile groups; M=1, S=M, k=0, r=0 and 1;
+    a one-choice space; zero-variance features; bfloat16) end to end on tiny models made in the run: what each
+    ended in. Exits 2 after writing if any ended in neither a finite preset nor a clear error."""
+    from ..experiments.stability import bench_stability, check, format_stability_table
+
+    bars = _Bars()
+    try:
+        result = bench_stability(scratch, bars)
+    finally:
+        bars.close()
+    _publish(result, out, format_stability_table(result), "stability", docs)
+    check(result)
+
+
 @bench.command("reference")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
