@@ -108,11 +108,12 @@ def bench_stability_command(out, docs, scratch):
 @bench.command("reference")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="target groups per target seed of each split (as bench-nams)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 def bench_reference_command(out, docs, targets, cache):
-    """E1/E2 of the roof-colour reference: how far the renders' roof colours (found with the roof labels)
-    agree with the swatch similarity that scores every method."""
+    """E1/E2 of the roof-colour reference on the test and validation splits: how far the renders' roof colours
+    (found with the roof labels) agree with the swatch similarity that scores every method."""
     from ..experiments.reference import bench_reference, format_reference_table
 
     bars = _Bars()
