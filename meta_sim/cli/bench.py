@@ -126,7 +126,8 @@ def bench_reference_command(out, docs, targets, cache):
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.json"), show_default=True)
 @click.option("--plot", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.png"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True, help="E1 target groups of 9 tiles")
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="E1 target groups of 9 tiles per seed of the validation split (as bench-nams)")
 @click.option("--adjoint-targets", type=int, default=20, show_default=True,
               help="target groups for the (slow) neural-adjoint settings")
 @click.option("--presets", default="fast,balanced", show_default=True, help="render presets to compare")

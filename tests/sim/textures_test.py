@@ -519,3 +519,17 @@ def _write_hashes():
 
 if __name__ == "__main__" and sys.argv[1:] == ["--write-hashes"]:
     _write_hashes()
+
+
+def test_the_cli_builds_either_held_out_set(tmp_path):
+    from click.testing import CliRunner
+
+    from meta_sim.cli import main
+
+    for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2")):
+        out = tmp_path / name
+        result = CliRunner().invoke(main, ["textures", "build", "--size", "16", "--heldout", *args, "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        assert load_bank(out).name == name
+        assert load_similarity(out / SIMILARITY_TO_DEFAULT_FILE).rows == tuple(recipe.id for recipe in
+                                                                               recipes(heldout=name))
