@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -83,8 +83,15 @@ bench-appearance: setup
 bench-realism: setup
 	META_SIM_THREADS=2 $(BIN)/meta-sim bench realism --out benchmarks/realism.json --pictures benchmarks/realism
 
+# E1 and E2 on the test split (300 target groups each, 95% intervals) with the validation split beside it
+# (long: the neural-adjoint sweep runs on both splits of both experiments; the validation targets of seed 1 are reused).
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
+
+# What each extreme case (constant, black, white, HDR and NaN targets; one-tile groups; M=1, S=M, k=0, r=0 and 1;
+# a one-choice space; zero-variance features; bfloat16) ends in, on tiny models made in the run (a few minutes).
+bench-stability: setup
+	$(BIN)/meta-sim bench stability --out benchmarks/stability.json
 
 # How far the renders' roof colours (found with the roof labels) agree with the swatch similarity that
 # scores E1/E2: a reference for bench-nams' accuracy, on the same training set and targets.

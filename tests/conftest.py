@@ -29,3 +29,10 @@ def heldout_bank():
     from meta_sim.sim.textures import ensure_heldout_bank
 
     return ensure_heldout_bank()
+
+
+@pytest.fixture(scope="session")
+def heldout_v2_bank():
+    from meta_sim.sim.textures import ensure_heldout_bank
+
+    return ensure_heldout_bank(name="heldout-v2")

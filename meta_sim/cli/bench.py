@@ -46,13 +46,18 @@ def bench_render(out, docs, designs, tiles, repeats, presets):
 @bench.command("nams")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/nams.json"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="target groups per target seed of each split (3 seeds each: 300 groups per split and experiment)")
 @click.option("--adjoint-targets", type=int, default=20, show_default=True,
-              help="target groups for the (slow) neural-adjoint settings")
+              help="target groups for the (slow) neural-adjoint settings, spread over the seeds")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
 def bench_nams_command(out, docs, targets, adjoint_targets, cache):
-    """Training, feature and search time, and E1/E2 accuracy per method and search setting (default scale)."""
+    """Training, feature and search time, and E1/E2 accuracy per method and search setting (default scale), on
+    the test split with 95% intervals and on the validation split beside it."""
+    for name, value in (("--targets", targets), ("--adjoint-targets", adjoint_targets)):
+        if value < 1:
+            raise MetaSimError(f"{name} must be at least 1, not {value}")
     from ..experiments.bench import bench_nams, format_nams_table
 
     bars = _Bars()
@@ -79,14 +84,36 @@ def bench_appearance_command(out, docs, targets, pictures, cache):
     _publish(result, out, format_appearance_table(result), "appearance", docs, Path(pictures) / "sheet.png")
 
 
+@bench.command("stability")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/stability.json"), show_default=True)
+@click.option("--scratch", type=click.Path(path_type=Path), default=None,
+              help="folder for the run's tiny models, targets and outputs (default: a temporary one)")
+@_torch_threads
+def bench_stability_command(out, docs, scratch):
+    """The extreme cases (constant, black, white, HDR and NaN targets; one-tile groups; M=1, S=M, k=0, r=0 and 1;
+    a one-choice space; zero-variance features; bfloat16) end to end on tiny models made in the run: what each
+    ended in. Exits 2 after writing if any ended in neither a finite preset nor a clear error."""
+    from ..experiments.stability import bench_stability, check, format_stability_table
+
+    bars = _Bars()
+    try:
+        result = bench_stability(scratch, bars)
+    finally:
+        bars.close()
+    _publish(result, out, format_stability_table(result), "stability", docs)
+    check(result)
+
+
 @bench.command("reference")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True, help="target groups per experiment")
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="target groups per target seed of each split (as bench-nams)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 def bench_reference_command(out, docs, targets, cache):
-    """E1/E2 of the roof-colour reference: how far the renders' roof colours (found with the roof labels)
-    agree with the swatch similarity that scores every method."""
+    """E1/E2 of the roof-colour reference on the test and validation splits: how far the renders' roof colours
+    (found with the roof labels) agree with the swatch similarity that scores every method."""
     from ..experiments.reference import bench_reference, format_reference_table
 
     bars = _Bars()
@@ -99,7 +126,8 @@ def bench_reference_command(out, docs, targets, cache):
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.json"), show_default=True)
 @click.option("--plot", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.png"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True, help="E1 target groups of 9 tiles")
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="E1 target groups of 9 tiles per seed of the validation split (as bench-nams)")
 @click.option("--adjoint-targets", type=int, default=20, show_default=True,
               help="target groups for the (slow) neural-adjoint settings")
 @click.option("--presets", default="fast,balanced", show_default=True, help="render presets to compare")

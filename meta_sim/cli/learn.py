@@ -8,6 +8,7 @@ import click
 
 from ..core.errors import MetaSimError
 from ..core.fileio import writable_dir
+from ..experiments.splits import SPLIT_NAMES, get_split, single_seed
 from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
 
 
@@ -196,27 +197,38 @@ def eval_group():
 
 def _design_eval(experiment: str, summary: str):
     @click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for results and nams.pt")
-    @click.option("--targets", type=int, default=20, show_default=True, help="target groups")
+    @click.option("--targets", type=int, default=20, show_default=True, help="target groups (per target seed)")
     @click.option("--target-tiles", type=int, default=9, show_default=True,
                   help="tiles per target group (the paper's groups have 9)")
-    @click.option("--seed", type=int, default=1, show_default=True, help="target seed")
+    @click.option("--seed", type=int, default=1, show_default=True,
+                  help="target seed (and the searches'); E2 then draws from heldout-v1")
+    @click.option("--split", "split_name", type=click.Choice(list(SPLIT_NAMES)), default=None,
+                  help="the targets of a split instead of --seed: validation (choices may be made on it) or test "
+                       "(report only; E2 with heldout-v2), --targets groups of each of its seeds")
     @click.option("--ms2/--no-ms2", default=True, show_default=True,
                   help="run the MS2 baseline (computes and caches features of every training tile once)")
     @_dataset_options
     @_search_options
+    @click.pass_context
     @_torch_threads
-    def command(out, targets, target_tiles, seed, ms2, M, k, S, iterations, lr, r, **o):
+    def command(ctx, out, targets, target_tiles, seed, split_name, ms2, M, k, S, iterations, lr, r, **o):
         from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
 
+        if split_name and ctx.get_parameter_source("seed") is not click.core.ParameterSource.DEFAULT:
+            raise MetaSimError("give --split or --seed, not both: a split has its own target seeds")
         dataset, settings = _configs(o)
-        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
-                                     iterations=iterations, lr=lr, r=r)
+        split = get_split(experiment, split_name) if split_name else single_seed(experiment, seed)
+        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, split=split, ms2=ms2, M=M,
+                                     k=k, S=S, iterations=iterations, lr=lr, r=r)
         eval_settings.check()
         writable_dir(out)
         bars = _Bars()
         results = run_eval(experiment, out, dataset, settings, eval_settings, o["cache"], bars)
         bars.close()
         click.echo(results_markdown(results))
+        if split.touches_test:
+            click.echo("These targets are the test split's: report these figures; choose nothing by them "
+                       "(choose on --split validation).")
         click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}")
 
     command.__doc__ = summary

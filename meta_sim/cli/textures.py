@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
+from ..sim.textures.procedural import FIRST_HELDOUT, HELDOUT_SETS
 from .base import main
 
 
@@ -20,7 +21,10 @@ def textures():
               help="folder for the bank (default: the cache folder the renderer uses)")
 @click.option("--from", "source", type=click.Path(path_type=Path), default=None,
               help="build from your own photos: a folder with flat/ and sloped/ subfolders")
-@click.option("--heldout", is_flag=True, help="build the held-out set (design-gap textures) instead")
+@click.option("--heldout", type=click.Choice(list(HELDOUT_SETS)), is_flag=False, flag_value=FIRST_HELDOUT,
+              default=None,
+              help="build a held-out set (design-gap textures) instead: heldout-v1 (E2 validation; the set "
+                   "`--heldout` alone builds) or heldout-v2 (E2 test)")
 @click.option("--size", type=int, default=256, show_default=True, help="texture size in pixels")
 @click.option("--repeat-m", type=float, default=8.0, show_default=True,
               help="with --from: physical size of one photo repeat in metres")
@@ -35,9 +39,9 @@ def textures_build(out, source, heldout, size, repeat_m):
             raise MetaSimError("with --from, give the bank folder to write with --out")
         bank = tx.build_bank_from_folder(source, out, repeat_m=repeat_m, size=size)
     elif out is None:
-        bank = tx.ensure_heldout_bank() if heldout else tx.ensure_default_bank()
+        bank = tx.ensure_heldout_bank(name=heldout) if heldout else tx.ensure_default_bank()
     else:
-        bank = tx.build_default_bank(out, size=size, heldout=heldout)
+        bank = tx.build_default_bank(out, size=size, heldout=heldout or False)
     counts = {kind: len(bank.ids(kind)) for kind in ("flat", "sloped")}
     click.echo(f"bank {bank.root}: {counts['flat']} flat, {counts['sloped']} sloped textures")
 

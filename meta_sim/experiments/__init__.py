@@ -1,2 +1,3 @@
 """The paper's experiments and our benchmarks: E1/E2 evaluation, bench-render, bench-nams,
-bench-farm, bench-tradeoff and the roof-colour reference. Nothing below imports them."""
+bench-farm, bench-tradeoff, bench-stability and the roof-colour reference, and the validation and test
+splits they are measured on (``splits``). Nothing below imports them."""

@@ -106,15 +106,20 @@ def format_render_table(result: dict) -> str:
 ADJOINT_SWEEP = ((1000, 200), (250, 200), (250, 100), (64, 100), (64, 50), (16, 50))
 
 
-def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, root: Path | None = None,
-               bars: Bars | None = None) -> dict:
-    """Training time, feature time per target group, and search time and E1/E2 accuracy per method.
+def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None = None, bars: Bars | None = None,
+               dataset=None, settings=None, tiles: int = 9, sweep=ADJOINT_SWEEP, variants: bool = True,
+               time_training: bool = True) -> dict:
+    """Training time, feature time per target group, and search time and E1/E2 accuracy per method, on
+    the validation and the test split of each experiment (``splits.py``).
 
-    Uses the default training set and model (built or reused from the cache);
-    training is timed on a fresh run into a temporary folder. Target groups
-    have 9 tiles, as in the paper. The neural-adjoint settings run on the
-    first ``adjoint_targets`` groups only: at the paper's setting a group
-    costs seconds, not milliseconds.
+    Uses the default training set and model (``dataset`` and ``settings``: others), built or reused
+    from the cache. Each split has ``targets`` groups of ``tiles`` tiles (9, as in the paper) per
+    target seed; every rate comes with a 95% interval from resampling the groups. The neural-adjoint
+    settings of ``sweep`` run on ``adjoint_targets`` groups only, spread over the seeds: at the
+    paper's setting a group costs seconds, not milliseconds. With ``variants`` the other
+    architectures and the ablations of the roof-colour features are scored too. The fastest adjoint
+    setting that keeps E1 is chosen on the validation split; with ``time_training`` training is timed
+    on a fresh run into a temporary folder.
     """
     import dataclasses
 
@@ -126,62 +131,46 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     from ..pipeline.features import time_extractor
     from ..pipeline.roofcolour import checkpoint_extractor
     from ..pipeline.workflow import ModelSettings, ensure_models, train_models
-    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
+    from .splits import SPLIT_NAMES, get_split
 
     root = Path(root or cache_root())
-    dataset, settings = DatasetConfig(), ModelSettings()
-    # The other NAMS architectures on the same training set, scored below with the exhaustive search.
-    others = {name: load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, architecture=name),
-                                                  root, bars).nams_path, "nams")
-              for name in ARCHITECTURES if name != settings.architecture}
-    # The default without the roof-colour histograms: its features are the default's leading part.
-    plain = load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, roof_colour=False),
-                                          root, bars).nams_path, "nams")
-    others["no_roof_colour"] = plain
-    # The roof colours counted on the pixels a colour-only likelihood finds, instead of the segmenter's:
-    # its features differ, so it is scored on targets featurised by its own extractor.
-    # Likewise each pixel weighted by the plain probability of its roof kind, not by its power.
-    own_features = {"colour_roof_finder": dataclasses.replace(settings, roof_finder="colour"),
-                    "roof_weight_power_1": dataclasses.replace(settings, roof_weight_power=1.0)}
+    dataset, settings = dataset or DatasetConfig(), settings or ModelSettings()
+    others, own_features = {}, {}
+    if variants:
+        # The other NAMS architectures on the same training set, scored below with the exhaustive search.
+        others = {name: load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, architecture=name),
+                                                      root, bars).nams_path, "nams")
+                  for name in ARCHITECTURES if name != settings.architecture}
+        # The default without the roof-colour histograms: its features are the default's leading part.
+        others["no_roof_colour"] = load_checkpoint(
+            ensure_models(dataset, dataclasses.replace(settings, roof_colour=False), root, bars).nams_path, "nams")
+        # The roof colours counted on the pixels a colour-only likelihood finds, instead of the segmenter's:
+        # its features differ, so it is scored on targets featurised by its own extractor.
+        # Likewise each pixel weighted by the plain probability of its roof kind, not by its power.
+        own_features = {"colour_roof_finder": dataclasses.replace(settings, roof_finder="colour"),
+                        "roof_weight_power_1": dataclasses.replace(settings, roof_weight_power=1.0)}
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
               "architecture": settings.architecture,
               "train_seconds_other_architectures": {name: round(ckpt.extra["seconds"], 1)
                                                     for name, ckpt in others.items()},
               "roof_finder": settings.roof_finder,
               "roof_weight_power": settings.roof_weight_power,
-              "targets": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": EvalSettings.tiles,
-              "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}}
-    experiments = {}
-    for experiment in ("e1", "e2"):
-        ctx = prepare_eval(experiment, dataset, settings, EvalSettings(targets=targets, seed=seed), root, bars)
-        few = dataclasses.replace(ctx, jobs=ctx.jobs[:adjoint_targets], features=ctx.features[:adjoint_targets])
-        rows = {}
-        for name, run in method_runs(ctx, seed, {}).items():
-            if name != "nams_adjoint":
-                rows[name], _ = score_method(ctx, run)
-                rows[name]["targets"] = len(ctx.jobs)
-        for starts, iterations in ADJOINT_SWEEP:
-            run = method_runs(few, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
-            name = f"nams_adjoint_M{starts}_it{iterations}"
-            rows[name], _ = score_method(few, run)
-            rows[name]["targets"] = len(few.jobs)
-        for name, ckpt in others.items():  # same targets and features
-            rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
-        for name, variant in own_features.items():
-            own = prepare_eval(experiment, dataset, variant, EvalSettings(targets=targets, seed=seed, ms2=False),
-                               root, bars)
-            rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
-            rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
-        experiments[experiment] = rows
-    result["experiments"] = experiments
-    paper = experiments["e1"]["nams_adjoint_M1000_it200"]
-    keeps = [(s, i) for s, i in ADJOINT_SWEEP
-             if all(experiments["e1"][f"nams_adjoint_M{s}_it{i}"][k] >= paper[k] - 0.05
-                    for k in ("flat_top1", "sloped_top1"))]
-    fastest = min(keeps, key=lambda si: experiments["e1"][f"nams_adjoint_M{si[0]}_it{si[1]}"]["seconds_per_target"])
-    result["fastest_adjoint_keeping_e1"] = {"M": fastest[0], "iterations": fastest[1]}
+              "targets_per_seed": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": tiles,
+              "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}, "splits": {}}
+    for split_name in SPLIT_NAMES:
+        experiments, seeds = {}, {}
+        for experiment in ("e1", "e2"):
+            split = get_split(experiment, split_name)
+            experiments[experiment] = _nams_rows(split, targets, tiles, adjoint_targets, sweep, dataset, settings,
+                                                 others, own_features, root, bars)
+            seeds[experiment] = split.to_dict()
+        result["splits"][split_name] = {"settings": seeds, "experiments": experiments}
+    result["fastest_adjoint_keeping_e1"] = fastest_adjoint(result["splits"]["validation"]["experiments"]["e1"],
+                                                           sweep)
     extractor = checkpoint_extractor(load_checkpoint(ensure_models(dataset, settings, root).nams_path, "nams"))
-    result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, 9, 8), 4)
+    result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, tiles, 8), 4)
+    if not time_training:
+        return result
     if settings.roof_colour and settings.roof_finder == "segmenter":
         from ..pipeline.dataset import training_tiles
         from ..pipeline.roofsegment import RoofSegmenter
@@ -199,38 +188,99 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     return result
 
 
+def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dataset, settings, others: dict,
+               own_features: dict, root: Path, bars: Bars | None) -> dict:
+    """bench_nams's rows of one experiment on one split: method name -> metrics, intervals, targets."""
+    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
+    from .splits import spread
+
+    seed = split.seeds[0]  # of the searches' random starts
+    ctx = prepare_eval(split.experiment, dataset, settings, EvalSettings(targets=targets, tiles=tiles, split=split),
+                       root, bars)
+    few = ctx.subset(spread(len(split.seeds), targets, adjoint_targets))
+    rows = {}
+    for name, run in method_runs(ctx, seed, {}).items():
+        if name != "nams_adjoint":
+            rows[name], _ = score_method(ctx, run)
+            rows[name]["targets"] = len(ctx.jobs)
+    for starts, iterations in sweep:
+        run = method_runs(few, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
+        name = f"nams_adjoint_M{starts}_it{iterations}"
+        rows[name], _ = score_method(few, run)
+        rows[name]["targets"] = len(few.jobs)
+    for name, ckpt in others.items():  # same targets and features
+        rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
+    for name, variant in own_features.items():
+        own = prepare_eval(split.experiment, dataset, variant,
+                           EvalSettings(targets=targets, tiles=tiles, split=split, ms2=False), root, bars)
+        rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
+        rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
+    return rows
+
+
+def fastest_adjoint(e1_rows: dict, sweep=ADJOINT_SWEEP) -> dict:
+    """The fastest adjoint setting of ``sweep`` whose E1 top-1 rates (flat and sloped) are within 0.05 of
+    the first (the paper's) setting's, from bench_nams's E1 rows of the validation split: a choice."""
+    def row(si):
+        return e1_rows[f"nams_adjoint_M{si[0]}_it{si[1]}"]
+
+    paper = row(sweep[0])
+    keeps = [si for si in sweep if all(row(si)[k] >= paper[k] - 0.05 for k in ("flat_top1", "sloped_top1"))]
+    fastest = min(keeps, key=lambda si: row(si)["seconds_per_target"])
+    return {"M": fastest[0], "iterations": fastest[1]}
+
+
 def format_nams_table(result: dict) -> str:
-    """``bench_nams``'s result as the Markdown tables of docs/benchmarks.md: accuracy and search time
-    per experiment and method, a note on training and feature times, and the stage times (E4)."""
-    lines = ["| experiment | method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target "
-             "| targets | top-1 flat / sloped, unseen designs |", "|---|---|---|---|---|---|---|---|---|"]
-    for experiment, rows in result["experiments"].items():
-        for name, m in rows.items():
-            unseen = (f"{m['unseen']['flat_top1']:.3f} / {m['unseen']['sloped_top1']:.3f} ({m['unseen_targets']})"
-                      if m.get("unseen") else "-")
-            lines.append(f"| {experiment.upper()} | {name} | {m['flat_top1']:.3f} | {m['flat_top10']:.3f} | "
-                         f"{m['sloped_top1']:.3f} | {m['sloped_top10']:.3f} | {m['seconds_per_target']:.4f} "
-                         f"| {m.get('targets', result['targets'])} | {unseen} |")
-    t = result["train_seconds"]
+    """``bench_nams``'s result as the Markdown tables of docs/benchmarks.md: accuracy with 95% intervals
+    and search time per experiment, method and split (test first, validation beside it), a note on
+    the splits, training and feature times, and the stage times (E4)."""
+    from .evaluate import with_interval
+
+    lines = ["| experiment | method | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | "
+             "s per target | targets | top-1 flat / sloped, unseen designs |", "|---" * 10 + "|"]
+    splits = result["splits"]
+    order = [name for name in ("test", "validation") if name in splits]
+    for experiment in splits[order[0]]["experiments"]:
+        for name in splits[order[0]]["experiments"][experiment]:
+            for split in order:
+                m = splits[split]["experiments"][experiment].get(name)
+                if m is None:
+                    continue
+                unseen = (f"{m['unseen']['flat_top1']:.3f} / {m['unseen']['sloped_top1']:.3f} "
+                          f"({m['unseen_targets']})" if m.get("unseen") else "-")
+                cells = " | ".join(with_interval(m, k) for k in ("flat_top1", "flat_top10", "sloped_top1",
+                                                                  "sloped_top10"))
+                lines.append(f"| {experiment.upper()} | {name} | {split} | {cells} | {m['seconds_per_target']:.4f} "
+                             f"| {m['targets']} | {unseen} |")
     f = result["fastest_adjoint_keeping_e1"]
-    lines += ["", f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
-              f"({result['dataset']['preset']}); target groups of {result.get('tiles_per_target', 4)} tiles "
-              f"in unseen cities. "
-              f"NAMS architecture {result.get('architecture', 'paper')} (rows nams_exhaustive_NAME: the other "
-              f"architectures; nams_exhaustive_no_roof_colour: the default without the roof-colour histograms; "
-              f"nams_exhaustive_colour_roof_finder: roofs for those histograms found by colour alone, not by "
-              f"the {result.get('roof_finder', 'colour')} roof finder"
-              + (f"; nams_exhaustive_roof_weight_power_1: each pixel counted with its plain roof probability, "
-                 f"not to the power {result['roof_weight_power']:g}" if "roof_weight_power" in result else "")
-              + "). "
-              f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
-              + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
-                        for name, s in result.get("train_seconds_other_architectures", {}).items()) + ". "
-              f"Features: {result['feature_seconds_per_group']:.3f} s per group of 9 tiles x 8 views"
-              + (f"; the roof segmenter learns in {result['roof_segmenter_seconds']:.0f} s, once per training set"
-                 if "roof_segmenter_seconds" in result else "") + ". "
-              f"Fastest adjoint setting within 0.05 of the paper setting's E1 top-1: "
-              f"M={f['M']}, {f['iterations']} iterations."]
+    described = "; ".join(f"{split}: E1 seeds {', '.join(map(str, s['settings']['e1']['seeds']))}, E2 seeds "
+                          f"{', '.join(map(str, s['settings']['e2']['seeds']))} with {s['settings']['e2']['heldout']}"
+                          for split, s in ((n, splits[n]) for n in order))
+    notes = [f"Splits ({described}); {result['targets_per_seed']} target groups of {result['tiles_per_target']} "
+             "tiles per seed in unseen cities, the neural-adjoint rows on "
+             f"{result['adjoint_targets']} of them spread over the seeds; [95% interval] from resampling the groups "
+             "(2,000 draws). Choices are made on the validation rows only.",
+             f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
+             f"({result['dataset']['preset']}). NAMS architecture {result['architecture']}"]
+    if result["train_seconds_other_architectures"]:
+        notes[-1] += (" (rows nams_exhaustive_NAME: the other architectures; nams_exhaustive_no_roof_colour: the "
+                      "default without the roof-colour histograms; nams_exhaustive_colour_roof_finder: roofs for "
+                      f"those histograms found by colour alone, not by the {result['roof_finder']} roof finder; "
+                      "nams_exhaustive_roof_weight_power_1: each pixel counted with its plain roof probability, not "
+                      f"to the power {result['roof_weight_power']:g})")
+    notes[-1] += "."
+    if "train_seconds" in result:
+        t = result["train_seconds"]
+        notes.append(f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
+                     + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
+                               for name, s in result["train_seconds_other_architectures"].items()) + ".")
+    notes.append(f"Features: {result['feature_seconds_per_group']:.3f} s per group of {result['tiles_per_target']} "
+                 "tiles x 8 views"
+                 + (f"; the roof segmenter learns in {result['roof_segmenter_seconds']:.0f} s, once per training set"
+                    if "roof_segmenter_seconds" in result else "") + ". "
+                 f"Fastest adjoint setting within 0.05 of the paper setting's E1 top-1 on the validation split: "
+                 f"M={f['M']}, {f['iterations']} iterations.")
+    lines += ["", " ".join(notes)]
     stages = stage_times(result)
     if stages:
         lines += ["", "| stage (E4) | seconds | paper |", "|---|---|---|"]
@@ -248,8 +298,11 @@ def stage_times(result: dict, render_bench: Path = Path("benchmarks/render.json"
         per_tile = json.loads(render_bench.read_text())["presets"][result["dataset"]["preset"]]["seconds_per_tile"]
     except (OSError, ValueError, KeyError):
         return []
+    if "train_seconds" not in result:
+        return []
     tiles = result["dataset"]["designs"] * result["dataset"]["tiles"]
-    group = result["feature_seconds_per_group"] + result["experiments"]["e1"]["nams_exhaustive"]["seconds_per_target"]
+    search = result["splits"]["test"]["experiments"]["e1"]["nams_exhaustive"]["seconds_per_target"]
+    group = result["feature_seconds_per_group"] + search
     segmenter = ([("learning the roof segmenter", result["roof_segmenter_seconds"], "-")]
                  if "roof_segmenter_seconds" in result else [])
     return [(f"simulation: training set of {tiles} tiles", per_tile * tiles, "15,300 images, 1.6 s each"),
@@ -274,7 +327,7 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     from ..pipeline.workflow import ModelSettings
     from ..sim.design import DesignSpace
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
-    from .evaluate import CONTINUOUS_SEARCH, EvalSettings, rankings, run_eval, score
+    from .evaluate import CONTINUOUS_SEARCH, EvalSettings, bootstrap_intervals, rankings, run_eval, score
 
     dataset = DatasetConfig(space=APPEARANCE_SPACE, designs=designs)
     settings = EvalSettings(targets=targets, seed=seed, ms2=False, **CONTINUOUS_SEARCH)
@@ -293,19 +346,6 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     result["space"] = space.to_dict()
     del result["targets_detail"]
     return result
-
-
-def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0) -> dict:
-    """Per metric of the score rows (one per target group): a 95% interval of its mean, resampling the
-    rows with replacement (the same draws for every metric)."""
-    import numpy as np
-
-    draws = np.random.default_rng(seed).integers(0, len(rows), (resamples, len(rows)))
-    out = {}
-    for key in rows[0]:
-        means = np.array([r[key] for r in rows], dtype=np.float64)[draws].mean(axis=1)
-        out[key] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
-    return out
 
 
 def format_appearance_table(result: dict) -> str:

@@ -8,6 +8,10 @@
 * E2: synthetic targets made with held-out textures (the design gap): the
   best a method can do is name the bank texture nearest to the truth.
 
+Each experiment has a validation and a test split (``splits.py``): target
+seeds and, for E2, the held-out set. Choices are made on validation; test is
+only reported.
+
 Methods, all in one harness: uniform sampling, direct regression (DR), MS2
 (REINFORCE over a categorical design distribution with KDE feature
 distributions, drawing simulations from the training set's tiles; see
@@ -36,6 +40,7 @@ from ..core.progress import Bars
 from ..nams.search import SearchOptions
 from ..render.jobs import Job
 from ..sim.design import Continuous, DesignSpace
+from .splits import FIRST_HELDOUT, Split, single_seed
 
 TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
 # Designs are drawn from np.random.default_rng([seed, stream]). Training sets use stream 1
@@ -145,16 +150,29 @@ def mean_scores(rows: list[dict]) -> dict:
     return {key: float(np.mean([r[key] for r in rows])) for key in rows[0]} if rows else {}
 
 
+def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0) -> dict:
+    """Per metric of the score rows (one per target group): a 95% interval of its mean, resampling the
+    rows with replacement (the same draws for every metric)."""
+    draws = np.random.default_rng(seed).integers(0, len(rows), (resamples, len(rows)))
+    out = {}
+    for key in rows[0]:
+        means = np.array([r[key] for r in rows], dtype=np.float64)[draws].mean(axis=1)
+        out[key] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
+    return out
+
+
 def results_markdown(results: dict) -> str:
     """``run_eval``'s results as Markdown tables: every method, then (E1) the targets the training
     set lacks."""
     experiment = results["experiment"].upper()
+    split = f", {results['split']['name']}" if "split" in results else ""
     lines = [f"### {experiment}: rate of inferring one of the n nearest textures "
-             f"({results['targets']} target groups of {results['tiles_per_target']} tiles)", "",
+             f"({results['targets']} target groups of {results['tiles_per_target']} tiles{split}; "
+             "95% intervals from resampling the groups)", "",
              "| method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target |",
              "|---|---|---|---|---|---|"]
     for name, m in results["methods"].items():
-        cells = " | ".join(f"{m[k]:.3f}" if k in m else "-" for k in METRICS)
+        cells = " | ".join(with_interval(m, k) if k in m else "-" for k in METRICS)
         lines.append(f"| {name} | {cells} | {m['seconds_per_target']:.4f} |")
     unseen = {name: m for name, m in results["methods"].items() if m.get("unseen")}
     if unseen:
@@ -174,6 +192,12 @@ def results_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def with_interval(metrics: dict, key: str) -> str:
+    """``metrics[key]`` with its 95% interval when ``metrics`` has one: ``0.811 [0.760, 0.860]``."""
+    low_high = metrics.get("intervals", {}).get(key)
+    return f"{metrics[key]:.3f}" + (f" [{low_high[0]:.3f}, {low_high[1]:.3f}]" if low_high else "")
+
+
 def write_results(out: Path, results: dict) -> None:
     """Write ``results.json`` and ``results.md`` into the folder ``out``."""
     write_text_atomic(out / "results.json", json.dumps(results, indent=2) + "\n")
@@ -182,37 +206,57 @@ def write_results(out: Path, results: dict) -> None:
 
 def render_targets(experiment: str, n: int, tiles: int, seed: int, preset: str, root: Path,
                    tile_px: int = 384, pixel_size_m: float = 0.3, bars: Bars | None = None,
-                   space: str = "rooftops-v1") -> tuple[list[Job], Path]:
-    """Render (or reuse) the target groups of an experiment in design space ``space``; returns the jobs
-    and their tile folder."""
+                   space: str = "rooftops-v1", heldout: str = FIRST_HELDOUT) -> tuple[list[Job], Path]:
+    """Render (or reuse) the target groups of an experiment in design space ``space`` (E2's roofs from
+    the held-out set ``heldout``); returns the jobs and their tile folder."""
     from ..render.jobs import RenderSettings
     from ..render.loop import render_jobs
     from ..sim.quality import get_preset
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
     space_name, space = space, DesignSpace.load(space)
-    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
-    jobs = target_jobs(experiment, space, heldout, n, seed)
+    bank, held = ensure_default_bank(), ensure_heldout_bank(name=heldout)
+    jobs = target_jobs(experiment, space, held, n, seed)
     name = f"{experiment}-v{TARGETS_VERSION}-n{n}-t{tiles}-s{seed}-{preset}-{tile_px}px-{pixel_size_m}m"
     if space_name != "rooftops-v1":  # the default space's targets keep the folders they had
         name += f"-{space.name}"
+    if experiment == "e2" and heldout != FIRST_HELDOUT:  # as do those of the first held-out set
+        name += f"-{heldout}"
     folder = Path(root) / "targets" / name
-    settings = RenderSettings(space=space, banks=[bank, heldout], preset=get_preset(preset), out_dir=folder,
+    settings = RenderSettings(space=space, banks=[bank, held], preset=get_preset(preset), out_dir=folder,
                               n_tiles=tiles, tile_px=tile_px, pixel_size_m=pixel_size_m)
-    render_jobs(jobs, settings, bars(f"render {experiment} targets", n * tiles) if bars else None)
+    render_jobs(jobs, settings, bars(f"render {experiment} targets (seed {seed})", n * tiles) if bars else None)
     return jobs, folder
+
+
+def render_split_targets(split: Split, n: int, tiles: int, preset: str, root: Path, tile_px: int = 384,
+                         pixel_size_m: float = 0.3, bars: Bars | None = None,
+                         space: str = "rooftops-v1") -> tuple[list[Job], list[Path]]:
+    """``render_targets`` for each seed of ``split``, ``n`` groups each: the jobs, seed after seed, and
+    each job's tile folder. MetaSimError when ``n`` groups per seed would share cities between seeds."""
+    split.check(n)
+    jobs, folders = [], []
+    for seed in split.seeds:
+        more, folder = render_targets(split.experiment, n, tiles, seed, preset, root, tile_px, pixel_size_m, bars,
+                                      space, split.heldout or FIRST_HELDOUT)
+        jobs += more
+        folders += [folder] * len(more)
+    return jobs, folders
 
 
 @dataclass(frozen=True)
 class EvalSettings(SearchOptions):
     """How `meta-sim eval` scores: the neural-adjoint search settings (``SearchOptions``; ``S`` also
-    for the exhaustive vote), target groups and tiles per group, whether to run MS2, the seed of the
-    targets and the searches, the targets' render preset, and the rows of ``sheet.png``."""
+    for the exhaustive vote), target groups (per target seed) and tiles per group, whether to run MS2,
+    the seed of the searches and, without a ``split``, of the targets (E2 then uses ``heldout-v1``),
+    the split whose target seeds and held-out set to use instead, the targets' render preset, and the
+    rows of ``sheet.png``."""
 
     targets: int = 20
     tiles: int = 9  # per target group, as in the paper (and `meta-sim infer`'s default group size)
     ms2: bool = True  # run the MS2 baseline (needs the training set's per-tile features)
     seed: int = 1
+    split: Split | None = None
     preset: str | None = None  # default: the training set's render preset
     sheet_rows: int = 6
 
@@ -222,6 +266,17 @@ class EvalSettings(SearchOptions):
         for name, value in (("--targets", self.targets), ("--target-tiles", self.tiles)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise MetaSimError(f"{name} must be at least 1, not {value!r}")
+        if self.split is not None:
+            self.split.check(self.targets)
+
+    def target_split(self, experiment: str) -> Split:
+        """The targets of ``experiment``: the split, else the one seed ``seed`` with ``heldout-v1``."""
+        if self.split is None:
+            return single_seed(experiment, self.seed)
+        if self.split.experiment != experiment:
+            raise MetaSimError(f"the {self.split.name} split given is {self.split.experiment.upper()}'s, "
+                               f"not {experiment.upper()}'s")
+        return self.split
 
 
 @dataclass
@@ -233,7 +288,7 @@ class EvalContext:
     nams: object  # nams.Checkpoint
     dr: object
     jobs: list
-    folder: Path
+    folders: list  # each job's tile folder (one per target seed)
     tiles: int
     features: object  # (targets, F) tensor: each group's tiles x views averaged
     tile_features: object  # (targets, tiles, F) tensor: each tile's views averaged
@@ -241,6 +296,13 @@ class EvalContext:
     ranks: dict
     pool: object = None  # dataset.TileFeatures of the training set: MS2's pre-rendered simulations
     training_designs: list = ()  # the training set's designs: E1 also scores the targets it lacks
+    split: Split | None = None  # where the targets come from
+
+    def subset(self, indices) -> EvalContext:
+        """The same context on the target groups ``indices`` only."""
+        indices = list(indices)
+        return replace(self, jobs=[self.jobs[i] for i in indices], folders=[self.folders[i] for i in indices],
+                       features=self.features[indices], tile_features=self.tile_features[indices])
 
 
 @dataclass
@@ -294,11 +356,13 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
 
     ``experiment`` is "e1" or "e2"; ``dataset`` a DatasetConfig and ``models_settings`` a
     ModelSettings (``pipeline.workflow``); training sets, models and targets are cached under
-    ``root``. With ``settings.ms2`` the training set's per-tile features are computed too (MS2's
-    pool). ``test_tiles`` more tiles of each target are rendered after the ``settings.tiles`` the
-    methods see (labelled test tiles for a task model; the features never use them). Returns the
-    EvalContext every method is scored with. Raises MetaSimError for an unknown experiment or
-    preset, a missing ``bpy`` while something is left to render, or what ``ensure_models`` raises.
+    ``root``. The targets are ``settings.targets`` groups of each seed of
+    ``settings.target_split(experiment)``. With ``settings.ms2`` the training set's per-tile
+    features are computed too (MS2's pool). ``test_tiles`` more tiles of each target are rendered
+    after the ``settings.tiles`` the methods see (labelled test tiles for a task model; the features
+    never use them). Returns the EvalContext every method is scored with. Raises MetaSimError for an
+    unknown experiment or preset, a split of another experiment, a missing ``bpy`` while something
+    is left to render, or what ``ensure_models`` raises.
     """
     import time
 
@@ -307,22 +371,24 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     from ..sim.imageio import read_image
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
+    split = settings.target_split(experiment)
+    split.check(settings.targets)
     methods = load_methods(dataset, models_settings, root, settings.ms2, bars)
     tiles = settings.tiles
-    jobs, folder = render_targets(experiment, settings.targets, tiles + test_tiles, settings.seed,
-                                  settings.preset or dataset.preset, root, dataset.tile_px, dataset.pixel_size_m, bars,
-                                  dataset.space)
+    jobs, folders = render_split_targets(split, settings.targets, tiles + test_tiles,
+                                         settings.preset or dataset.preset, root, dataset.tile_px,
+                                         dataset.pixel_size_m, bars, dataset.space)
     started = time.perf_counter()
-    groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job in jobs]
+    groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job, folder in zip(jobs, folders)]
     features, per_tile = group_features(groups, methods.extractor, models_settings.views,
                                         f"{experiment} target features", bars)
     feature_seconds = (time.perf_counter() - started) / len(jobs)
-    ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank())
+    ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank(name=split.heldout or FIRST_HELDOUT))
     training_designs = sample_designs(methods.nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
     import torch
 
-    return EvalContext(experiment, methods.models, methods.nams, methods.dr, jobs, folder, tiles, features,
-                       torch.stack(per_tile), feature_seconds, ranks, methods.pool, training_designs)
+    return EvalContext(experiment, methods.models, methods.nams, methods.dr, jobs, folders, tiles, features,
+                       torch.stack(per_tile), feature_seconds, ranks, methods.pool, training_designs, split)
 
 
 def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
@@ -354,7 +420,8 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
 
 # The neural-adjoint setting (starts M, steps) the benchmarks use in spaces with continuous parameters, where
 # NAMS is factorised over many parameters: each step costs several times the default space's, and the
-# paper's 1,000 starts x 200 steps would take minutes per target group (bench-nams's (64, 100) row).
+# paper's 1,000 starts x 200 steps would take minutes per target group (bench-nams's (64, 100) row, on E1's
+# validation split: docs/design.md, "Splits").
 CONTINUOUS_SEARCH = {"M": 64, "iterations": 100}
 
 
@@ -387,7 +454,8 @@ def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> d
 
 
 def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
-    """Mean top-1/top-10 rates and seconds per target of one method.
+    """Mean top-1/top-10 rates and seconds per target of one method, and ``intervals``: each rate's
+    95% interval from resampling the target groups (``bootstrap_intervals``).
 
     In E1 also ``unseen``: the rates over the targets whose design is not one
     of the training set's (``unseen_targets`` of them). A method that only
@@ -399,7 +467,7 @@ def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
     designs = run()
     seconds = (time.perf_counter() - started) / len(ctx.jobs)
     rows = [score(p, job.design, ctx.ranks, ctx.nams.space) for p, job in zip(designs, ctx.jobs)]
-    metrics = {**mean_scores(rows), "seconds_per_target": seconds}
+    metrics = {**mean_scores(rows), "seconds_per_target": seconds, "intervals": bootstrap_intervals(rows)}
     if ctx.training_designs:
         unseen = unseen_rows(rows, ctx.jobs, ctx.training_designs)
         metrics.update(unseen=mean_scores(unseen), unseen_targets=len(unseen))
@@ -431,7 +499,8 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     methods, predictions = {}, {}
     for name, run in method_runs(ctx, settings.seed, adjoint, settings.S).items():
         methods[name], predictions[name] = score_method(ctx, run)
-    results = {"experiment": experiment, "targets": len(ctx.jobs), "tiles_per_target": ctx.tiles,
+    results = {"experiment": experiment, "split": ctx.split.to_dict(), "targets": len(ctx.jobs),
+               "tiles_per_target": ctx.tiles,
                "feature_seconds_per_target": ctx.feature_seconds, "methods": methods,
                "adjoint": adjoint, "training": {"designs": dataset.designs, "tiles": dataset.tiles,
                                                 "preset": dataset.preset, "seconds": ctx.models.seconds},
@@ -443,7 +512,7 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     shutil.copy2(ctx.models.nams_path, out / "nams.pt")
     shutil.copy2(ctx.models.dr_path, out / "dr.pt")
     banks = _banks()
-    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folder, best_nams(predictions),
+    comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folders, best_nams(predictions),
                      RenderSettings(space=ctx.nams.space, banks=banks,
                                     preset=get_preset(settings.preset or dataset.preset),
                                     out_dir=root / "targets" / "inferred", n_tiles=ctx.tiles,
@@ -452,12 +521,12 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
 
 
 def _banks() -> list:
-    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+    from ..sim.textures import ensure_default_bank, ensure_heldout_banks
 
-    return [ensure_default_bank(), ensure_heldout_bank()]
+    return [ensure_default_bank(), *ensure_heldout_banks()]
 
 
-def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted: list[dict],
+def comparison_sheet(path: Path, jobs: list[Job], target_folders: list[Path], predicted: list[dict],
                      settings) -> None:
     """Each target's first tile beside the same city rendered with the inferred design, and the textures."""
     from ..pipeline.dataset import job_tiles
@@ -467,7 +536,8 @@ def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted
     from ..sim.textures.sheet import render_sheet
 
     space, banks, folder, tiles = settings.space, settings.banks, settings.out_dir, settings.n_tiles
-    inferred = [Job(design, job.city_seed, f"{job.name}-inferred")
+    # Named by city too: the jobs of two target seeds share names, and the inferred renders one folder.
+    inferred = [Job(design, job.city_seed, f"{job.name}-{job.city_seed}-inferred")
                 for job, design in zip(jobs, predicted)]
     render_jobs(inferred, settings)
 
@@ -478,7 +548,7 @@ def comparison_sheet(path: Path, jobs: list[Job], target_folder: Path, predicted
         return next(b for b in banks if b.contains(texture_id)).load_image(texture_id)
 
     rows = []
-    for job, guess in zip(jobs, inferred):
+    for job, guess, target_folder in zip(jobs, inferred, target_folders):
         row = [("TARGET", srgb8(job_tiles(target_folder, job.name, tiles)[0])),
                ("INFERRED", srgb8(job_tiles(folder, guess.name, tiles)[0]))]
         for param in [n for n in space.names if n in KIND_OF]:

@@ -15,7 +15,8 @@ score, with information no method has -- the tiles' roof labels:
 
 A low figure means the renders' roof colours rank the bank differently from
 the swatches, whatever the features and the model; ``make bench-reference``
-writes ``benchmarks/reference.json``.
+writes ``benchmarks/reference.json``. Like ``make bench-nams`` it measures
+each experiment on its test and its validation split (``splits.py``).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ from ..core.progress import Bars
 from ..sim.imageio import linear_to_srgb
 from ..sim.meshes import FLAT_ROOF, SLOPED_ROOF
 from ..sim.textures import hsv_cone_histogram
-from .evaluate import KIND_OF, mean_scores, rankings, render_targets, score
+from .evaluate import KIND_OF, mean_scores, rankings, render_split_targets, score
+from .splits import SPLIT_NAMES, get_split
 
 ROOF_CLASS_OF = {"flat": FLAT_ROOF, "sloped": SLOPED_ROOF}
 
@@ -57,10 +59,11 @@ def nearest(histogram: np.ndarray, references: dict[str, np.ndarray]) -> str | N
     return max(references, key=lambda t: (np.minimum(references[t], target).sum(), t))
 
 
-def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Path | None = None,
-                    bars: Bars | None = None, dataset=None) -> dict:
-    """E1 and E2 top-1/top-10 of the roof-colour reference on bench-nams' training set and targets
-    (``dataset``: another training set, a ``DatasetConfig``; its tile size and pixel size are the targets')."""
+def bench_reference(targets: int = 100, tiles: int = 9, root: Path | None = None, bars: Bars | None = None,
+                    dataset=None) -> dict:
+    """E1 and E2 top-1/top-10 of the roof-colour reference on bench-nams' training set and targets:
+    ``targets`` groups per seed of each split (``dataset``: another training set, a ``DatasetConfig``;
+    its tile size and pixel size are the targets')."""
     from ..core.cache import cache_root
     from ..pipeline.dataset import DatasetConfig, render_training_set
     from ..pipeline.workflow import dataset_dir
@@ -83,18 +86,19 @@ def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Pat
             update(1)
     references = {kind: {t: c / c.sum() for t, c in by_texture.items() if c.sum() > 0}
                   for kind, by_texture in sums.items()}
-    bank, heldout = ensure_default_bank(), ensure_heldout_bank()
+    bank = ensure_default_bank()
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
-              "targets": targets, "tiles_per_target": tiles,
+              "targets_per_seed": targets, "tiles_per_target": tiles,
               "bank_textures_seen": {kind: len(refs) for kind, refs in references.items()},
-              "machine": {"cpus": os.cpu_count()}, "experiments": {}}
-    for experiment in ("e1", "e2"):
-        target_jobs, target_folder = render_targets(experiment, targets, tiles, seed, dataset.preset, root,
-                                                    dataset.tile_px, dataset.pixel_size_m, bars)
-        ranks = rankings(experiment, bank, heldout)
-        update = bars(f"{experiment} target roofs", len(target_jobs)) if bars else None
+              "machine": {"cpus": os.cpu_count()}, "splits": {name: {"experiments": {}} for name in SPLIT_NAMES}}
+    for split_name, experiment in ((s, e) for s in SPLIT_NAMES for e in ("e1", "e2")):
+        split = get_split(experiment, split_name)
+        target_jobs, folders = render_split_targets(split, targets, tiles, dataset.preset, root, dataset.tile_px,
+                                                    dataset.pixel_size_m, bars)
+        ranks = rankings(experiment, bank, ensure_heldout_bank(name=split.heldout or "heldout-v1"))
+        update = bars(f"{experiment} {split_name} target roofs", len(target_jobs)) if bars else None
         rows, missing = [], {kind: 0 for kind in ROOF_CLASS_OF}
-        for job in target_jobs:
+        for job, target_folder in zip(target_jobs, folders):
             counts = roof_histograms(target_folder / f"{job.name}_t{j:02d}.exr" for j in range(tiles))
             predicted = {}
             for param, kind in KIND_OF.items():
@@ -106,18 +110,20 @@ def bench_reference(targets: int = 100, tiles: int = 9, seed: int = 1, root: Pat
             rows.append(score(predicted, job.design, ranks))
             if update:
                 update(1)
-        result["experiments"][experiment] = {"roof_colour_reference": {
+        result["splits"][split_name]["experiments"][experiment] = {"roof_colour_reference": {
             **{key: round(value, 3) for key, value in mean_scores(rows).items()},
-            "targets": len(rows), "groups_without_roofs": missing}}
+            "targets": len(rows), "seeds": list(split.seeds), "heldout": split.heldout,
+            "groups_without_roofs": missing}}
     return result
 
 
 def format_reference_table(result: dict) -> str:
     """The reference's result as the Markdown table of docs/benchmarks.md."""
-    lines = ["| experiment | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | targets |",
-             "|---|---|---|---|---|---|"]
-    for experiment, rows in result["experiments"].items():
-        r = rows["roof_colour_reference"]
-        lines.append(f"| {experiment.upper()} | {r['flat_top1']:.2f} | {r['flat_top10']:.2f} | "
-                     f"{r['sloped_top1']:.2f} | {r['sloped_top10']:.2f} | {r['targets']} |")
+    lines = ["| experiment | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | targets |",
+             "|---|---|---|---|---|---|---|"]
+    for experiment in ("e1", "e2"):
+        for split in ("test", "validation"):
+            r = result["splits"][split]["experiments"][experiment]["roof_colour_reference"]
+            lines.append(f"| {experiment.upper()} | {split} | {r['flat_top1']:.2f} | {r['flat_top10']:.2f} | "
+                         f"{r['sloped_top1']:.2f} | {r['sloped_top10']:.2f} | {r['targets']} |")
     return "\n".join(lines)

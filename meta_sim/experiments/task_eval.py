@@ -283,7 +283,8 @@ def run_synthetic(h: Harness, experiment: str, out: Path) -> dict:
     pools = {"none": None, "uniform": render_set(h, "uniform", synthetic_jobs(h, None, 0.0, s.target_seed))}
     for strategy in [k for k in ("dr", "ms2", "nams", "gt") if k in predicted]:
         pools[strategy] = render_set(h, strategy, synthetic_jobs(h, predicted[strategy], 0.0, s.target_seed))
-    test_paths = [p for job in ctx.jobs for p in job_tiles(ctx.folder, job.name, s.tiles + s.test_tiles)[s.tiles:]]
+    test_paths = [p for job, folder in zip(ctx.jobs, ctx.folders)
+                  for p in job_tiles(folder, job.name, s.tiles + s.test_tiles)[s.tiles:]]
     test = _tile_test_pool(h, test_paths)
     counts, pictures = score_strategies(h, pools, test)
     result = {"experiment": experiment, "targets": len(ctx.jobs), "test_tiles": len(test),

@@ -1,7 +1,8 @@
 """What each knob that costs time buys in accuracy (`meta-sim bench tradeoff`, `make bench-tradeoff`).
 
-Every point is measured on E1 (bank designs in cities never trained on):
-top-1 and top-10 for flat and sloped roofs, and two costs:
+Every point is measured on E1's validation split (bank designs in cities
+never trained on; ``splits.py``), since the profiles are chosen on it: top-1
+and top-10 for flat and sloped roofs, and two costs:
 
 * ``seconds_per_group``: inference, per target group: features of its tiles
   (x views) plus the search;
@@ -16,7 +17,7 @@ renders, target groups of 9 tiles, exhaustive search):
 * ``search``: exhaustive, and the neural-adjoint search at several (M,
   iterations), the paper's (1000, 200) first, plus DR and MS2: taken from
   ``make bench-nams`` (``benchmarks/nams.json``, the same model and E1
-  targets), with this bench's feature time per tile added;
+  validation targets), with this bench's feature time per tile added;
 * ``views``: the default extractor is invariant to the 8 dihedral views, so
   8 views give the features of 1 at the cost of 1 (checked, not assumed:
   the bench compares the vectors); a backbone pays 8x;
@@ -41,11 +42,13 @@ from ..core.fileio import write_bytes_atomic
 from ..core.progress import Bars
 from ..pipeline.dataset import DatasetConfig
 from ..pipeline.profiles import PROFILES
+from .splits import get_split, spread
 
 GROUP_TILES = (1, 2, 4, 9)
 TRAINING_SETS = ((150, 4), (300, 2), (300, 4), (600, 2), (600, 4), (1700, 9))
 RENDER_PRESETS = ("fast", "balanced")
 METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
+SPLIT = get_split("e1", "validation")  # the profiles and defaults are choices: made on validation only
 
 
 @dataclass
@@ -72,7 +75,7 @@ def _render_seconds_per_tile(preset: str, render_bench: Path) -> float:
 class _Experiment:
     """One training set and model, E1 targets rendered with its preset, per-tile target features."""
 
-    def __init__(self, dataset: DatasetConfig, views: int, targets: int, seed: int, root: Path,
+    def __init__(self, dataset: DatasetConfig, views: int, targets: int, root: Path,
                  render_bench: Path, bars: Bars | None = None):
         from ..nams import load_checkpoint
         from ..pipeline.dataset import job_tiles
@@ -83,17 +86,19 @@ class _Experiment:
         from ..sim.design import DesignSpace
         from ..sim.imageio import read_image
         from ..sim.textures import ensure_default_bank, ensure_heldout_bank
-        from .evaluate import rankings, render_targets
+        from .evaluate import rankings, render_split_targets
 
         self.dataset = dataset
         # E1 targets whose design the training set lacks are also scored alone ("unseen").
         self.training_designs = sample_designs(DesignSpace.load(dataset.space), dataset.designs, dataset.seed)
         models = ensure_models(dataset, ModelSettings(views=views), root, bars)
         self.nams = load_checkpoint(models.nams_path, "nams")
-        self.jobs, folder = render_targets("e1", targets, max(GROUP_TILES), seed, dataset.preset, root,
-                                           dataset.tile_px, dataset.pixel_size_m, bars)
+        self.seeds, self.per_seed = len(SPLIT.seeds), targets
+        self.jobs, folders = render_split_targets(SPLIT, targets, max(GROUP_TILES), dataset.preset, root,
+                                                  dataset.tile_px, dataset.pixel_size_m, bars)
         extractor = checkpoint_extractor(self.nams)
-        tiles = [[read_image(p)] for job in self.jobs for p in job_tiles(folder, job.name, max(GROUP_TILES))]
+        tiles = [[read_image(p)] for job, folder in zip(self.jobs, folders)
+                 for p in job_tiles(folder, job.name, max(GROUP_TILES))]
         started = time.perf_counter()
         self.tile_features = features_for_groups(tiles, extractor, 1).reshape(len(self.jobs), max(GROUP_TILES), -1)
         self.feature_seconds_per_tile = (time.perf_counter() - started) / len(tiles)
@@ -111,8 +116,9 @@ class _Experiment:
         from ..nams import adjoint_search, exhaustive_search
         from .evaluate import mean_scores, score, unseen_rows
 
-        n = targets or len(self.jobs)
-        feats = self.tile_features[:n, :group_tiles].mean(dim=1)
+        chosen = spread(self.seeds, self.per_seed, targets or len(self.jobs))  # the adjoint's few: every seed's
+        n, jobs = len(chosen), [self.jobs[i] for i in chosen]
+        feats = self.tile_features[chosen, :group_tiles].mean(dim=1)
         normed = self.nams.feature_norm.apply(feats)
         started = time.perf_counter()
         if method == "exhaustive":
@@ -122,8 +128,8 @@ class _Experiment:
                                      generator=torch.Generator().manual_seed(seed),
                                      **{"S": min(50, adjoint["M"]), **adjoint})
         search_seconds = (time.perf_counter() - started) / n
-        rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, self.jobs[:n])]
-        unseen = unseen_rows(rows, self.jobs[:n], self.training_designs)
+        rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, jobs)]
+        unseen = unseen_rows(rows, jobs, self.training_designs)
         metrics = {**mean_scores(rows), "unseen_targets": len(unseen),
                    **{f"unseen_{k}": v for k, v in mean_scores(unseen).items()}}
         return Point(knob, setting, metrics,
@@ -162,12 +168,18 @@ class _AllViews:
 
 
 def _search_points(nams_bench: Path, base: _Experiment) -> list[Point]:
-    """The search methods' E1 rows of ``make bench-nams`` as points: search time plus 9 tiles' features."""
+    """The search methods' E1 validation rows of ``make bench-nams`` as points: search time plus 9 tiles'
+    features."""
     try:
         bench = json.loads(nams_bench.read_text())
-        rows = bench["experiments"]["e1"]
+        rows = bench["splits"]["validation"]["experiments"]["e1"]
+        seeds = bench["splits"]["validation"]["settings"]["e1"]["seeds"]
     except (OSError, ValueError, KeyError) as exc:
-        raise MetaSimError(f"no E1 rows in {nams_bench} ({exc}); run `make bench-nams` first") from None
+        raise MetaSimError(f"no E1 validation rows in {nams_bench} ({exc}); run `make bench-nams` first") from None
+    if (seeds, bench.get("targets_per_seed")) != (list(SPLIT.seeds), base.per_seed):
+        raise MetaSimError(f"{nams_bench} was measured on {bench.get('targets_per_seed')} target groups of seeds "
+                           f"{seeds}, not {base.per_seed} of {list(SPLIT.seeds)}: run `make bench-nams` again "
+                           "with as many --targets")
     if bench.get("tiles_per_target") != max(GROUP_TILES):
         raise MetaSimError(f"{nams_bench} was measured on groups of {bench.get('tiles_per_target')} tiles, "
                            f"not {max(GROUP_TILES)}: run `make bench-nams` again")
@@ -182,40 +194,41 @@ def _search_points(nams_bench: Path, base: _Experiment) -> list[Point]:
                   if row.get("unseen") else {})
         points.append(Point("search", setting, {**{k: row[k] for k in METRICS}, **unseen},
                             round(row["seconds_per_target"] + features, 5), round(base.one_off, 1),
-                            int(row.get("targets", bench["targets"])),
+                            int(row["targets"]),
                             {"search_seconds_per_group": row["seconds_per_target"], "from": str(nams_bench)}))
     return points
 
 
-def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, root: Path | None = None,
+def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | None = None,
                    render_bench: Path = Path("benchmarks/render.json"),
                    nams_bench: Path = Path("benchmarks/nams.json"), presets=RENDER_PRESETS,
                    training_sets=TRAINING_SETS, profiles=tuple(PROFILES), bars: Bars | None = None) -> dict:
-    """Measure every knob alone, then every profile end to end; returns a JSON-able dict."""
+    """Measure every knob alone, then every profile end to end, on ``targets`` groups of each seed of E1's
+    validation split (the adjoint search on ``adjoint_targets`` of them); returns a JSON-able dict."""
     from ..core.cache import cache_root
 
     root = Path(root or cache_root())
     points: list[Point] = []
-    base = _Experiment(DatasetConfig(), 8, targets, seed, root, render_bench, bars)
+    base = _Experiment(DatasetConfig(), 8, targets, root, render_bench, bars)
     for g in GROUP_TILES:
         points.append(base.run("tiles per target group", str(g), group_tiles=g))
     points += _search_points(nams_bench, base)
     for designs, tiles in training_sets:
-        experiment = _Experiment(DatasetConfig(designs=designs, tiles=tiles), 8, targets, seed, root,
-                                 render_bench, bars)
+        experiment = _Experiment(DatasetConfig(designs=designs, tiles=tiles), 8, targets, root, render_bench, bars)
         points.append(experiment.run("training set", f"{designs} x {tiles}"))
     for preset in presets:
-        experiment = _Experiment(DatasetConfig(preset=preset), 8, targets, seed, root, render_bench, bars)
+        experiment = _Experiment(DatasetConfig(preset=preset), 8, targets, root, render_bench, bars)
         points.append(experiment.run("render preset", preset))
     for name in profiles:
         profile = PROFILES[name]
-        experiment = _Experiment(profile.dataset, profile.views, targets, seed, root, render_bench, bars)
+        experiment = _Experiment(profile.dataset, profile.views, targets, root, render_bench, bars)
         n = adjoint_targets if profile.method == "adjoint" else targets
         points.append(experiment.run("profile", name, profile.group_size, profile.method,
                                      profile.search_options(), targets=n))
     import torch
 
-    return {"experiment": "e1", "targets": targets, "adjoint_targets": adjoint_targets,
+    return {"experiment": "e1", "split": SPLIT.to_dict(), "targets_per_seed": targets,
+            "targets": len(base.jobs), "adjoint_targets": adjoint_targets,
             "tiles_per_target_group_default": max(GROUP_TILES),
             "views": _views_check(), "points": [asdict(p) for p in points],
             "profiles": {name: {**asdict(PROFILES[name]), "dataset": asdict(PROFILES[name].dataset)}
@@ -294,7 +307,7 @@ def plot_tradeoff(result: dict, path: Path) -> Path:
         axis.set_ylabel("E1 top-1, mean of flat and sloped")
         axis.grid(True, alpha=0.3)
         axis.legend(fontsize=8, loc="lower right")
-    fig.suptitle(f"meta-sim: accuracy bought by time (E1, {result['targets']} target groups; "
+    fig.suptitle(f"meta-sim: accuracy bought by time (E1 validation, {result['targets']} target groups; "
                  f"adjoint on {result['adjoint_targets']})")
     fig.tight_layout()
     buffer = io.BytesIO()

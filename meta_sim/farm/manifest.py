@@ -263,9 +263,9 @@ def render_setup(manifest: Manifest, with_banks: bool = True):
 
     banks = []
     if with_banks:
-        from ..sim.textures import ensure_default_bank, ensure_heldout_bank, load_bank
+        from ..sim.textures import ensure_default_bank, ensure_heldout_banks, load_bank
 
-        banks = [load_bank(manifest.bank) if manifest.bank else ensure_default_bank(), ensure_heldout_bank()]
+        banks = [load_bank(manifest.bank) if manifest.bank else ensure_default_bank(), *ensure_heldout_banks()]
     settings = RenderSettings(space=DesignSpace.from_dict(manifest.space), banks=banks,
                               preset=get_preset(manifest.preset), out_dir=Path(manifest.out_dir),
                               n_tiles=manifest.n_tiles, tile_px=manifest.tile_px,

@@ -72,6 +72,10 @@ class FeatureNorm:
         lead = features.shape[1] - sum(hist_blocks)
         if min(hist_blocks, default=1) < 1 or lead < 1:
             raise MetaSimError(f"histogram blocks {list(hist_blocks)} do not fit {features.shape[1]} features")
+        if len(features) and bool((features.amax(dim=0) == features.amin(dim=0)).all()):
+            raise MetaSimError(f"the {len(features)} training feature vectors are all the same: no feature tells "
+                               "one design from another, so nothing can be learnt (are the training tiles blank, "
+                               "or all of one design?)")
         norm = cls._fit_lead(features[:, :lead], eps, whiten, designs, shrink)
         if not hist_blocks:
             return norm
@@ -95,6 +99,8 @@ class FeatureNorm:
             spread = singular / math.sqrt(len(x))
             # Directions without spread in the training set cannot be whitened.
             keep = min(whiten, int((spread > eps * spread[0].clamp_min(eps)).sum()))
+            if keep == 0:  # every leading dimension constant (the histograms vary): nothing to whiten
+                return cls(mean.float(), std.float())
             dof = None if designs is None else _residual_dof(designs)
             if dof is not None and 2 <= dof < keep:
                 keep = dof // 2  # what the noise covariance can be estimated for (see the class docstring)

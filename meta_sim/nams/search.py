@@ -405,7 +405,9 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
 
 # --- entry points --------------------------------------------------------------------------------
 def resolve_method(space: DesignSpace, method: str) -> str:
-    """"auto" becomes "exhaustive" for a discrete space of at most MAX_EXHAUSTIVE_DESIGNS, else "adjoint"."""
+    """"auto" becomes "exhaustive" for a discrete space of at most MAX_EXHAUSTIVE_DESIGNS, else "adjoint".
+
+    The exhaustive search was made the default on E1/E2's validation split (docs/design.md, "Splits")."""
     if method not in ("auto", "adjoint", "exhaustive"):
         raise MetaSimError(f"unknown search method {method!r}; use auto, adjoint or exhaustive")
     if method != "auto":

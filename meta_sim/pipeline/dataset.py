@@ -40,7 +40,8 @@ class DatasetConfig:
 
     600 designs x 2 tiles rather than 300 x 4: the same rendering, and more
     designs is what NAMS needs to infer designs it was not trained on (rows
-    "training set" of `make bench-tradeoff` in docs/benchmarks.md).
+    "training set" of `make bench-tradeoff` in docs/benchmarks.md, on E1's
+    validation split).
     """
 
     designs: int = 600

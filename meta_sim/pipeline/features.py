@@ -93,8 +93,8 @@ class ColourTexture:
 
     The stretch (1/4 rather than 1/3 or 1/2), the conditional form of
     item 3 and its weight were chosen on "fast" renders of every bank
-    texture in two cities, by how often a design's nearest neighbour in the
-    other city is the same design: the plain cone and a joint histogram for
+    texture in two cities (no E1/E2 target), by how often a design's nearest
+    neighbour in the other city is the same design: the plain cone and a joint histogram for
     item 3 tell far fewer roof textures apart.
 
     Every statistic is invariant to rotations by 90 degrees and flips (2x2

@@ -210,7 +210,7 @@ class _Run:
 
 
 def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space) -> None:
-    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+    from ..sim.textures import ensure_default_bank, ensure_heldout_banks
     from ..sim.textures.pngio import write_png
     from ..sim.textures.sheet import render_sheet
 
@@ -234,7 +234,7 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
         lines.append(f"- {name}: " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items()))
     write_text_atomic(out_dir / "report.md", "\n".join(lines) + "\n")
 
-    banks = [ensure_default_bank(), ensure_heldout_bank()]
+    banks = [ensure_default_bank(), *ensure_heldout_banks()]
 
     def swatch(texture_id):
         bank = next((b for b in banks if b.contains(texture_id)), None)

@@ -25,7 +25,8 @@ class Profile:
         return {"M": self.M, "iterations": self.iterations} if self.method == "adjoint" else {}
 
 
-# Chosen on `make bench-tradeoff`'s training-set rows (docs/benchmarks.md, "Speed against accuracy"):
+# Chosen on `make bench-tradeoff`'s training-set rows (docs/benchmarks.md, "Speed against accuracy"), on E1's
+# validation split (docs/design.md, "Splits"):
 # the number of designs matters, the tiles per design do not. balanced is the default; fast halves
 # its rendering; paper is the paper's protocol.
 PROFILES = {

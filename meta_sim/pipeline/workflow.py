@@ -43,7 +43,9 @@ class ModelSettings:
     nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
     train: dict = field(default_factory=dict)  # TrainConfig overrides
     seed: int = 0
-    # Add the roof-colour histograms to the features (meta_sim.pipeline.roofcolour); needs the tiles' labels.
+    # The next three were chosen on E1/E2's validation split (bench-nams's ablation rows; docs/design.md,
+    # "Splits"). Add the roof-colour histograms to the features (meta_sim.pipeline.roofcolour); needs the
+    # tiles' labels.
     roof_colour: bool = True
     # What finds the roofs they count: roofcolour.ROOF_FINDERS (the learnt segmenter, or colour alone).
     roof_finder: str = "segmenter"

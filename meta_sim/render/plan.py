@@ -12,7 +12,7 @@ from ..sim.layout import parse_style, style_text
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
 from ..sim.sensor import get_sensor
-from ..sim.textures import ensure_default_bank, ensure_heldout_bank, load_bank
+from ..sim.textures import ensure_default_bank, ensure_heldout_banks, load_bank
 from .jobs import RenderSettings, design_jobs, sample_designs, sample_population, single_job
 
 # Bounds of the whole-number options: a city seed is a numpy seed (not negative); beyond these a render
@@ -59,8 +59,8 @@ def plan(options: dict):
         space = DesignSpace.for_textures(f"bank:{banks[0].name}", banks[0].ids("flat"), banks[0].ids("sloped"))
     else:
         space = DesignSpace.load()
-    heldout = ensure_heldout_bank()
-    extra = {p.name: heldout.ids(p.texture_kind) for p in space.parameters
+    heldout = ensure_heldout_banks()
+    extra = {p.name: [t for bank in heldout for t in bank.ids(p.texture_kind)] for p in space.parameters
              if getattr(p, "texture_kind", None)}
     if options.get("design") is not None:
         jobs = [single_job(space, space.parse(options["design"], extra), options["seed"])]
@@ -76,7 +76,7 @@ def plan(options: dict):
     else:
         designs = sample_designs(space, options["random_designs"], options["seed"])
         jobs = design_jobs(space, designs, options["seed"], options["cities"])
-    settings = RenderSettings(space=space, banks=banks + [heldout], preset=preset,
+    settings = RenderSettings(space=space, banks=banks + heldout, preset=preset,
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
                               preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter,

@@ -54,7 +54,8 @@ class RenderPreset:
 # Workbench's studio light renders a surface far darker than the path-traced presets' sun and sky do,
 # so fast renders are scaled up to their brightness: a model trained on one preset then meets
 # targets at the brightness it learnt. How the value was chosen is in docs/design.md ("The fast
-# preset's exposure"); `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
+# preset's exposure"): on the training sets' renders, no E1/E2 target ("Splits");
+# `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
 FAST_EXPOSURE = 6.0
 
 # Every preset ends with a tone curve that does not clip: the identity up to a linear 0.6 (display

@@ -121,7 +121,7 @@ def test_appearance_table_lists_every_metric_with_the_nams_interval():
 def test_bootstrap_intervals_hold_the_mean_and_narrow_with_more_groups():
     import numpy as np
 
-    from meta_sim.experiments.bench import bootstrap_intervals
+    from meta_sim.experiments.evaluate import bootstrap_intervals
 
     rng = np.random.default_rng(3)
     few = [{"hit": float(h), "error": e} for h, e in zip(rng.random(20) < 0.7, rng.random(20))]

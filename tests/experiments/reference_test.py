@@ -55,8 +55,12 @@ def test_bench_reference_on_a_small_rendered_training_set(bank, heldout_bank, tm
     # every texture of the training set with a roof of its kind in view has a reference histogram
     for kind, param in (("flat", "flat_roof"), ("sloped", "sloped_roof")):
         assert 1 <= result["bank_textures_seen"][kind] <= len({d[param] for d in designs})
-    for experiment in ("e1", "e2"):
-        row = result["experiments"][experiment]["roof_colour_reference"]
-        assert row["targets"] == 2
-        assert all(0.0 <= row[f"{kind}_top{n}"] <= 1.0 for kind in ("flat", "sloped") for n in (1, 10))
-    assert format_reference_table(result).count("\n") == 3
+    for split, seeds in (("validation", [1, 2, 7]), ("test", [21, 22, 23])):
+        for experiment in ("e1", "e2"):
+            row = result["splits"][split]["experiments"][experiment]["roof_colour_reference"]
+            assert row["targets"] == 6 and row["seeds"] == seeds
+            assert all(0.0 <= row[f"{kind}_top{n}"] <= 1.0 for kind in ("flat", "sloped") for n in (1, 10))
+        assert result["splits"][split]["experiments"]["e2"]["roof_colour_reference"]["heldout"] == (
+            "heldout-v2" if split == "test" else "heldout-v1")
+    table = format_reference_table(result)
+    assert table.count("\n") == 5 and "| E2 | test |" in table

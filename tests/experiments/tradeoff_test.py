@@ -65,7 +65,8 @@ def test_stage_times_come_from_the_measured_parts(tmp_path):
     render.write_text(json.dumps({"presets": {"fast": {"seconds_per_tile": 0.1}}}))
     result = {"dataset": {"designs": 300, "tiles": 4, "preset": "fast"}, "feature_seconds_per_group": 0.2,
               "train_seconds": {"train_nams": 120.0},
-              "experiments": {"e1": {"nams_exhaustive": {"seconds_per_target": 0.05}}}}
+              "splits": {"test": {"experiments": {"e1": {"nams_exhaustive": {"seconds_per_target": 0.05}}}},
+                         "validation": {"experiments": {"e1": {"nams_exhaustive": {"seconds_per_target": 9.0}}}}}}
     stages = dict((name.split(":")[0].split(" (")[0], seconds) for name, seconds, _ in stage_times(result, render))
     assert stages["simulation"] == pytest.approx(120.0)  # 1,200 tiles x 0.1 s
     assert stages["training NAMS"] == 120.0
@@ -76,28 +77,33 @@ def test_stage_times_come_from_the_measured_parts(tmp_path):
                   stage_times({**result, "roof_segmenter_seconds": 300.0}, render))
     assert stages["learning the roof segmenter"] == 300.0
     assert stage_times(result, tmp_path / "missing.json") == []
+    assert stage_times({k: v for k, v in result.items() if k != "train_seconds"}, render) == []  # a quick run
 
 
-def test_search_points_come_from_the_nams_benchmark(tmp_path):
+def test_search_points_come_from_the_nams_benchmarks_validation_rows(tmp_path):
     from types import SimpleNamespace
 
     from meta_sim.experiments.tradeoff import _search_points
 
-    row = {"flat_top1": 0.9, "flat_top10": 1.0, "sloped_top1": 0.8, "sloped_top10": 0.9}
-    bench = {"targets": 100, "tiles_per_target": 9,
-             "experiments": {"e1": {"uniform": {**row, "seconds_per_target": 0.0},
-                                    "nams_exhaustive": {**row, "seconds_per_target": 0.004, "targets": 100},
-                                    "nams_adjoint_M1000_it200": {**row, "seconds_per_target": 16.0, "targets": 20}}}}
+    bench = _nams_result()
+    bench["splits"]["validation"]["experiments"]["e1"]["uniform"] = _nams_row(0.02, 0.0)
     path = tmp_path / "nams.json"
     path.write_text(json.dumps(bench))
-    base = SimpleNamespace(feature_seconds_per_tile=0.01, one_off=300.0)
+    base = SimpleNamespace(per_seed=100, feature_seconds_per_tile=0.01, one_off=300.0)
     points = {p.setting: p for p in _search_points(path, base)}
-    assert set(points) == {"exhaustive", "adjoint M=1000, 200 it"}
-    assert points["exhaustive"].seconds_per_group == pytest.approx(0.004 + 0.09)
-    assert points["adjoint M=1000, 200 it"].targets == 20
+    assert set(points) == {"exhaustive", "adjoint M=1000, 200 it", "adjoint M=64, 100 it", "adjoint M=16, 50 it"}
+    assert points["exhaustive"].seconds_per_group == pytest.approx(0.002 + 0.09)
+    assert points["adjoint M=1000, 200 it"].targets == 20 and points["exhaustive"].targets == 300
+    assert points["adjoint M=1000, 200 it"].metrics["flat_top1"] == 0.95  # validation's, not test's 0.5
     bench["tiles_per_target"] = 4
     path.write_text(json.dumps(bench))
     with pytest.raises(MetaSimError, match="groups of 4 tiles"):
+        _search_points(path, base)
+    path.write_text(json.dumps(_nams_result(validation_targets_per_seed=20)))
+    with pytest.raises(MetaSimError, match="run `make bench-nams` again"):
+        _search_points(path, base)
+    path.write_text(json.dumps({"targets": 100, "experiments": {}}))  # a bench-nams result from before the splits
+    with pytest.raises(MetaSimError, match="no E1 validation rows"):
         _search_points(path, base)
     with pytest.raises(MetaSimError, match="bench-nams"):
         _search_points(tmp_path / "missing.json", base)
@@ -121,3 +127,43 @@ def test_torch_side_commands_take_their_thread_count_from_meta_sim_threads(tmp_p
         assert result.exit_code == 2 and "META_SIM_THREADS" in result.output
     finally:
         torch.set_num_threads(before)
+
+
+def _nams_row(top1, seconds, targets=300):
+    metrics = {"flat_top1": top1, "flat_top10": 1.0, "sloped_top1": top1, "sloped_top10": 0.9}
+    return {**metrics, "seconds_per_target": seconds, "targets": targets,
+            "intervals": {k: [v - 0.05, min(1.0, v + 0.05)] for k, v in metrics.items()}}
+
+
+def _nams_result(validation_targets_per_seed=100):
+    from meta_sim.experiments.splits import get_split
+
+    def split(name, paper_top1):
+        rows = {"nams_exhaustive": _nams_row(0.9, 0.002),
+                "nams_adjoint_M1000_it200": _nams_row(paper_top1, 30.0, 20),
+                "nams_adjoint_M64_it100": _nams_row(paper_top1 - 0.04, 1.0, 20),
+                "nams_adjoint_M16_it50": _nams_row(paper_top1 - 0.3, 0.1, 20)}
+        return {"settings": {e: get_split(e, name).to_dict() for e in ("e1", "e2")},
+                "experiments": {"e1": rows, "e2": dict(rows)}}
+
+    return {"dataset": {"designs": 600, "tiles": 2, "preset": "fast"}, "architecture": "additive",
+            "train_seconds_other_architectures": {}, "roof_finder": "segmenter", "roof_weight_power": 4.0,
+            "targets_per_seed": validation_targets_per_seed, "adjoint_targets": 20, "tiles_per_target": 9,
+            "feature_seconds_per_group": 0.2,
+            "splits": {"validation": split("validation", 0.95), "test": split("test", 0.5)}}
+
+
+def test_the_fastest_adjoint_setting_is_chosen_on_validation_rows_and_the_table_puts_test_first():
+    from meta_sim.experiments.bench import fastest_adjoint, format_nams_table
+
+    result = _nams_result()
+    sweep = ((1000, 200), (64, 100), (16, 50))
+    assert fastest_adjoint(result["splits"]["validation"]["experiments"]["e1"], sweep) == {"M": 64, "iterations": 100}
+    result["fastest_adjoint_keeping_e1"] = {"M": 64, "iterations": 100}
+    table = format_nams_table(result)
+    rows = [line for line in table.splitlines() if line.startswith("| E1 | nams_exhaustive |")]
+    assert [r.split(" | ")[2] for r in rows] == ["test", "validation"]  # test first, validation beside it
+    assert "| 0.900 [0.850, 0.950] |" in rows[0]
+    assert "E2 seeds 21, 22, 23 with heldout-v2" in table and "E2 seeds 1, 2, 7 with heldout-v1" in table
+    assert "on the validation split: M=64, 100 iterations" in table
+    assert "stage (E4)" not in table  # no training timed: no stage times

@@ -289,6 +289,19 @@ def test_zero_variance_features_train_to_a_finite_model():
     assert torch.all(fit.norm.std[:4] == 1.0)
 
 
+def test_features_that_never_vary_are_a_clear_error_unless_the_histograms_do():
+    """`make bench-stability` found this: with every feature constant the whitening had no component
+    and failed on an empty eigenvalue list (an IndexError, not a message)."""
+    designs, features = _toy()
+    with pytest.raises(MetaSimError, match="all the same: no feature tells one design from another"):
+        train_nams(designs, torch.full_like(features, 3.0), NAMSConfig(8, 12, hidden=SMALL), _quick(max_epochs=1))
+    # The leading features constant, a histogram block that varies: nothing to whiten, a finite model.
+    varied = torch.cat([torch.full((len(designs), 8), 3.0), designs[:, 3:7] + 0.1], dim=1)
+    fit = train_nams(designs, varied, NAMSConfig(8, 12, hidden=SMALL), _quick(max_epochs=2), hist_blocks=(4,))
+    assert fit.norm.components is None and all(math.isfinite(v) for v in fit.history["train_loss"])
+    assert torch.isfinite(fit.norm.apply(varied)).all()
+
+
 _IN_A_FRESH_PROCESS = """
 import hashlib, sys
 import torch

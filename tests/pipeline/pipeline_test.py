@@ -73,6 +73,47 @@ def test_eval_reuses_its_cached_training_set_and_model(evaluated, tiny_env, tmp_
                {k: v for k, v in second[method].items() if k != "seconds_per_target"}
 
 
+def test_eval_on_the_test_split_draws_every_seed_and_heldout_v2(evaluated, tiny_env, tmp_path):
+    result = _cli("eval", "e2", "--out", tmp_path, "--split", "test", "--targets", 1, "--target-tiles", 2, "-M", 16,
+                  "--iterations", 5, "-S", 4, "--no-ms2", "--cache", tiny_env, *TINY)
+    assert result.exit_code == 0, result.output
+    assert "test split's" in result.output and "[" in result.output  # intervals in the table
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert results["split"] == {"experiment": "e2", "name": "test", "seeds": [21, 22, 23], "heldout": "heldout-v2"}
+    assert results["targets"] == 3
+    from meta_sim.sim.textures import ensure_heldout_bank
+
+    v2 = set(ensure_heldout_bank(name="heldout-v2").ids())
+    assert all({t["truth"]["flat_roof"], t["truth"]["sloped_roof"]} <= v2 for t in results["targets_detail"])
+    for metrics in results["methods"].values():
+        for key, (low, high) in metrics["intervals"].items():
+            assert low <= metrics[key] <= high
+
+
+def test_bench_nams_reports_the_test_split_beside_validation(evaluated, tiny_env):
+    from meta_sim.experiments.bench import bench_nams, format_nams_table
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    result = bench_nams(targets=1, adjoint_targets=2, root=tiny_env, dataset=dataset, settings=settings, tiles=2,
+                        sweep=((16, 5), (4, 5)), variants=False, time_training=False)
+    assert list(result["splits"]) == ["validation", "test"]
+    for split, seeds in (("validation", [1, 2, 7]), ("test", [21, 22, 23])):
+        settings_of = result["splits"][split]["settings"]
+        assert settings_of["e1"]["seeds"] == settings_of["e2"]["seeds"] == seeds
+        assert settings_of["e2"]["heldout"] == ("heldout-v1" if split == "validation" else "heldout-v2")
+        for rows in result["splits"][split]["experiments"].values():
+            assert rows["nams_exhaustive"]["targets"] == 3 and rows["nams_adjoint_M16_it5"]["targets"] == 2
+            assert set(rows["nams_exhaustive"]["intervals"]) == {"flat_top1", "flat_top10", "sloped_top1",
+                                                                 "sloped_top10"}
+    assert result["fastest_adjoint_keeping_e1"]["M"] in (16, 4)
+    table = format_nams_table(result)
+    assert "| E2 | nams_exhaustive | test |" in table and "| E2 | nams_exhaustive | validation |" in table
+    assert "E2 seeds 21, 22, 23 with heldout-v2" in table
+
+
 def _target_folder(tmp_path, tiny_env):
     folder = tmp_path / "targets"
     result = _cli("render", "--design", "flat_roof=3,sloped_roof=5", "--seed", 777, "--tiles", 4,

@@ -28,6 +28,7 @@ from meta_sim.sim.textures import (
     ensure_default_bank,
     ensure_heldout_bank,
     generate,
+    heldout_bank_dir,
     hsv_cone_histogram,
     load_bank,
     load_similarity,
@@ -40,6 +41,7 @@ from meta_sim.sim.textures import (
     write_similarity,
 )
 from meta_sim.sim.textures.pngio import encode_png
+from meta_sim.sim.textures.procedural import HELDOUT_SETS
 
 HASHES = Path(__file__).parent / "data" / "texture_hashes.json"
 ID_PATTERN = re.compile(r"^(flat|sloped)-[a-z0-9]+(-[a-z0-9]+)*$")
@@ -55,8 +57,17 @@ def heldout(heldout_bank):
 
 
 @pytest.fixture(scope="module")
-def images(bank, heldout):
-    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout) for e in b.entries}
+def heldout_v2(heldout_v2_bank):
+    return heldout_v2_bank
+
+
+@pytest.fixture(scope="module")
+def images(bank, heldout, heldout_v2):
+    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout, heldout_v2) for e in b.entries}
+
+
+def _all_recipes():
+    return recipes() + sum((recipes(heldout=name) for name in HELDOUT_SETS), ())
 
 
 # --- recipes and generated images -------------------------------------------
@@ -83,6 +94,59 @@ def test_heldout_textures_are_new_roofs_not_in_the_bank(bank, heldout, images):
     assert sim.matrix.max() < 0.98  # no near-duplicate of a bank texture
 
 
+def test_heldout_v2_is_a_second_set_of_new_roofs(bank, heldout, heldout_v2):
+    assert heldout.name == "heldout-v1" and heldout_v2.name == "heldout-v2"
+    assert len(heldout_v2.ids("flat")) >= 10 and len(heldout_v2.ids("sloped")) >= 10
+    others = set(bank.ids()) | set(heldout.ids())
+    assert not set(heldout_v2.ids()) & others
+    assert not {e.sha256 for e in heldout_v2.entries} & {e.sha256 for b in (bank, heldout) for e in b.entries}
+    for entry in heldout_v2.entries:
+        assert ID_PATTERN.match(entry.id) and entry.id.startswith(entry.kind + "-")
+        assert entry.source == f"procedural:{entry.id}@v1"
+    sim = load_similarity(heldout_v2.root / SIMILARITY_TO_DEFAULT_FILE)
+    assert sim.rows == tuple(heldout_v2.ids()) and sim.cols == tuple(bank.ids())
+    assert heldout_v2.root == heldout_bank_dir(name="heldout-v2") != heldout.root
+    with pytest.raises(MetaSimError, match="unknown held-out set 'heldout-v3'"):
+        ensure_heldout_bank(name="heldout-v3")
+
+
+def _nearest(rows: np.ndarray, cols: np.ndarray, same: bool = False) -> np.ndarray:
+    """Each row's highest similarity to a column (not itself when rows and columns are one set)."""
+    sim = similarity_matrix(rows, cols)
+    if same:
+        np.fill_diagonal(sim, -1.0)
+    return sim.max(axis=1)
+
+
+def test_heldout_v2_is_unlike_the_bank_and_heldout_v1_yet_ranks_the_bank(bank, heldout, heldout_v2, images):
+    """E2's test textures must not be the validation textures in other colours' clothing, nor so far from
+    everything that the HSV ranking of the bank is a tie (a top-10 hit would then be a coin toss).
+
+    Unlike: a typical bank texture (the median) is this close to its nearest bank neighbour of its
+    kind; every heldout-v2 texture is further than that from everything in the bank and in heldout-v1,
+    of either kind, and the set as a whole is further from them than heldout-v1 is from the bank.
+    Rankable: each shares some colours (similarity above 0.01) with at least 10 bank textures of its
+    kind, so its top 10 are ranked by colour, not drawn by the tie rule."""
+    def hists(b, kind=None):
+        return np.stack([hsv_cone_histogram(images[i]) for i in b.ids(kind)])
+
+    known = np.concatenate([hists(bank), hists(heldout)])
+    for kind in ("flat", "sloped"):
+        typical = np.median(_nearest(hists(bank, kind), hists(bank, kind), same=True))
+        v2 = hists(heldout_v2, kind)
+        nearest_known = _nearest(v2, known)
+        assert nearest_known.max() < typical, (kind, nearest_known.max(), typical)
+        assert np.median(nearest_known) < np.median(_nearest(hists(heldout, kind), hists(bank))), kind
+        shared = (similarity_matrix(v2, hists(bank, kind)) > 0.01).sum(axis=1)
+        assert shared.min() >= 10, (kind, dict(zip(heldout_v2.ids(kind), shared)))
+
+
+def test_heldout_v2_builds_to_the_same_bytes_twice(heldout_v2, tmp_path):
+    _assert_same_files(heldout_v2.root, build_default_bank(tmp_path / "again", heldout="heldout-v2").root)
+    with pytest.raises(MetaSimError, match="unknown held-out set"):
+        build_default_bank(tmp_path / "bad", size=16, heldout="heldout-v0")
+
+
 def _wrap_is_smooth(img: np.ndarray, axis: int) -> bool:
     """The mean difference across the wrap-around edge is comparable to the
     interior neighbour differences: no worse than the worst interior line
@@ -104,7 +168,7 @@ def test_every_texture_is_periodic_by_construction():
     # u + 1 is not exactly u in floating point, so allow rare 1-step flips.
     from meta_sim.sim.textures.procedural import _render
 
-    for recipe in recipes() + recipes(heldout=True):
+    for recipe in _all_recipes():
         one = generate(recipe, 48)
         diff = np.abs(_render(recipe, 48, span=2).astype(int) - np.tile(one, (2, 2, 1)))
         assert diff.max() <= 1 and (diff > 0).mean() < 1e-3, recipe.id
@@ -124,17 +188,21 @@ def test_generate_honours_size_and_rejects_tiny_sizes():
         generate(recipe, 4)
 
 
-def test_building_twice_gives_byte_identical_files(bank, tmp_path):
-    again = build_default_bank(tmp_path / "again")
-    files = sorted(p.relative_to(bank.root) for p in bank.root.rglob("*") if p.is_file())
-    assert files == sorted(p.relative_to(again.root) for p in again.root.rglob("*") if p.is_file())
+def _assert_same_files(one: Path, other: Path) -> None:
+    files = sorted(p.relative_to(one) for p in one.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(other) for p in other.rglob("*") if p.is_file())
     for rel in files:
-        assert (bank.root / rel).read_bytes() == (again.root / rel).read_bytes(), rel
+        assert (one / rel).read_bytes() == (other / rel).read_bytes(), rel
 
 
-def test_pixels_match_the_committed_hashes(bank, heldout):
+def test_building_twice_gives_byte_identical_files(bank, tmp_path):
+    _assert_same_files(bank.root, build_default_bank(tmp_path / "again").root)
+
+
+def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2):
     expected = json.loads(HASHES.read_text())["256"]
-    actual = {e.id: e.sha256 for b in (bank, heldout) for e in b.entries}
+    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2) for e in b.entries}
+    assert set(expected) == set(actual)
     changed = sorted(i for i in expected if actual.get(i) != expected[i])
     assert not changed, (
         f"pixels changed for {changed}; if intended, bump RECIPE_VERSION and run "
@@ -444,10 +512,24 @@ def test_contact_sheet_is_written_with_the_expected_size(bank, tmp_path):
 
 def _write_hashes():
     """Regenerate tests/data/texture_hashes.json (only when recipes change on purpose)."""
-    hashes = {r.id: pixel_sha256(generate(r, 256)) for r in recipes() + recipes(heldout=True)}
+    hashes = {r.id: pixel_sha256(generate(r, 256)) for r in _all_recipes()}
     HASHES.parent.mkdir(parents=True, exist_ok=True)
     HASHES.write_text(json.dumps({"256": hashes}, indent=1, sort_keys=True) + "\n")
 
 
 if __name__ == "__main__" and sys.argv[1:] == ["--write-hashes"]:
     _write_hashes()
+
+
+def test_the_cli_builds_either_held_out_set(tmp_path):
+    from click.testing import CliRunner
+
+    from meta_sim.cli import main
+
+    for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2")):
+        out = tmp_path / name
+        result = CliRunner().invoke(main, ["textures", "build", "--size", "16", "--heldout", *args, "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        assert load_bank(out).name == name
+        assert load_similarity(out / SIMILARITY_TO_DEFAULT_FILE).rows == tuple(recipe.id for recipe in
+                                                                               recipes(heldout=name))

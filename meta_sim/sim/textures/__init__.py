@@ -1,4 +1,4 @@
-"""Roof texture banks: the procedural default bank, the held-out bank, users'
+"""Roof texture banks: the procedural default bank, the held-out sets, users'
 photo folders, the HSV colour similarity between textures, and contact
 sheets. Pure Python + numpy (OpenImageIO only to read photos); never imports
 bpy or torch."""
@@ -17,13 +17,14 @@ from .bank import (
     default_bank_dir,
     ensure_default_bank,
     ensure_heldout_bank,
+    ensure_heldout_banks,
     heldout_bank_dir,
     load_bank,
     pixel_sha256,
     save_manifest,
 )
 from .pngio import write_png
-from .procedural import Recipe, generate, recipe_by_id, recipes
+from .procedural import HELDOUT_SETS, Recipe, generate, recipe_by_id, recipes
 from .sheet import contact_sheet
 from .similarity import (
     Similarity,
@@ -37,6 +38,7 @@ from .similarity import (
 )
 
 __all__ = [
+    "HELDOUT_SETS",
     "BANK_FORMAT",
     "BANK_VERSION",
     "KINDS",
@@ -54,6 +56,7 @@ __all__ = [
     "default_bank_dir",
     "ensure_default_bank",
     "ensure_heldout_bank",
+    "ensure_heldout_banks",
     "generate",
     "heldout_bank_dir",
     "hsv_cone_histogram",

@@ -13,7 +13,7 @@ of one repeat of the image in metres (its height scales with the aspect
 ratio). Banks also hold ``similarity.json`` (see ``similarity.py``).
 
 Banks come from three places: the default procedural bank and the held-out
-bank (cached under ``$META_SIM_CACHE`` or ``~/.cache/meta-sim`` and built on
+sets ``heldout-v1`` and ``heldout-v2`` (cached under ``$META_SIM_CACHE`` or ``~/.cache/meta-sim`` and built on
 first use), or a user's folder of photos (``build_bank_from_folder``).
 """
 
@@ -244,17 +244,20 @@ def check_size(size) -> int:
     return size
 
 
-def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: bool = False,
+def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: bool | str = False,
                        progress: Progress | None = None) -> TextureBank:
-    """Generate the default (or held-out) procedural bank into ``out_dir``.
+    """Generate the default procedural bank, or a held-out set (``heldout``: True for the first, or a
+    name of ``procedural.HELDOUT_SETS``), into ``out_dir``.
 
     Writes ``<kind>/<id>.png``, ``manifest.json`` and ``similarity.json``
-    (bank against itself); the held-out bank also gets
+    (bank against itself); a held-out set also gets
     ``similarity_to_default.json`` (held-out rows, default-bank columns).
     ``progress`` is told of each texture generated (``len(procedural.recipes(heldout))`` in all);
     an exception it raises (a cancel) stops the build.
     """
     check_size(size)
+    if isinstance(heldout, str):
+        _heldout_name(heldout)
     out = Path(out_dir)
     recipes = procedural.recipes(heldout=heldout)
     images = []
@@ -265,14 +268,14 @@ def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: boo
     by_id = {r.id: r for r in recipes}
     bank = _write_bank(
         out,
-        f"{'heldout' if heldout else 'default'}-v{procedural.RECIPE_VERSION}",
+        procedural.set_name(heldout),
         [(r.id, r.name, r.kind, img) for r, img in zip(recipes, images)],
         lambda texture_id: (by_id[texture_id].repeat_m, by_id[texture_id].source),
     )
     hists = _histograms(images)
     ids = tuple(r.id for r in recipes)
     save_similarity(Similarity(ids, ids, similarity_matrix(hists, hists)), out / SIMILARITY_FILE)
-    if heldout:
+    if procedural.heldout_set(heldout) is not None:
         default = procedural.recipes()
         default_hists = _histograms(procedural.generate(r, size) for r in default)
         save_similarity(
@@ -380,8 +383,17 @@ def default_bank_dir(size: int = 256, cache_dir: str | os.PathLike | None = None
     return cache_root(cache_dir) / "banks" / f"default-v{procedural.RECIPE_VERSION}-{size}"
 
 
-def heldout_bank_dir(size: int = 256, cache_dir: str | os.PathLike | None = None) -> Path:
-    return cache_root(cache_dir) / "banks" / f"heldout-v{procedural.RECIPE_VERSION}-{size}"
+def heldout_bank_dir(size: int = 256, cache_dir: str | os.PathLike | None = None,
+                     name: str = procedural.FIRST_HELDOUT) -> Path:
+    """The cache folder of the held-out set ``name`` (``heldout-v1`` or ``heldout-v2``)."""
+    return cache_root(cache_dir) / "banks" / f"{procedural.set_name(_heldout_name(name))}-{size}"
+
+
+def _heldout_name(name: str) -> str:
+    """``name`` if it is a held-out set, else MetaSimError listing them."""
+    if name not in procedural.HELDOUT_SETS:
+        raise MetaSimError(f"unknown held-out set {name!r}; choose one of {', '.join(procedural.HELDOUT_SETS)}")
+    return name
 
 
 def _ensure(final: Path, build: Callable[[Path], TextureBank]) -> TextureBank:
@@ -403,6 +415,13 @@ def ensure_default_bank(size: int = 256, cache_dir: str | os.PathLike | None = N
     return _ensure(default_bank_dir(size, cache_dir), lambda d: build_default_bank(d, size, progress=progress))
 
 
-def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = None) -> TextureBank:
-    """The cached held-out bank (textures not in the default bank), built on first use."""
-    return _ensure(heldout_bank_dir(size, cache_dir), lambda d: build_default_bank(d, size, heldout=True))
+def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = None,
+                        name: str = procedural.FIRST_HELDOUT) -> TextureBank:
+    """The cached held-out set ``name`` (textures not in the default bank), built on first use:
+    ``heldout-v1`` (E2's validation textures) or ``heldout-v2`` (E2's test textures)."""
+    return _ensure(heldout_bank_dir(size, cache_dir, name), lambda d: build_default_bank(d, size, heldout=name))
+
+
+def ensure_heldout_banks(size: int = 256, cache_dir: str | os.PathLike | None = None) -> list[TextureBank]:
+    """Every held-out set, cached: what a render looks texture ids up in besides its bank."""
+    return [ensure_heldout_bank(size, cache_dir, name) for name in procedural.HELDOUT_SETS]

@@ -1291,11 +1291,95 @@ HELDOUT_SLOPED_RECIPES: tuple[Recipe, ...] = (
 )
 
 
-def recipes(kind: str | None = None, heldout: bool = False) -> tuple[Recipe, ...]:
-    """The default (or held-out) recipes, flat first, optionally one kind."""
-    flat, sloped = (
-        (HELDOUT_FLAT_RECIPES, HELDOUT_SLOPED_RECIPES) if heldout else (FLAT_RECIPES, SLOPED_RECIPES)
-    )
+# The second held-out set: E2's test textures (meta_sim/experiments/splits.py), never looked at to choose
+# anything. Its colours are those neither the bank nor the first held-out set has (lime, yellow, orange,
+# pink, lavender, cobalt, sky blue, teal, cream), on the same families, each with enough grey or shadow
+# that the HSV similarity still ranks the bank's textures for it: every one shares colours with at least
+# ten bank textures of its kind, and none is as close to a bank or first held-out texture as a typical
+# bank texture is to its nearest neighbour (tests/sim/textures_test.py measures both).
+HELDOUT_V2_FLAT_RECIPES: tuple[Recipe, ...] = (
+    _flat("deck-lime", "Lime-green painted metal deck", 6.0, "profiled", **_deck("#8ab83a")),
+    _flat("deck-yellow", "Yellow painted metal deck", 6.0, "profiled", **_deck("#c8a830")),
+    _flat("turf-artificial", "Artificial turf", 4.0, "vegetation", rosette_m=0.02, patch_m=2.0,
+          palette=_p("#8ac040", "#7ab030", "#9ad050"), bare=0.0, substrate="#3a3a30"),
+    _flat("gravel-blue-glass", "Blue glass gravel", 3.0, "gravel", stone_m=0.03,
+          palette=_p(("#3a7ac0", 3), ("#2a5aa0", 2), ("#5a9ad8", 2))),
+    _flat("coating-cream", "Cream roof coating", 8.0, "coating", colour="#f0e0a0", substrate="#6a6a66", peel=0.08),
+    _flat("court-blue", "Blue sports-court coating", 10.0, "coating", colour="#3a62a8", substrate="#5a5a5a",
+          peel=0.3, roller=0.04, cracks=0.6, stains=dict(colour="#606060", amount=0.6, size_m=2.0)),
+    _flat("membrane-orange", "Safety-orange membrane", 12.0, "sheet",
+          **_membrane("#d8692a", sheet_m=2.0, stains=dict(colour="#7a7070", amount=0.7, size_m=2.0, threshold=0.45),
+                      patches=dict(probability=0.6, tone=-0.3, edge=0.3))),
+    _flat("capsheet-red", "Bright red granulated cap sheet", 8.0, "sheet",
+          **_cap_sheet("#b82a2a", _p("#d84a4a", "#7a1a1a", "#8a8a8a", "#5a5a5a"), fleck_share=0.25)),
+    _flat("coating-yellow", "Yellow elastomeric coating", 8.0, "coating", colour="#d8b840", substrate="#707070",
+          peel=0.35, cracks=0.8, stains=dict(colour="#808070", amount=0.6, size_m=2.0)),
+    _flat("capsheet-purple", "Purple granulated cap sheet", 8.0, "sheet",
+          **_cap_sheet("#7a5a8a", _p("#9a7aaa", "#4a3a5a", "#8a8a8a", "#5a5a5a"), fleck_share=0.3)),
+    _flat("coating-teal", "Teal roof coating", 8.0, "coating", colour="#3a8a82", substrate="#707070", peel=0.35,
+          stains=dict(colour="#606868", amount=0.6, size_m=2.0)),
+)
+
+HELDOUT_V2_SLOPED_RECIPES: tuple[Recipe, ...] = (
+    _sloped("clay-glazed-yellow", "Glazed yellow clay tiles", 6.0, "tiles",
+            **_barrel(_p("#e0b820", "#d0a818", "#e8c838"), gloss=0.3, tone=0.05)),
+    _sloped("seam-sky", "Sky-blue standing-seam metal", 8.0, "profiled", **_seam("#6a9ac0")),
+    _sloped("corrugated-orange", "Orange painted corrugated iron", 4.0, "profiled",
+            **_corrugated("#e0782a", rust=dict(amount=0.08, palette=_RUST))),
+    _sloped("clay-glazed-red", "Glazed bright red clay tiles", 6.0, "tiles",
+            **_barrel(_p("#c81e1e", "#b81818", "#d82a2a"), gloss=0.3, tone=0.05)),
+    _sloped("shingle-mustard", "Mustard 3-tab shingles", 5.0, "tiles",
+            **_three_tab(_p("#b89a3a", "#c4a648", "#ac8e30"), _p("#d8c070", "#5a4a20"))),
+    _sloped("corrugated-lime", "Lime painted corrugated iron", 4.0, "profiled",
+            **_corrugated("#8ab040", rust=dict(amount=0.2, palette=_RUST))),
+    _sloped("clay-glazed-cobalt", "Glazed cobalt clay tiles", 6.0, "tiles",
+            **_barrel(_p("#2a40a8", "#3248b0", "#2238a0"), gloss=0.35, tone=0.05)),
+    _sloped("shingle-lavender", "Lavender 3-tab shingles", 5.0, "tiles",
+            **_three_tab(_p("#8a6ab0", "#9474ba", "#8060a6"), _p("#b09ad0", "#40304a"))),
+    _sloped("corrugated-pink", "Pink painted corrugated iron", 4.0, "profiled",
+            **_corrugated("#c07a8a", rust=dict(amount=0.4, palette=_RUST))),
+    _sloped("shingle-coral", "Coral architectural shingles", 5.0, "tiles",
+            **_architectural(_p("#d0607a", "#dc708a", "#c4506a"), _p("#8a8a8a", "#4a4a4a"), fleck_share=0.25,
+                             stains=dict(colour="#606060", amount=0.5, size_m=1.5))),
+    _sloped("shakes-painted-blue", "Blue-painted wood shakes", 5.0, "tiles",
+            **_shakes(_p("#4a6ab0", "#5474ba", "#4060a6"))),
+)
+
+# Held-out sets by name, in the order they were made (a name is not RECIPE_VERSION: see ``set_name``).
+HELDOUT_SETS: dict[str, tuple[tuple[Recipe, ...], tuple[Recipe, ...]]] = {
+    "heldout-v1": (HELDOUT_FLAT_RECIPES, HELDOUT_SLOPED_RECIPES),
+    "heldout-v2": (HELDOUT_V2_FLAT_RECIPES, HELDOUT_V2_SLOPED_RECIPES),
+}
+FIRST_HELDOUT = "heldout-v1"
+
+
+def heldout_set(heldout: bool | str) -> str | None:
+    """The held-out set ``heldout`` names: None for False (the bank), the first set for True, else the
+    name itself, which must be one of ``HELDOUT_SETS`` (ValueError)."""
+    if heldout is False:
+        return None
+    if heldout is True:
+        return FIRST_HELDOUT
+    if heldout not in HELDOUT_SETS:
+        raise ValueError(f"unknown held-out set {heldout!r}; choose one of {', '.join(HELDOUT_SETS)}")
+    return heldout
+
+
+def set_name(heldout: bool | str = False) -> str:
+    """The name of the bank of the default recipes (``default-v1``) or of a held-out set
+    (``heldout-v1``, ``heldout-v2``). Held-out sets are numbered in the order they were made; if
+    RECIPE_VERSION ever changes their pixels, their banks gain ``-rN`` so they never pass for these."""
+    name = heldout_set(heldout)
+    if name is None:
+        return f"default-v{RECIPE_VERSION}"
+    return name if RECIPE_VERSION == 1 else f"{name}-r{RECIPE_VERSION}"
+
+
+def recipes(kind: str | None = None, heldout: bool | str = False) -> tuple[Recipe, ...]:
+    """The default recipes, or a held-out set's (``heldout``: True for the first, or a name of
+    ``HELDOUT_SETS``), flat first, optionally one kind."""
+    name = heldout_set(heldout)
+    flat, sloped = (FLAT_RECIPES, SLOPED_RECIPES) if name is None else HELDOUT_SETS[name]
     if kind is None:
         return flat + sloped
     if kind not in KINDS:
@@ -1304,7 +1388,7 @@ def recipes(kind: str | None = None, heldout: bool = False) -> tuple[Recipe, ...
 
 
 def recipe_by_id(recipe_id: str) -> Recipe:
-    for recipe in recipes() + recipes(heldout=True):
+    for recipe in recipes() + sum((recipes(heldout=name) for name in HELDOUT_SETS), ()):
         if recipe.id == recipe_id:
             return recipe
     raise KeyError(recipe_id)
