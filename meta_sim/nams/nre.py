@@ -40,6 +40,7 @@ from .train import _clean
 
 KIND = "sbi_nre"
 CLASSIFIERS = ("resnet", "mlp", "linear")
+MIN_SPLIT_ROWS = 3
 
 
 def _positive_int(value, name: str) -> None:
@@ -185,37 +186,44 @@ def train_nre(designs: torch.Tensor, features: torch.Tensor, space: DesignSpace,
     (N, F) with sbi's ``NRE_C``.
 
     ``model_config`` defaults to ``NREConfig`` for these widths. Rows with NaN/Inf are dropped with a
-    warning (as for NAMS). ``num_classes`` is capped so that a batch holds enough other designs to
-    contrast with (a tiny training set). The global torch RNG is seeded inside a fork, so the result
-    depends on ``config.seed`` only and the caller's RNG state is left untouched. Raises MetaSimError
-    for a space the baseline cannot enumerate, shapes that disagree with it, or too few rows.
+    warning (as for NAMS). On a tiny training set the validation split grows to 3 rows and
+    ``num_classes`` is capped so that a batch holds enough other designs to contrast with. The global
+    torch RNG is seeded inside a fork, so the result depends on ``config.seed`` only and the caller's
+    RNG state is left untouched. Raises MetaSimError for a space the baseline cannot enumerate, shapes
+    that disagree with it, or fewer than 6 rows.
     """
     check_space(space)
     designs, features, dropped = _clean(designs, features)
     if designs.shape[1] != space.dim:
         raise MetaSimError(f"designs have {designs.shape[1]} values; space {space.name!r} encodes to {space.dim}")
-    n_val = len(designs) - int((1 - config.val_fraction) * len(designs))  # sbi's split
-    if n_val < 2 or len(designs) - n_val < 2:
-        raise MetaSimError(f"the sbi baseline needs at least 2 training and 2 validation simulations; have "
-                           f"{len(designs)} in all (render more designs)")
+    n = len(designs)
+    # NRE-C contrasts a pair with at least 2 other designs of its batch, so both splits need 3 rows: a
+    # tiny training set gets a larger validation split.
+    if n < 2 * MIN_SPLIT_ROWS:
+        raise MetaSimError(f"the sbi baseline needs at least {2 * MIN_SPLIT_ROWS} simulations with finite "
+                           f"features; have {n} (render more designs)")
+    val_fraction = max(config.val_fraction, MIN_SPLIT_ROWS / n)
+    n_val = n - int((1 - val_fraction) * n)  # sbi's split
     model_config = model_config or NREConfig(design_dim=designs.shape[1], feature_dim=features.shape[1])
     if (model_config.design_dim, model_config.feature_dim) != (designs.shape[1], features.shape[1]):
         raise MetaSimError("the sbi classifier's sizes do not match the designs and features")
     # A pair is contrasted with num_classes + 1 designs of its batch; sbi caps that at the smaller batch.
-    num_classes = min(config.num_classes, min(config.batch_size, n_val, len(designs) - n_val) - 1)
+    num_classes = min(config.num_classes, min(config.batch_size, n_val, n - n_val) - 1)
     require("sbi", "the sbi baseline")
     from sbi.inference import NRE_C
 
     started = time.perf_counter()
-    # sbi prints its convergence and warns at max_epochs; the history below records both.
+    # sbi prints its convergence and warns at max_epochs (the history below records both) and about
+    # constant feature dimensions (harmless: nothing is z-scored).
     with (torch.random.fork_rng(devices=[]), contextlib.redirect_stdout(io.StringIO()),
           warnings.catch_warnings()):
         warnings.filterwarnings("ignore", message="Maximum number of epochs")
+        warnings.filterwarnings("ignore", message="Data has constant values")
         torch.manual_seed(config.seed)  # split, batches, contrasting draws and initial weights
         trainer = NRE_C(classifier=build_estimator(model_config), tracker=_NoLogs(), show_progress_bars=False)
         estimator = trainer.append_simulations(designs, features).train(
             num_classes=num_classes, gamma=config.gamma, training_batch_size=config.batch_size,
-            learning_rate=config.lr, validation_fraction=config.val_fraction, stop_after_epochs=config.patience,
+            learning_rate=config.lr, validation_fraction=val_fraction, stop_after_epochs=config.patience,
             max_num_epochs=config.max_epochs - 1)  # sbi counts from 0 to max_num_epochs inclusive
     model = RatioClassifier(model_config, estimator).eval()
     summary = trainer._summary
@@ -224,7 +232,7 @@ def train_nre(designs: torch.Tensor, features: torch.Tensor, space: DesignSpace,
                "epochs": int(summary["epochs_trained"][-1]),
                "stopped_early": int(summary["epochs_trained"][-1]) < config.max_epochs,
                "best_val_loss": float(summary["best_validation_loss"][-1]),
-               "num_classes": num_classes, "n_rows": len(designs), "n_dropped": dropped,
+               "num_classes": num_classes, "val_fraction": val_fraction, "n_rows": n, "n_dropped": dropped,
                "seconds": time.perf_counter() - started, "train_config": config.to_dict()}
     return NREFit(model, history)
 

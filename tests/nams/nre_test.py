@@ -121,7 +121,7 @@ def test_nre_refuses_what_it_cannot_enumerate_or_learn(toy):
     with pytest.raises(MetaSimError, match="continuous"):
         nre_predict(toy["fit"].model, toy["targets"], continuous)
     space = toy["space"]
-    with pytest.raises(MetaSimError, match="at least 2 training and 2 validation"):
+    with pytest.raises(MetaSimError, match="at least 6 simulations"):
         train_nre(toy["designs"][:5], toy["features"][:5], space, config=QUICK)
     with pytest.raises(MetaSimError, match="encodes to 9"):
         train_nre(toy["designs"][:, :8], toy["features"], space, config=QUICK)
@@ -137,11 +137,12 @@ def test_nre_refuses_what_it_cannot_enumerate_or_learn(toy):
 
 def test_nre_drops_non_finite_simulations_and_trains_on_a_tiny_set(toy):
     space = toy["space"]
-    designs, features = toy["designs"][:24].clone(), toy["features"][:24].clone()
+    designs, features = toy["designs"][:7].clone(), toy["features"][:7].clone()
     features[3, 0] = math.nan
-    with pytest.warns(UserWarning, match="dropped 1 of 24"):
+    with pytest.warns(UserWarning, match="dropped 1 of 7"):
         fit = train_nre(designs, features, space, config=NRETrainConfig(max_epochs=3))
-    assert fit.history["n_dropped"] == 1 and fit.history["num_classes"] == 2  # capped by the 3 validation rows
+    # 3 of the 6 rows left validate (not a tenth), and each pair is contrasted with 2 others, not 5.
+    assert fit.history["n_dropped"] == 1 and fit.history["num_classes"] == 2 and fit.history["val_fraction"] == 0.5
     assert len(nre_predict(fit.model, toy["targets"][:2], space)) == 2
 
 
