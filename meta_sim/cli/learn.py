@@ -202,15 +202,17 @@ def _design_eval(experiment: str, summary: str):
     @click.option("--seed", type=int, default=1, show_default=True, help="target seed")
     @click.option("--ms2/--no-ms2", default=True, show_default=True,
                   help="run the MS2 baseline (computes and caches features of every training tile once)")
+    @click.option("--sbi/--no-sbi", default=True, show_default=True,
+                  help="run the sbi baseline (neural ratio estimation; discrete spaces; trains and caches it once)")
     @_dataset_options
     @_search_options
     @_torch_threads
-    def command(out, targets, target_tiles, seed, ms2, M, k, S, iterations, lr, r, **o):
+    def command(out, targets, target_tiles, seed, ms2, sbi, M, k, S, iterations, lr, r, **o):
         from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
 
         dataset, settings = _configs(o)
-        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, M=M, k=k, S=S,
-                                     iterations=iterations, lr=lr, r=r)
+        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, ms2=ms2, sbi=sbi, M=M, k=k,
+                                     S=S, iterations=iterations, lr=lr, r=r)
         eval_settings.check()
         writable_dir(out)
         bars = _Bars()

@@ -111,7 +111,7 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
     """Training time, feature time per target group, and search time and E1/E2 accuracy per method.
 
     Uses the default training set and model (built or reused from the cache);
-    training is timed on a fresh run into a temporary folder. Target groups
+    training (NAMS, DR and the sbi baseline) is timed on a fresh run into a temporary folder. Target groups
     have 9 tiles, as in the paper. The neural-adjoint settings run on the
     first ``adjoint_targets`` groups only: at the paper's setting a group
     costs seconds, not milliseconds.
@@ -160,6 +160,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
             if name != "nams_adjoint":
                 rows[name], _ = score_method(ctx, run)
                 rows[name]["targets"] = len(ctx.jobs)
+        if "sbi_nre" in rows:
+            rows["sbi_nre"]["train_seconds"] = round(ctx.sbi.extra["seconds"], 1)
         for starts, iterations in ADJOINT_SWEEP:
             run = method_runs(few, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
             name = f"nams_adjoint_M{starts}_it{iterations}"
@@ -168,8 +170,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
         for name, ckpt in others.items():  # same targets and features
             rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
         for name, variant in own_features.items():
-            own = prepare_eval(experiment, dataset, variant, EvalSettings(targets=targets, seed=seed, ms2=False),
-                               root, bars)
+            own = prepare_eval(experiment, dataset, variant,
+                               EvalSettings(targets=targets, seed=seed, ms2=False, sbi=False), root, bars)
             rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
             rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
         experiments[experiment] = rows
@@ -191,11 +193,13 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, seed: int = 1, roo
         RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed)
         result["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
     with tempfile.TemporaryDirectory() as out:
-        from ..pipeline.workflow import prepare_features
+        from ..pipeline.workflow import prepare_features, train_nre_checkpoint
 
         feature_set = prepare_features(dataset, settings, root).features
-        result["train_seconds"] = {k: round(v, 2) for k, v in
-                                   train_models(feature_set, Path(out), settings, dataset).items()}
+        seconds = train_models(feature_set, Path(out), settings, dataset)
+        seconds["train_sbi_nre"] = train_nre_checkpoint(feature_set, load_checkpoint(Path(out) / "nams.pt", "nams"),
+                                                        Path(out) / "sbi_nre.pt", settings, dataset)
+        result["train_seconds"] = {k: round(v, 2) for k, v in seconds.items()}
     return result
 
 
@@ -224,6 +228,7 @@ def format_nams_table(result: dict) -> str:
                  f"not to the power {result['roof_weight_power']:g}" if "roof_weight_power" in result else "")
               + "). "
               f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
+              + (f", sbi_nre {t['train_sbi_nre']:.0f} s" if "train_sbi_nre" in t else "")
               + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
                         for name, s in result.get("train_seconds_other_architectures", {}).items()) + ". "
               f"Features: {result['feature_seconds_per_group']:.3f} s per group of 9 tiles x 8 views"
@@ -277,7 +282,7 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     from .evaluate import CONTINUOUS_SEARCH, EvalSettings, rankings, run_eval, score
 
     dataset = DatasetConfig(space=APPEARANCE_SPACE, designs=designs)
-    settings = EvalSettings(targets=targets, seed=seed, ms2=False, **CONTINUOUS_SEARCH)
+    settings = EvalSettings(targets=targets, seed=seed, ms2=False, sbi=False, **CONTINUOUS_SEARCH)
     import shutil
 
     with tempfile.TemporaryDirectory(prefix="meta-sim-appearance-") as scratch:  # the checkpoints stay out
