@@ -24,7 +24,9 @@ from meta_sim.nams.norm import FeatureNorm
 from meta_sim.nams.nre import log_ratios
 
 FEATURES = 12
-QUICK = NRETrainConfig(max_epochs=60, seed=0)
+# Smaller and shorter than the defaults, which are sized for the default training set.
+SMALL = {"classifier": "resnet", "hidden": 64}
+QUICK = NRETrainConfig(batch_size=200, num_classes=5, patience=20, max_epochs=60, seed=0)
 
 
 def _simulate(space, designs, noise, generator, effects):
@@ -43,9 +45,13 @@ def toy():
     designs, features = _simulate(space, space.sample(rng, 240), 0.5, generator, effects)
     truth = space.sample(rng, 30)
     _, targets = _simulate(space, truth, 0.2, generator, effects)
-    fit = train_nre(designs, features, space, config=QUICK)
+    fit = train_nre(designs, features, space, _small(space), QUICK)
     return {"space": space, "designs": designs, "features": features, "truth": truth, "targets": targets,
             "fit": fit}
+
+
+def _small(space):
+    return NREConfig(design_dim=space.dim, feature_dim=FEATURES, **SMALL)
 
 
 def _hit_rate(designs, truth):
@@ -89,14 +95,14 @@ def test_nre_is_deterministic_for_a_seed(toy):
     space, designs, features = toy["space"], toy["designs"], toy["features"]
     short = NRETrainConfig(max_epochs=8, seed=0)
     state = torch.random.get_rng_state()
-    first = train_nre(designs, features, space, config=short)
+    first = train_nre(designs, features, space, _small(space), short)
     assert torch.equal(torch.random.get_rng_state(), state)  # the caller's RNG is left alone
-    again = train_nre(designs, features, space, config=short)
+    again = train_nre(designs, features, space, _small(space), short)
     assert first.history["epochs"] == 8 and not first.history["stopped_early"]
     for a, b in zip(first.model.state_dict().values(), again.model.state_dict().values()):
         assert torch.equal(a, b)
     assert torch.equal(log_ratios(first.model, toy["targets"], space), log_ratios(again.model, toy["targets"], space))
-    other = train_nre(designs, features, space, config=NRETrainConfig(max_epochs=2, seed=1))
+    other = train_nre(designs, features, space, _small(space), NRETrainConfig(max_epochs=2, seed=1))
     assert not all(torch.equal(a, b) for a, b in zip(first.model.state_dict().values(),
                                                       other.model.state_dict().values()))
 
