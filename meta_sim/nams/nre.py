@@ -27,7 +27,7 @@ import math
 import time
 import warnings
 from dataclasses import asdict, dataclass
-from typing import Mapping, NamedTuple
+from typing import Callable, Mapping, NamedTuple
 
 import torch
 from torch import nn
@@ -183,11 +183,13 @@ def check_space(space: DesignSpace) -> int:
 
 
 def train_nre(designs: torch.Tensor, features: torch.Tensor, space: DesignSpace,
-              model_config: NREConfig | None = None, config: NRETrainConfig = NRETrainConfig()) -> NREFit:
+              model_config: NREConfig | None = None, config: NRETrainConfig = NRETrainConfig(),
+              on_epoch: Callable[[int], None] | None = None) -> NREFit:
     """Train the ratio classifier on encoded ``designs`` (N, space.dim) and normalised ``features``
     (N, F) with sbi's ``NRE_C``.
 
-    ``model_config`` defaults to ``NREConfig`` for these widths. Rows with NaN/Inf are dropped with a
+    ``model_config`` defaults to ``NREConfig`` for these widths; ``on_epoch(1)`` is called after every
+    epoch (progress bars). Rows with NaN/Inf are dropped with a
     warning (as for NAMS). On a tiny training set the validation split grows to 3 rows and
     ``num_classes`` is capped so that a batch holds enough other designs to contrast with. The global
     torch RNG is seeded inside a fork, so the result depends on ``config.seed`` only and the caller's
@@ -214,6 +216,12 @@ def train_nre(designs: torch.Tensor, features: torch.Tensor, space: DesignSpace,
     require("sbi", "the sbi baseline")
     from sbi.inference import NRE_C
 
+    class Trainer(NRE_C):
+        def _summarize_epoch(self, *args, **kwargs) -> None:  # sbi's hook after each epoch
+            super()._summarize_epoch(*args, **kwargs)
+            if on_epoch is not None:
+                on_epoch(1)
+
     started = time.perf_counter()
     # sbi prints its convergence and warns at max_epochs (the history below records both) and about
     # constant feature dimensions (harmless: nothing is z-scored).
@@ -222,7 +230,7 @@ def train_nre(designs: torch.Tensor, features: torch.Tensor, space: DesignSpace,
         warnings.filterwarnings("ignore", message="Maximum number of epochs")
         warnings.filterwarnings("ignore", message="Data has constant values")
         torch.manual_seed(config.seed)  # split, batches, contrasting draws and initial weights
-        trainer = NRE_C(classifier=build_estimator(model_config), tracker=_NoLogs(), show_progress_bars=False)
+        trainer = Trainer(classifier=build_estimator(model_config), tracker=_NoLogs(), show_progress_bars=False)
         estimator = trainer.append_simulations(designs, features).train(
             num_classes=num_classes, gamma=config.gamma, training_batch_size=config.batch_size,
             learning_rate=config.lr, validation_fraction=val_fraction, stop_after_epochs=config.patience,

@@ -244,18 +244,18 @@ def nre_settings(settings: ModelSettings) -> tuple[dict, object]:
 
 
 def train_nre_checkpoint(features: FeatureSet, nams, path: Path, settings: ModelSettings,
-                         dataset: DatasetConfig) -> float:
+                         dataset: DatasetConfig, bars: Bars | None = None) -> float:
     """Train the sbi baseline on a training set's features, normalised by the NAMS checkpoint ``nams``
     (the features NAMS searches in), and write its checkpoint to ``path``; returns the seconds training
-    took. Raises MetaSimError as ``nams.nre.train_nre`` does."""
+    took; ``bars`` makes a progress bar of its epochs. Raises MetaSimError as ``nams.nre.train_nre`` does."""
     from ..nams import save_checkpoint
-    from ..nams.nre import NREConfig, train_nre
+    from ..nams.nre import KIND, NREConfig, train_nre
 
     classifier, train_config = nre_settings(settings)
     normed = nams.feature_norm.apply(features.features)
     fit = train_nre(features.encoded, normed, features.space,
                     NREConfig(design_dim=features.encoded.shape[1], feature_dim=normed.shape[1], **classifier),
-                    train_config)
+                    train_config, bars(f"train {KIND}", train_config.max_epochs) if bars else None)
     seconds = fit.history["seconds"]
     extra = {"designs": len(features.names), "views": features.views, "extractor_spec": settings.extractor,
              "seconds": seconds, "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m,
@@ -290,8 +290,4 @@ def ensure_nre(models: Models, dataset: DatasetConfig, settings: ModelSettings,
             load_checkpoint(path, KIND)
             return path, {}
         except MetaSimError:
-            update = bars(f"train {KIND}", 1) if bars else None
-            seconds = train_nre_checkpoint(models.features, nams, path, settings, dataset)
-            if update:
-                update(1)
-            return path, {f"train_{KIND}": seconds}
+            return path, {f"train_{KIND}": train_nre_checkpoint(models.features, nams, path, settings, dataset, bars)}

@@ -95,8 +95,10 @@ def test_nre_is_deterministic_for_a_seed(toy):
     space, designs, features = toy["space"], toy["designs"], toy["features"]
     short = NRETrainConfig(max_epochs=8, seed=0)
     state = torch.random.get_rng_state()
-    first = train_nre(designs, features, space, _small(space), short)
+    epochs = []
+    first = train_nre(designs, features, space, _small(space), short, on_epoch=epochs.append)
     assert torch.equal(torch.random.get_rng_state(), state)  # the caller's RNG is left alone
+    assert epochs == [1] * 8
     again = train_nre(designs, features, space, _small(space), short)
     assert first.history["epochs"] == 8 and not first.history["stopped_early"]
     for a, b in zip(first.model.state_dict().values(), again.model.state_dict().values()):
