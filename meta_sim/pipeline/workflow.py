@@ -235,7 +235,7 @@ NRE_CODE_VERSION = 1
 
 def nre_settings(settings: ModelSettings) -> tuple[dict, object]:
     """The sbi baseline's classifier options (without the sizes, which the features decide) and its
-    ``NRETrainConfig``: sbi's defaults, seeded by ``settings.seed``."""
+    ``NRETrainConfig``: the defaults of ``nams.nre``, seeded by ``settings.seed``."""
     from ..nams.nre import NREConfig, NRETrainConfig
 
     classifier = {k: v for k, v in NREConfig(design_dim=1, feature_dim=1).to_dict().items()
