@@ -207,19 +207,21 @@ def _design_eval(experiment: str, summary: str):
                        "(report only; E2 with heldout-v2), --targets groups of each of its seeds")
     @click.option("--ms2/--no-ms2", default=True, show_default=True,
                   help="run the MS2 baseline (computes and caches features of every training tile once)")
+    @click.option("--sbi/--no-sbi", default=True, show_default=True,
+                  help="run the sbi baseline (neural ratio estimation; discrete spaces; trains and caches it once)")
     @_dataset_options
     @_search_options
     @click.pass_context
     @_torch_threads
-    def command(ctx, out, targets, target_tiles, seed, split_name, ms2, M, k, S, iterations, lr, r, **o):
+    def command(ctx, out, targets, target_tiles, seed, split_name, ms2, sbi, M, k, S, iterations, lr, r, **o):
         from ..experiments.evaluate import EvalSettings, results_markdown, run_eval
 
         if split_name and ctx.get_parameter_source("seed") is not click.core.ParameterSource.DEFAULT:
             raise MetaSimError("give --split or --seed, not both: a split has its own target seeds")
         dataset, settings = _configs(o)
         split = get_split(experiment, split_name) if split_name else single_seed(experiment, seed)
-        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, split=split, ms2=ms2, M=M,
-                                     k=k, S=S, iterations=iterations, lr=lr, r=r)
+        eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, split=split, ms2=ms2, sbi=sbi,
+                                     M=M, k=k, S=S, iterations=iterations, lr=lr, r=r)
         eval_settings.check()
         writable_dir(out)
         bars = _Bars()

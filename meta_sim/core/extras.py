@@ -6,7 +6,7 @@ import importlib.util
 
 from .errors import MetaSimError
 
-EXTRAS = {"bpy": "render", "distributed": "farm", "matplotlib": "bench", "pyproj": "geo"}
+EXTRAS = {"bpy": "render", "distributed": "farm", "matplotlib": "bench", "pyproj": "geo", "sbi": "sbi"}
 
 
 def require(module: str, what: str) -> None:

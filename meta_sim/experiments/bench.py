@@ -118,8 +118,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
     settings of ``sweep`` run on ``adjoint_targets`` groups only, spread over the seeds: at the
     paper's setting a group costs seconds, not milliseconds. With ``variants`` the other
     architectures and the ablations of the roof-colour features are scored too. The fastest adjoint
-    setting that keeps E1 is chosen on the validation split; with ``time_training`` training is timed
-    on a fresh run into a temporary folder.
+    setting that keeps E1 is chosen on the validation split; with ``time_training`` training (NAMS, DR and
+    the sbi baseline) is timed on a fresh run into a temporary folder.
     """
     import dataclasses
 
@@ -180,11 +180,13 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
         RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed)
         result["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
     with tempfile.TemporaryDirectory() as out:
-        from ..pipeline.workflow import prepare_features
+        from ..pipeline.workflow import prepare_features, train_nre_checkpoint
 
         feature_set = prepare_features(dataset, settings, root).features
-        result["train_seconds"] = {k: round(v, 2) for k, v in
-                                   train_models(feature_set, Path(out), settings, dataset).items()}
+        seconds = train_models(feature_set, Path(out), settings, dataset)
+        seconds["train_sbi_nre"] = train_nre_checkpoint(feature_set, load_checkpoint(Path(out) / "nams.pt", "nams"),
+                                                        Path(out) / "sbi_nre.pt", settings, dataset)
+        result["train_seconds"] = {k: round(v, 2) for k, v in seconds.items()}
     return result
 
 
@@ -203,6 +205,8 @@ def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dat
         if name != "nams_adjoint":
             rows[name], _ = score_method(ctx, run)
             rows[name]["targets"] = len(ctx.jobs)
+    if "sbi_nre" in rows:
+        rows["sbi_nre"]["train_seconds"] = round(ctx.sbi.extra["seconds"], 1)
     for starts, iterations in sweep:
         run = method_runs(few, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
         name = f"nams_adjoint_M{starts}_it{iterations}"
@@ -212,7 +216,7 @@ def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dat
         rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
     for name, variant in own_features.items():
         own = prepare_eval(split.experiment, dataset, variant,
-                           EvalSettings(targets=targets, tiles=tiles, split=split, ms2=False), root, bars)
+                           EvalSettings(targets=targets, tiles=tiles, split=split, ms2=False, sbi=False), root, bars)
         rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
         rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
     return rows
@@ -272,6 +276,7 @@ def format_nams_table(result: dict) -> str:
     if "train_seconds" in result:
         t = result["train_seconds"]
         notes.append(f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
+                     + (f", sbi_nre {t['train_sbi_nre']:.0f} s" if "train_sbi_nre" in t else "")
                      + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
                                for name, s in result["train_seconds_other_architectures"].items()) + ".")
     notes.append(f"Features: {result['feature_seconds_per_group']:.3f} s per group of {result['tiles_per_target']} "
@@ -330,7 +335,7 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     from .evaluate import CONTINUOUS_SEARCH, EvalSettings, bootstrap_intervals, rankings, run_eval, score
 
     dataset = DatasetConfig(space=APPEARANCE_SPACE, designs=designs)
-    settings = EvalSettings(targets=targets, seed=seed, ms2=False, **CONTINUOUS_SEARCH)
+    settings = EvalSettings(targets=targets, seed=seed, ms2=False, sbi=False, **CONTINUOUS_SEARCH)
     import shutil
 
     with tempfile.TemporaryDirectory(prefix="meta-sim-appearance-") as scratch:  # the checkpoints stay out

@@ -15,8 +15,9 @@ only reported.
 Methods, all in one harness: uniform sampling, direct regression (DR), MS2
 (REINFORCE over a categorical design distribution with KDE feature
 distributions, drawing simulations from the training set's tiles; see
-``meta_sim/nams/ms2.py``), and NAMS with the neural-adjoint and the
-exhaustive search.
+``meta_sim/nams/ms2.py``), the sbi baseline (neural ratio estimation with
+the ``sbi`` package, evaluated over every design; ``meta_sim/nams/nre.py``),
+and NAMS with the neural-adjoint and the exhaustive search.
 
 Scoring follows the paper (section 5.4): rank the bank's textures by the HSV
 similarity to the true texture (``meta_sim/sim/textures/similarity.py``); a
@@ -174,6 +175,10 @@ def results_markdown(results: dict) -> str:
     for name, m in results["methods"].items():
         cells = " | ".join(with_interval(m, k) if k in m else "-" for k in METRICS)
         lines.append(f"| {name} | {cells} | {m['seconds_per_target']:.4f} |")
+    trained = {name: m["train_seconds"] for name, m in results["methods"].items() if "train_seconds" in m}
+    if trained:
+        lines += ["", "Training (when the cached model was trained): "
+                  + ", ".join(f"{name} {seconds:.1f} s" for name, seconds in trained.items()) + "."]
     unseen = {name: m for name, m in results["methods"].items() if m.get("unseen")}
     if unseen:
         n = next(iter(unseen.values()))["unseen_targets"]
@@ -247,14 +252,15 @@ def render_split_targets(split: Split, n: int, tiles: int, preset: str, root: Pa
 @dataclass(frozen=True)
 class EvalSettings(SearchOptions):
     """How `meta-sim eval` scores: the neural-adjoint search settings (``SearchOptions``; ``S`` also
-    for the exhaustive vote), target groups (per target seed) and tiles per group, whether to run MS2,
-    the seed of the searches and, without a ``split``, of the targets (E2 then uses ``heldout-v1``),
-    the split whose target seeds and held-out set to use instead, the targets' render preset, and the
-    rows of ``sheet.png``."""
+    for the exhaustive vote), target groups (per target seed) and tiles per group, whether to run MS2
+    and the sbi baseline, the seed of the searches and, without a ``split``, of the targets (E2 then
+    uses ``heldout-v1``), the split whose target seeds and held-out set to use instead, the targets'
+    render preset, and the rows of ``sheet.png``."""
 
     targets: int = 20
     tiles: int = 9  # per target group, as in the paper (and `meta-sim infer`'s default group size)
     ms2: bool = True  # run the MS2 baseline (needs the training set's per-tile features)
+    sbi: bool = True  # run the sbi baseline in a discrete space (trains its classifier once per model)
     seed: int = 1
     split: Split | None = None
     preset: str | None = None  # default: the training set's render preset
@@ -268,6 +274,10 @@ class EvalSettings(SearchOptions):
                 raise MetaSimError(f"{name} must be at least 1, not {value!r}")
         if self.split is not None:
             self.split.check(self.targets)
+        if self.sbi:
+            from ..core.extras import require
+
+            require("sbi", "the sbi baseline (--no-sbi leaves it out)")
 
     def target_split(self, experiment: str) -> Split:
         """The targets of ``experiment``: the split, else the one seed ``seed`` with ``heldout-v1``."""
@@ -297,6 +307,7 @@ class EvalContext:
     pool: object = None  # dataset.TileFeatures of the training set: MS2's pre-rendered simulations
     training_designs: list = ()  # the training set's designs: E1 also scores the targets it lacks
     split: Split | None = None  # where the targets come from
+    sbi: object = None  # nams.Checkpoint of the sbi baseline's classifier (a discrete space, when asked for)
 
     def subset(self, indices) -> EvalContext:
         """The same context on the target groups ``indices`` only."""
@@ -307,24 +318,32 @@ class EvalContext:
 
 @dataclass
 class Methods:
-    """The trained models every method needs: NAMS and DR checkpoints, the feature extractor, and
-    (for MS2) the training set's per-tile features."""
+    """The trained models every method needs: NAMS and DR checkpoints, the feature extractor, (for
+    MS2) the training set's per-tile features, and (for the sbi baseline) its checkpoint."""
 
     models: object  # workflow.Models
     nams: object  # nams.Checkpoint
     dr: object
     extractor: object
     pool: object = None
+    sbi: object = None
 
 
-def load_methods(dataset, models_settings, root: Path, ms2: bool = True, bars: Bars | None = None) -> Methods:
-    """Build or reuse the training set and models (and with ``ms2`` the MS2 pool) under ``root``."""
+def load_methods(dataset, models_settings, root: Path, ms2: bool = True, bars: Bars | None = None,
+                 sbi: bool = False) -> Methods:
+    """Build or reuse the training set and models under ``root``, with ``ms2`` the MS2 pool, and with
+    ``sbi`` the sbi baseline when the space is discrete (its seconds join ``models.seconds``)."""
     from ..nams import load_checkpoint
     from ..pipeline.roofcolour import checkpoint_extractor
-    from ..pipeline.workflow import ensure_models
+    from ..pipeline.workflow import ensure_models, ensure_nre
 
     models = ensure_models(dataset, models_settings, root, bars)
     nams, dr = load_checkpoint(models.nams_path, "nams"), load_checkpoint(models.dr_path, "dr")
+    sbi_checkpoint = None
+    if sbi and discrete(nams.space):
+        path, seconds = ensure_nre(models, dataset, models_settings, bars)
+        models.seconds.update(seconds)
+        sbi_checkpoint = load_checkpoint(path, "sbi_nre")
     extractor = checkpoint_extractor(nams, Path(models_settings.weights) if models_settings.weights else None)
     pool = None
     if ms2:
@@ -333,7 +352,7 @@ def load_methods(dataset, models_settings, root: Path, ms2: bool = True, bars: B
 
         pool = build_tile_features(dataset_dir(dataset, root), dataset, extractor, models_settings.views,
                                    bars("MS2 pool: training tile features", dataset.designs) if bars else None)
-    return Methods(models, nams, dr, extractor, pool)
+    return Methods(models, nams, dr, extractor, pool, sbi_checkpoint)
 
 
 def group_features(groups: list[list[np.ndarray]], extractor, views: int, label: str,
@@ -373,7 +392,7 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
 
     split = settings.target_split(experiment)
     split.check(settings.targets)
-    methods = load_methods(dataset, models_settings, root, settings.ms2, bars)
+    methods = load_methods(dataset, models_settings, root, settings.ms2, bars, settings.sbi)
     tiles = settings.tiles
     jobs, folders = render_split_targets(split, settings.targets, tiles + test_tiles,
                                          settings.preset or dataset.preset, root, dataset.tile_px,
@@ -388,7 +407,8 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     import torch
 
     return EvalContext(experiment, methods.models, methods.nams, methods.dr, jobs, folders, tiles, features,
-                       torch.stack(per_tile), feature_seconds, ranks, methods.pool, training_designs, split)
+                       torch.stack(per_tile), feature_seconds, ranks, methods.pool, training_designs, split,
+                       methods.sbi)
 
 
 def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
@@ -396,6 +416,7 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
     import torch
 
     from ..nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
+    from ..nams.nre import nre_predict
 
     space, feats, n = ctx.nams.space, ctx.features, len(ctx.jobs)
     generator = torch.Generator().manual_seed(seed)
@@ -411,6 +432,9 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
         pool_designs = ctx.pool.encoded.repeat_interleave(ctx.pool.features.shape[1], dim=0)
         runs["ms2"] = lambda: [r.design for r in ms2_search(
             pool, pool_designs, [norm.apply(t) for t in ctx.tile_features], space, generator=generator)]
+    if ctx.sbi is not None:
+        runs["sbi_nre"] = lambda: [r.design for r in nre_predict(ctx.sbi.model, ctx.sbi.feature_norm.apply(feats),
+                                                                 space)]
     runs["nams_adjoint"] = lambda: [r.design for r in adjoint_search(
         ctx.nams.model, normed, space, generator=generator, **adjoint_settings)]
     if discrete(space):  # the exhaustive search enumerates every design
@@ -448,7 +472,7 @@ def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> d
         raise MetaSimError(f"the checkpoint was trained on {dim} feature dimensions; these targets have "
                            f"{ctx.features.shape[-1]}")
     other = replace(ctx, nams=checkpoint, features=ctx.features[:, :dim],
-                    tile_features=ctx.tile_features[..., :dim], pool=None)
+                    tile_features=ctx.tile_features[..., :dim], pool=None, sbi=None)
     metrics, _ = score_method(other, method_runs(other, seed, {}, S)["nams_exhaustive"])
     return {**metrics, "targets": len(ctx.jobs)}
 
@@ -479,7 +503,9 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     """Build or reuse the training set and models, render targets, score every method.
 
     Arguments as for ``prepare_eval`` (``root`` defaults to the cache). Scores uniform, DR, MS2 (with
-    ``settings.ms2``) and NAMS with the adjoint and the exhaustive search, and writes into ``out``:
+    ``settings.ms2``), the sbi baseline (with ``settings.sbi``, in a discrete space; its row also holds
+    ``train_seconds``, its training time when it was trained) and NAMS with the adjoint and the
+    exhaustive search, and writes into ``out``:
     ``results.json`` and ``results.md``, copies of ``nams.pt`` and ``dr.pt``, and ``sheet.png``
     (the first ``settings.sheet_rows`` targets beside the same city rendered with NAMS's inferred
     design). Returns the results dict. Raises MetaSimError as ``prepare_eval`` does, or when the
@@ -499,6 +525,8 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     methods, predictions = {}, {}
     for name, run in method_runs(ctx, settings.seed, adjoint, settings.S).items():
         methods[name], predictions[name] = score_method(ctx, run)
+    if "sbi_nre" in methods:
+        methods["sbi_nre"]["train_seconds"] = ctx.sbi.extra["seconds"]
     results = {"experiment": experiment, "split": ctx.split.to_dict(), "targets": len(ctx.jobs),
                "tiles_per_target": ctx.tiles,
                "feature_seconds_per_target": ctx.feature_seconds, "methods": methods,

@@ -276,7 +276,7 @@ def run_synthetic(h: Harness, experiment: str, out: Path) -> dict:
     from .evaluate import EvalSettings, prepare_eval
 
     s = h.settings
-    eval_settings = EvalSettings(targets=s.groups, tiles=s.tiles, seed=s.target_seed, ms2=True)
+    eval_settings = EvalSettings(targets=s.groups, tiles=s.tiles, seed=s.target_seed, ms2=True, sbi=False)
     ctx = prepare_eval(experiment, h.dataset, h.models_settings, eval_settings, h.root, h.bars, s.test_tiles)
     predicted = _predictions(h, ctx, s.target_seed)
     predicted["gt"] = [job.design for job in ctx.jobs]

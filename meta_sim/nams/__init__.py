@@ -1,5 +1,6 @@
 """The torch side of NAMS: networks (``model``), training and checkpoints (``train``,
-``checkpoint``), and design inference (``search``). Never imports bpy."""
+``checkpoint``), design inference (``search``), and the MS2 and sbi baselines (``ms2``, ``nre``).
+Never imports bpy."""
 
 from .checkpoint import Checkpoint, load_checkpoint, model_id, save_checkpoint
 from .model import (
@@ -14,6 +15,7 @@ from .model import (
 )
 from .ms2 import MS2Config, ms2_search
 from .norm import FeatureNorm
+from .nre import NREConfig, NRETrainConfig, RatioClassifier, nre_predict, train_nre
 from .search import (
     SearchResult,
     adjoint_search,
@@ -28,8 +30,8 @@ from .train import EpochReport, Fit, TrainConfig, train_dr, train_nams
 
 __all__ = [
     "ARCHITECTURES", "DEFAULT_ARCHITECTURE", "architecture_options", "Checkpoint", "DRConfig", "DirectRegression",
-    "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS",
-    "NAMSConfig", "SearchResult", "TrainConfig", "adjoint_search", "build_model", "design_table", "dr_predict",
-    "exhaustive_search", "load_checkpoint", "model_id", "ms2_search", "save_checkpoint", "search", "time_search",
-    "train_dr", "train_nams", "uniform_predict",
+    "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS", "NAMSConfig", "NREConfig", "NRETrainConfig",
+    "RatioClassifier", "SearchResult", "TrainConfig", "adjoint_search", "build_model", "design_table", "dr_predict",
+    "exhaustive_search", "load_checkpoint", "model_id", "ms2_search", "nre_predict", "save_checkpoint", "search",
+    "time_search", "train_dr", "train_nams", "train_nre", "uniform_predict",
 ]

@@ -6,8 +6,8 @@ code is ever executed):
 
     format          "meta-sim-checkpoint"
     format_version  2
-    kind            "nams" or "dr"
-    model_config    NAMSConfig / DRConfig as a dict
+    kind            "nams", "dr" or "sbi_nre" (the sbi baseline's ratio classifier, ``nre``)
+    model_config    NAMSConfig / DRConfig / NREConfig as a dict
     state_dict      the model's tensors (NAMS: also the buffers z_mean, z_std,
                     feature_scale)
     space           the design space (DesignSpace.to_dict())
@@ -41,6 +41,11 @@ from ..core.fileio import write_bytes_atomic
 from ..sim.design import DesignSpace
 from .model import MODELS, NAMS, DirectRegression, build_model
 from .norm import FeatureNorm
+from .nre import KIND as NRE_KIND
+from .nre import NREConfig, RatioClassifier
+
+# Every kind a checkpoint holds: the networks of model.py, and the sbi baseline's classifier.
+KINDS = (*MODELS, NRE_KIND)
 
 FORMAT = "meta-sim-checkpoint"
 FORMAT_VERSION = 2
@@ -52,7 +57,7 @@ class Checkpoint:
     feature normalisation it was trained with, and ``model_id``, which presets cite."""
 
     kind: str
-    model: NAMS | DirectRegression
+    model: NAMS | DirectRegression | RatioClassifier
     space: DesignSpace
     feature_norm: FeatureNorm
     extractor_id: str
@@ -61,15 +66,15 @@ class Checkpoint:
     model_id: str
 
 
-def save_checkpoint(path: str | Path, kind: str, model: NAMS | DirectRegression, config, space_dict: Mapping,
-                    feature_norm: FeatureNorm, extractor_id: str, extra: Mapping | None = None,
+def save_checkpoint(path: str | Path, kind: str, model: NAMS | DirectRegression | RatioClassifier, config,
+                    space_dict: Mapping, feature_norm: FeatureNorm, extractor_id: str, extra: Mapping | None = None,
                     history: Mapping | None = None) -> str:
     """Write a checkpoint atomically and return its model_id.
 
     ``config`` is the model's config (dataclass or dict) and must be the one
     the model was built with; ``extra`` and ``history`` hold plain values only.
     """
-    if kind not in MODELS or getattr(model, "kind", None) != kind:
+    if kind not in KINDS or getattr(model, "kind", None) != kind:
         raise ValueError(f"kind {kind!r} does not match the model ({type(model).__name__})")
     config_dict = config.to_dict() if hasattr(config, "to_dict") else dict(config)
     if config_dict != model.config.to_dict():
@@ -101,7 +106,8 @@ def save_checkpoint(path: str | Path, kind: str, model: NAMS | DirectRegression,
 def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
     """Read and verify a checkpoint; the model comes back in eval mode.
 
-    ``kind`` ("nams" or "dr"), when given, must match the file.
+    ``kind`` ("nams", "dr" or "sbi_nre"), when given, must match the file. An "sbi_nre" checkpoint
+    needs the ``sbi`` package (MetaSimError naming the extra without it).
     """
     path = Path(path)
     try:
@@ -128,7 +134,7 @@ def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
     if kind is not None and found != kind:
         raise MetaSimError(f"{path} is a {found!r} checkpoint; this needs a {kind!r} checkpoint")
     try:
-        model = build_model(found, payload["model_config"])
+        model = _build(found, payload["model_config"])
         model.load_state_dict(payload["state_dict"])
     except _DAMAGED as exc:
         raise MetaSimError(f"{path}: the model does not match its config ({type(exc).__name__})") from None
@@ -149,6 +155,12 @@ def load_checkpoint(path: str | Path, kind: str | None = None) -> Checkpoint:
     return Checkpoint(kind=found, model=model, space=space, feature_norm=norm,
                       extractor_id=payload["extractor_id"], history=payload["history"],
                       extra=payload["extra"], model_id=_model_id(data))
+
+
+def _build(kind, config) -> NAMS | DirectRegression | RatioClassifier:
+    if kind == NRE_KIND:
+        return RatioClassifier(NREConfig.from_dict(config))
+    return build_model(kind, config)
 
 
 # What a damaged (but checksummed) structure raises while it is rebuilt: all mean "not usable".

@@ -321,6 +321,20 @@ def count_designs(space: DesignSpace) -> int | None:
     return math.prod(p.width for p in space.parameters)
 
 
+def design_grid(space: DesignSpace) -> torch.Tensor:
+    """Every design of a discrete space, encoded (n, space.dim): the last parameter's choice varies
+    fastest, so the rows reshape to a (width_1, ..., width_k) grid."""
+    n = count_designs(space)
+    if n is None:
+        raise MetaSimError(f"{space.name!r} has continuous parameters; its designs cannot be enumerated")
+    index = torch.cartesian_prod(*[torch.arange(p.width) for p in space.parameters]).reshape(n, -1)
+    designs = torch.zeros(n, space.dim)
+    rows = torch.arange(n)
+    for column, (_, sl) in enumerate(space.blocks()):
+        designs[rows, sl.start + index[:, column]] = 1.0
+    return designs
+
+
 def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DESIGNS,
                  batch: int = 4096) -> DesignTable:
     """P(mu(E(d))) / feature_scale for every design of ``space``.
@@ -342,11 +356,7 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
     cached = model._design_tables.get(key)
     if cached is not None:
         return cached
-    index = torch.cartesian_prod(*[torch.arange(p.width) for p in space.parameters]).reshape(n, -1)
-    designs = torch.zeros(n, space.dim)
-    rows = torch.arange(n)
-    for column, (_, sl) in enumerate(space.blocks()):
-        designs[rows, sl.start + index[:, column]] = 1.0
+    designs = design_grid(space)
     was_training = model.training
     model.eval()
     with torch.no_grad():

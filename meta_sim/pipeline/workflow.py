@@ -1,4 +1,4 @@
-"""Training set -> features -> NAMS and DR checkpoints, cached by what went in.
+"""Training set -> features -> NAMS and DR checkpoints (and the sbi baseline's), cached by what went in.
 
 `meta-sim train`, `meta-sim eval` and `make demo` share this path. A cached
 model is reused only when the dataset configuration, the extractor, the view
@@ -229,3 +229,67 @@ def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | N
         except MetaSimError:
             seconds.update(train_models(features, folder, settings, config, bars))
     return Models(paths["nams"], paths["dr"], features, seconds)
+
+
+# Bumped when the sbi baseline's training changes in a way its settings do not show.
+NRE_CODE_VERSION = 1
+
+
+def nre_settings(settings: ModelSettings) -> tuple[dict, object]:
+    """The sbi baseline's classifier options (without the sizes, which the features decide) and its
+    ``NRETrainConfig``: the defaults of ``nams.nre``, seeded by ``settings.seed``."""
+    from ..nams.nre import NREConfig, NRETrainConfig
+
+    classifier = {k: v for k, v in NREConfig(design_dim=1, feature_dim=1).to_dict().items()
+                  if k not in ("design_dim", "feature_dim")}
+    return classifier, NRETrainConfig(seed=settings.seed)
+
+
+def train_nre_checkpoint(features: FeatureSet, nams, path: Path, settings: ModelSettings,
+                         dataset: DatasetConfig, bars: Bars | None = None) -> float:
+    """Train the sbi baseline on a training set's features, normalised by the NAMS checkpoint ``nams``
+    (the features NAMS searches in), and write its checkpoint to ``path``; returns the seconds training
+    took; ``bars`` makes a progress bar of its epochs. Raises MetaSimError as ``nams.nre.train_nre`` does."""
+    from ..nams import save_checkpoint
+    from ..nams.nre import KIND, NREConfig, train_nre
+
+    classifier, train_config = nre_settings(settings)
+    normed = nams.feature_norm.apply(features.features)
+    fit = train_nre(features.encoded, normed, features.space,
+                    NREConfig(design_dim=features.encoded.shape[1], feature_dim=normed.shape[1], **classifier),
+                    train_config, bars(f"train {KIND}", train_config.max_epochs) if bars else None)
+    seconds = fit.history["seconds"]
+    extra = {"designs": len(features.names), "views": features.views, "extractor_spec": settings.extractor,
+             "seconds": seconds, "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m,
+             "dataset": asdict(dataset), "nams_model_id": nams.model_id}
+    save_checkpoint(path, fit.model.kind, fit.model, fit.model.config, features.space.to_dict(), nams.feature_norm,
+                    features.extractor_id, extra=extra, history=fit.history)
+    return seconds
+
+
+def ensure_nre(models: Models, dataset: DatasetConfig, settings: ModelSettings,
+               bars: Bars | None = None) -> tuple[Path, dict]:
+    """The cached sbi baseline for the models ``ensure_models`` returned, trained first if it is missing
+    or unreadable (``train_nre_checkpoint``).
+
+    It lies beside them, named by its own settings and code version, so it is keyed by every input
+    theirs is (the training set, the extractor, the NAMS normalisation it reuses) and by its own.
+    Returns its path and the seconds spent ("train_sbi_nre" only when it was trained now). Raises
+    MetaSimError for a design space the baseline cannot enumerate, without the ``sbi`` package, or as
+    training does.
+    """
+    from ..nams import load_checkpoint
+    from ..nams.nre import KIND, check_space
+
+    nams = load_checkpoint(models.nams_path, "nams")
+    check_space(nams.space)
+    classifier, train_config = nre_settings(settings)
+    blob = json.dumps({"classifier": classifier, "train": train_config.to_dict(), "code": NRE_CODE_VERSION},
+                      sort_keys=True)
+    path = models.nams_path.parent / f"{KIND}-{hashlib.sha256(blob.encode()).hexdigest()[:8]}.pt"
+    with locked(path.parent):
+        try:
+            load_checkpoint(path, KIND)
+            return path, {}
+        except MetaSimError:
+            return path, {f"train_{KIND}": train_nre_checkpoint(models.features, nams, path, settings, dataset, bars)}

@@ -132,3 +132,28 @@ def test_bootstrap_intervals_hold_the_mean_and_narrow_with_more_groups():
             assert low < np.mean([r[key] for r in rows]) < high
     assert np.diff(bootstrap_intervals(many)["hit"]) < 0.5 * np.diff(bootstrap_intervals(few)["hit"])
     assert bootstrap_intervals([{"hit": 1.0}] * 5) == {"hit": [1.0, 1.0]}
+
+
+def test_tables_give_the_sbi_baselines_training_time():
+    from meta_sim.experiments.bench import format_nams_table
+    from meta_sim.experiments.evaluate import results_markdown
+
+    row = {"flat_top1": 0.5, "flat_top10": 0.9, "sloped_top1": 0.4, "sloped_top10": 0.8, "seconds_per_target": 0.01}
+    table = results_markdown({"experiment": "e1", "targets": 2, "tiles_per_target": 9, "methods": {
+        "dr": row, "sbi_nre": {**row, "train_seconds": 12.34}}})
+    assert "| sbi_nre | 0.500 | 0.900 | 0.400 | 0.800 | 0.0100 |" in table
+    assert "Training (when the cached model was trained): sbi_nre 12.3 s." in table
+    assert "Training" not in results_markdown({"experiment": "e2", "targets": 2, "tiles_per_target": 9,
+                                               "methods": {"dr": row}})
+    from meta_sim.experiments.splits import get_split
+
+    rows = {"e1": {"nams_exhaustive": {**row, "targets": 2}, "sbi_nre": {**row, "targets": 2}}}
+    result = {"splits": {name: {"settings": {e: get_split(e, name).to_dict() for e in ("e1", "e2")},
+                                "experiments": rows} for name in ("test", "validation")},
+              "targets_per_seed": 2, "adjoint_targets": 1, "tiles_per_target": 9, "architecture": "additive",
+              "train_seconds_other_architectures": {},
+              "dataset": {"designs": 600, "tiles": 2, "preset": "fast"}, "feature_seconds_per_group": 0.2,
+              "fastest_adjoint_keeping_e1": {"M": 250, "iterations": 200},
+              "train_seconds": {"train_nams": 221.0, "train_dr": 52.0, "train_sbi_nre": 30.4}}
+    table = format_nams_table(result)
+    assert "Training: NAMS 221 s, DR 52 s, sbi_nre 30 s" in table and "| E1 | sbi_nre | validation |" in table

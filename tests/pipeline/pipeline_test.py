@@ -43,7 +43,9 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
     results = json.loads((out / "results.json").read_text())
     assert results["experiment"] == "e1" and results["targets"] == 3
     assert results["architecture"] == "additive"  # the default
-    assert set(results["methods"]) == {"uniform", "dr", "ms2", "nams_adjoint", "nams_exhaustive"}
+    assert set(results["methods"]) == {"uniform", "dr", "ms2", "sbi_nre", "nams_adjoint", "nams_exhaustive"}
+    assert results["methods"]["sbi_nre"]["train_seconds"] > 0
+    assert "train_sbi_nre" in results["training"]["seconds"]  # trained by this run, cached for the next
     for metrics in results["methods"].values():
         for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
             assert 0.0 <= metrics[key] <= 1.0
@@ -52,6 +54,7 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
         assert set(metrics["unseen"]) == ({"flat_top1", "flat_top10", "sloped_top1", "sloped_top10"}
                                           if metrics["unseen_targets"] else set())
     assert "| nams_adjoint |" in (out / "results.md").read_text()
+    assert "| sbi_nre |" in (out / "results.md").read_text() and "Training (when" in (out / "results.md").read_text()
     assert (out / "sheet.png").stat().st_size > 1000
     assert (out / "nams.pt").is_file() and (out / "dr.pt").is_file()
 
@@ -62,9 +65,10 @@ def test_eval_reuses_its_cached_training_set_and_model(evaluated, tiny_env, tmp_
                  "--cache", tiny_env, *TINY)
     assert again.exit_code == 0
     without = _cli("eval", "e1", "--out", tmp_path / "no-ms2", "--targets", 3, "-M", 16, "--iterations", 5,
-                   "-S", 4, "--no-ms2", "--cache", tiny_env, *TINY)
+                   "-S", 4, "--no-ms2", "--no-sbi", "--cache", tiny_env, *TINY)
     assert without.exit_code == 0
-    assert "ms2" not in json.loads((tmp_path / "no-ms2" / "results.json").read_text())["methods"]
+    assert not {"ms2", "sbi_nre"} & set(json.loads((tmp_path / "no-ms2" / "results.json").read_text())["methods"])
+    assert "train_sbi_nre" not in json.loads((tmp_path / "results.json").read_text())["training"]["seconds"]
     assert (tmp_path / "nams.pt").read_bytes() == (out / "nams.pt").read_bytes()
     first = json.loads((out / "results.json").read_text())["methods"]
     second = json.loads((tmp_path / "results.json").read_text())["methods"]
