@@ -22,8 +22,8 @@ and NAMS with the neural-adjoint and the exhaustive search.
 Scoring follows the paper (section 5.4): rank the bank's textures by the HSV
 similarity to the true texture (``meta_sim/sim/textures/similarity.py``); a
 prediction is a top-n hit when it is among the n nearest, with ties at the
-n-th place shared fairly (``Ranking.credit``). In E1 the nearest texture is
-the truth itself. The published scores are in docs/benchmarks.md
+n-th place shared fairly (``ranking.py``). In E1 the nearest texture is the
+truth itself. The published scores are in docs/benchmarks.md
 (`make bench-nams`).
 """
 
@@ -41,6 +41,7 @@ from ..core.progress import Bars
 from ..nams.search import SearchOptions
 from ..render.jobs import Job
 from ..sim.design import Continuous, DesignSpace
+from .ranking import KIND_OF, rankings
 from .splits import FIRST_HELDOUT, Split, single_seed
 
 TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from cities never trained on
@@ -49,7 +50,6 @@ TARGET_CITY_SEED = 100_000  # training sets use small seeds: targets come from c
 # training set's first designs. Version 2 of the targets draws E1 from a stream of its own.
 TARGET_DESIGN_STREAM = {"e1": 3, "e2": 2}
 TARGETS_VERSION = 2
-KIND_OF = {"flat_roof": "flat", "sloped_roof": "sloped"}
 METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
 
 
@@ -77,48 +77,8 @@ def target_jobs(experiment: str, space: DesignSpace, heldout, n: int, seed: int)
             for k, design in enumerate(designs)]
 
 
-@dataclass(frozen=True)
-class Ranking:
-    """The bank's textures of one kind by similarity to one true texture, nearest first."""
-
-    ids: tuple[str, ...]
-    similarity: tuple[float, ...]
-
-    def credit(self, predicted: str, n: int) -> float:
-        """1 when ``predicted`` is among the ``n`` nearest textures, else 0. Textures tied with the
-        n-th nearest share the places left (a tie decided by a fair coin, in expectation): a held-out
-        texture whose colours no bank texture has is equally far (similarity 0) from dozens, and
-        deciding such ties by bank order would make a hit depend on where a texture is listed."""
-        if predicted not in self.ids:
-            return 0.0
-        if n >= len(self.ids):
-            return 1.0
-        mine = self.similarity[self.ids.index(predicted)]
-        edge = self.similarity[n - 1]
-        if mine != edge:
-            return float(mine > edge)
-        better = sum(1 for v in self.similarity if v > edge)
-        tied = sum(1 for v in self.similarity if v == edge)
-        return (n - better) / tied
-
-
-def rankings(experiment: str, bank, heldout) -> dict:
-    """Per roof kind: true texture id -> its ``Ranking`` of the bank's textures of that kind."""
-    from ..sim.textures import SIMILARITY_FILE, SIMILARITY_TO_DEFAULT_FILE, load_similarity, rank_by_similarity
-
-    sim = load_similarity(Path(heldout.root if experiment == "e2" else bank.root) /
-                          (SIMILARITY_TO_DEFAULT_FILE if experiment == "e2" else SIMILARITY_FILE))
-    truth_bank = heldout if experiment == "e2" else bank
-
-    def ranking(truth: str, kind: str) -> Ranking:
-        order = rank_by_similarity(truth, bank.ids(kind), sim)
-        return Ranking(tuple(order), tuple(sim.value(truth, t) for t in order))
-
-    return {kind: {t: ranking(t, kind) for t in truth_bank.ids(kind)} for kind in ("flat", "sloped")}
-
-
 def score(predicted: dict, truth: dict, ranks: dict, space: DesignSpace | None = None) -> dict:
-    """top-1 / top-10 hits (tie-aware, see ``Ranking.credit``) for each roof parameter the space has.
+    """top-1 / top-10 hits (tie-aware, see ``ranking.Ranking.credit``) for each roof parameter the space has.
 
     With ``space``, its other parameters too: ``{name}_hit`` (1 for the true choice) for a categorical
     one, ``{name}_error`` (the absolute error as a fraction of the parameter's range) for a continuous one.

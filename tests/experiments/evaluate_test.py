@@ -2,7 +2,8 @@
 
 import pytest
 
-from meta_sim.experiments.evaluate import Ranking, rankings, score
+from meta_sim.experiments.evaluate import rankings, score
+from meta_sim.experiments.ranking import Ranking
 from meta_sim.sim.textures import ensure_default_bank, ensure_heldout_bank
 
 
