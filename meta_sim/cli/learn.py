@@ -231,7 +231,9 @@ def _design_eval(experiment: str, summary: str):
         if split.touches_test:
             click.echo("These targets are the test split's: report these figures; choose nothing by them "
                        "(choose on --split validation).")
-        click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}")
+        click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}"
+                   + (" with breakdown.md and breakdown.png: where NAMS's top-10 misses come from"
+                      if experiment == "e2" else ""))
 
     command.__doc__ = summary
     eval_group.command(experiment)(command)

@@ -414,9 +414,15 @@ def discrete(space: DesignSpace) -> bool:
     return not any(isinstance(p, Continuous) for p in space.parameters)
 
 
+def best_nams_name(methods) -> str:
+    """NAMS's best method among the names ``methods``: the exhaustive search where it ran (a discrete
+    space), else the neural-adjoint."""
+    return "nams_exhaustive" if "nams_exhaustive" in methods else "nams_adjoint"
+
+
 def best_nams(predictions: dict) -> list:
-    """NAMS's designs: the exhaustive search's where it ran (a discrete space), else the adjoint's."""
-    return predictions.get("nams_exhaustive") or predictions["nams_adjoint"]
+    """NAMS's designs (``best_nams_name``'s) of method name -> designs."""
+    return predictions[best_nams_name(predictions)]
 
 
 def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> dict:
@@ -466,16 +472,19 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     ``settings.ms2``), the sbi baseline (with ``settings.sbi``, in a discrete space; its row also holds
     ``train_seconds``, its training time when it was trained) and NAMS with the adjoint and the
     exhaustive search, and writes into ``out``:
-    ``results.json`` and ``results.md``, copies of ``nams.pt`` and ``dr.pt``, and ``sheet.png``
+    ``results.json`` and ``results.md``, copies of ``nams.pt`` and ``dr.pt``, ``sheet.png``
     (the first ``settings.sheet_rows`` targets beside the same city rendered with NAMS's inferred
-    design). Returns the results dict. Raises MetaSimError as ``prepare_eval`` does, or when the
-    search settings are invalid.
+    design), and in E2 where NAMS's top-10 misses come from (``breakdown.write_breakdown``:
+    ``breakdown.json``, ``breakdown.md``, ``breakdown.png``). Returns the results dict. Raises
+    MetaSimError as ``prepare_eval`` does, or when the search settings are invalid.
     """
     import shutil
 
     from ..core.cache import cache_root
     from ..render.jobs import RenderSettings
     from ..sim.quality import get_preset
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+    from .breakdown import write_breakdown
 
     root = Path(root or cache_root())
     out = Path(out)
@@ -500,6 +509,11 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     shutil.copy2(ctx.models.nams_path, out / "nams.pt")
     shutil.copy2(ctx.models.dr_path, out / "dr.pt")
     banks = _banks()
+    if experiment == "e2":
+        heldout = ensure_heldout_bank(name=ctx.split.heldout or FIRST_HELDOUT)
+        other_roof = rankings("e2", ensure_default_bank(), heldout, across=True)
+        write_breakdown(out, results, best_nams_name(predictions), ctx.ranks, other_roof,
+                        lambda texture_id: texture_swatch(banks, texture_id))
     comparison_sheet(out / "sheet.png", ctx.jobs[:settings.sheet_rows], ctx.folders, best_nams(predictions),
                      RenderSettings(space=ctx.nams.space, banks=banks,
                                     preset=get_preset(settings.preset or dataset.preset),
@@ -512,6 +526,11 @@ def _banks() -> list:
     from ..sim.textures import ensure_default_bank, ensure_heldout_banks
 
     return [ensure_default_bank(), *ensure_heldout_banks()]
+
+
+def texture_swatch(banks: list, texture_id: str) -> np.ndarray:
+    """The uint8 RGB image of ``texture_id`` from the first of ``banks`` that has it."""
+    return next(b for b in banks if b.contains(texture_id)).load_image(texture_id)
 
 
 def comparison_sheet(path: Path, jobs: list[Job], target_folders: list[Path], predicted: list[dict],
@@ -532,15 +551,13 @@ def comparison_sheet(path: Path, jobs: list[Job], target_folders: list[Path], pr
     def srgb8(path):
         return np.floor(read_image(path) * 255 + 0.5).astype(np.uint8)
 
-    def swatch(texture_id):
-        return next(b for b in banks if b.contains(texture_id)).load_image(texture_id)
-
     rows = []
     for job, guess, target_folder in zip(jobs, inferred, target_folders):
         row = [("TARGET", srgb8(job_tiles(target_folder, job.name, tiles)[0])),
                ("INFERRED", srgb8(job_tiles(folder, guess.name, tiles)[0]))]
         for param in [n for n in space.names if n in KIND_OF]:
             kind = KIND_OF[param][0].upper()
-            row += [(f"{kind} TRUE", swatch(job.design[param])), (f"{kind} NAMS", swatch(guess.design[param]))]
+            row += [(f"{kind} TRUE", texture_swatch(banks, job.design[param])),
+                    (f"{kind} NAMS", texture_swatch(banks, guess.design[param]))]
         rows.append(row)
     write_png(path, render_sheet(rows, 160, len(rows[0])))

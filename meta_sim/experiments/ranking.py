@@ -1,6 +1,6 @@
 """How E1 and E2 rank the bank: per roof kind, the bank's textures by the HSV similarity to a true
 texture (``meta_sim/sim/textures/similarity.py``), and the tie-aware top-n credit of a prediction
-(the paper's scoring, section 5.4); ``evaluate`` scores with it.
+(the paper's scoring, section 5.4). ``evaluate`` scores with it and ``breakdown`` explains its misses.
 """
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 KIND_OF = {"flat_roof": "flat", "sloped_roof": "sloped"}
+OTHER_KIND = {"flat": "sloped", "sloped": "flat"}
 
 
 @dataclass(frozen=True)
@@ -35,9 +36,18 @@ class Ranking:
         tied = sum(1 for v in self.similarity if v == edge)
         return (n - better) / tied
 
+    def place(self, texture: str) -> int:
+        """1 + the number of textures strictly nearer than ``texture`` (ties share the best place)."""
+        mine = self.similarity[self.ids.index(texture)]
+        return 1 + sum(1 for v in self.similarity if v > mine)
 
-def rankings(experiment: str, bank, heldout) -> dict:
-    """Per roof kind: true texture id -> its ``Ranking`` of the bank's textures of that kind."""
+
+def rankings(experiment: str, bank, heldout, across: bool = False) -> dict:
+    """Per roof kind: true texture id -> its ``Ranking`` of the bank's textures of that kind.
+
+    With ``across`` the true textures are those of the *other* kind: under "flat", each sloped true
+    texture ranks the bank's flat textures (how near a flat texture is to a target's sloped roof).
+    """
     from ..sim.textures import SIMILARITY_FILE, SIMILARITY_TO_DEFAULT_FILE, load_similarity, rank_by_similarity
 
     sim = load_similarity(Path(heldout.root if experiment == "e2" else bank.root) /
@@ -48,4 +58,5 @@ def rankings(experiment: str, bank, heldout) -> dict:
         order = rank_by_similarity(truth, bank.ids(kind), sim)
         return Ranking(tuple(order), tuple(sim.value(truth, t) for t in order))
 
-    return {kind: {t: ranking(t, kind) for t in truth_bank.ids(kind)} for kind in ("flat", "sloped")}
+    return {kind: {t: ranking(t, kind) for t in truth_bank.ids(OTHER_KIND[kind] if across else kind)}
+            for kind in ("flat", "sloped")}
