@@ -158,13 +158,15 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
               "targets_per_seed": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": tiles,
               "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}, "splits": {}}
     for split_name in SPLIT_NAMES:
-        experiments, seeds = {}, {}
+        experiments, seeds, breakdowns = {}, {}, {}
         for experiment in ("e1", "e2"):
             split = get_split(experiment, split_name)
-            experiments[experiment] = _nams_rows(split, targets, tiles, adjoint_targets, sweep, dataset, settings,
-                                                 others, own_features, root, bars)
+            experiments[experiment], breakdown = _nams_rows(split, targets, tiles, adjoint_targets, sweep, dataset,
+                                                            settings, others, own_features, root, bars)
             seeds[experiment] = split.to_dict()
-        result["splits"][split_name] = {"settings": seeds, "experiments": experiments}
+            if breakdown is not None:
+                breakdowns[experiment] = breakdown
+        result["splits"][split_name] = {"settings": seeds, "experiments": experiments, "breakdown": breakdowns}
     result["fastest_adjoint_keeping_e1"] = fastest_adjoint(result["splits"]["validation"]["experiments"]["e1"],
                                                            sweep)
     extractor = checkpoint_extractor(load_checkpoint(ensure_models(dataset, settings, root).nams_path, "nams"))
@@ -191,20 +193,31 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
 
 
 def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dataset, settings, others: dict,
-               own_features: dict, root: Path, bars: Bars | None) -> dict:
-    """bench_nams's rows of one experiment on one split: method name -> metrics, intervals, targets."""
-    from .evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
+               own_features: dict, root: Path, bars: Bars | None) -> tuple[dict, dict | None]:
+    """bench_nams's rows of one experiment on one split (method name -> metrics, intervals, targets) and, in
+    E2, where NAMS's top-10 misses come from (``breakdown.error_breakdown``; None in E1)."""
+    from ..sim.textures import ensure_default_bank, ensure_heldout_bank
+    from .breakdown import error_breakdown
+    from .evaluate import EvalSettings, best_nams_name, method_runs, prepare_eval, score_method, score_other_model
+    from .ranking import rankings
     from .splits import spread
 
     seed = split.seeds[0]  # of the searches' random starts
     ctx = prepare_eval(split.experiment, dataset, settings, EvalSettings(targets=targets, tiles=tiles, split=split),
                        root, bars)
     few = ctx.subset(spread(len(split.seeds), targets, adjoint_targets))
-    rows = {}
+    rows, predictions = {}, {}
     for name, run in method_runs(ctx, seed, {}).items():
         if name != "nams_adjoint":
-            rows[name], _ = score_method(ctx, run)
+            rows[name], predictions[name] = score_method(ctx, run)
             rows[name]["targets"] = len(ctx.jobs)
+    breakdown = None
+    method = best_nams_name(predictions)
+    if split.experiment == "e2" and method in predictions:  # not when NAMS's best ran on the adjoint's few only
+        detail = [{"truth": job.design, "predicted": {method: design}}
+                  for job, design in zip(ctx.jobs, predictions[method])]
+        other_roof = rankings("e2", ensure_default_bank(), ensure_heldout_bank(name=split.heldout), across=True)
+        breakdown = error_breakdown(detail, ctx.ranks, method, other_roof)
     if "sbi_nre" in rows:
         rows["sbi_nre"]["train_seconds"] = round(ctx.sbi.extra["seconds"], 1)
     for starts, iterations in sweep:
@@ -219,7 +232,7 @@ def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dat
                            EvalSettings(targets=targets, tiles=tiles, split=split, ms2=False, sbi=False), root, bars)
         rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
         rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
-    return rows
+    return rows, breakdown
 
 
 def fastest_adjoint(e1_rows: dict, sweep=ADJOINT_SWEEP) -> dict:
@@ -237,7 +250,9 @@ def fastest_adjoint(e1_rows: dict, sweep=ADJOINT_SWEEP) -> dict:
 def format_nams_table(result: dict) -> str:
     """``bench_nams``'s result as the Markdown tables of docs/benchmarks.md: accuracy with 95% intervals
     and search time per experiment, method and split (test first, validation beside it), a note on
-    the splits, training and feature times, and the stage times (E4)."""
+    the splits, training and feature times, the stage times (E4), and per split where NAMS's E2
+    top-10 misses come from (``breakdown.breakdown_markdown``; results from before it lack them)."""
+    from .breakdown import breakdown_markdown, breakdown_title
     from .evaluate import with_interval
 
     lines = ["| experiment | method | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | "
@@ -291,6 +306,10 @@ def format_nams_table(result: dict) -> str:
         lines += ["", "| stage (E4) | seconds | paper |", "|---|---|---|"]
         lines += [f"| {name} | {seconds:.3f} | {paper} |" if seconds < 10 else f"| {name} | {seconds:.0f} | {paper} |"
                   for name, seconds, paper in stages]
+    for split in order:
+        for experiment, breakdown in splits[split].get("breakdown", {}).items():
+            title = breakdown_title(experiment, splits[split]["settings"][experiment])
+            lines += ["", breakdown_markdown(breakdown, title).rstrip("\n")]
     return "\n".join(lines)
 
 

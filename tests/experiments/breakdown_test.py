@@ -168,3 +168,26 @@ def test_other_roof_rankings_rank_a_kinds_bank_textures_by_the_other_roofs_textu
         for ranking in across[kind].values():
             assert sorted(ranking.ids) == sorted(bank.ids(kind))
             assert list(ranking.similarity) == sorted(ranking.similarity, reverse=True)
+
+
+def test_bench_nams_table_gives_each_splits_breakdown_after_the_accuracy_table():
+    from meta_sim.experiments.bench import format_nams_table
+    from meta_sim.experiments.splits import get_split
+
+    ranks, other_roof = _ranks()
+    breakdown = error_breakdown(TARGETS, ranks, "nams_exhaustive", other_roof)
+    row = {"flat_top1": 0.5, "flat_top10": 0.5, "sloped_top1": 0.5, "sloped_top10": 0.75, "seconds_per_target": 0.01,
+           "targets": 4}
+    result = {"splits": {name: {"settings": {e: get_split(e, name).to_dict() for e in ("e1", "e2")},
+                                "experiments": {"e2": {"nams_exhaustive": row}}, "breakdown": {"e2": breakdown}}
+                         for name in ("validation", "test")},
+              "targets_per_seed": 4, "adjoint_targets": 1, "tiles_per_target": 9, "architecture": "additive",
+              "train_seconds_other_architectures": {}, "dataset": {"designs": 600, "tiles": 2, "preset": "fast"},
+              "feature_seconds_per_group": 0.2, "fastest_adjoint_keeping_e1": {"M": 250, "iterations": 200}}
+    table = format_nams_table(result)
+    test = table.index("#### E2, test (heldout-v2): where nams_exhaustive's top-10 misses come from")
+    validation = table.index("#### E2, validation (heldout-v1): where nams_exhaustive's top-10 misses come from")
+    assert table.index("| E2 | nams_exhaustive | test |") < test < validation  # test first, as in the table above
+    assert table.count("| flat | flat-held-1 | 3 | 0.333 | 0.333 | 2.0 | 1.0 (0.7) |") == 2
+    del result["splits"]["test"]["breakdown"]  # a result from before the breakdown
+    assert "misses come from" in format_nams_table(result) and "E2, test (" not in format_nams_table(result)
