@@ -350,7 +350,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
     designs in the same cities (what inferring the domain's design adds). With ``realness`` also the accuracy
     of a real-versus-rendered classifier (``task.realness``; held-out real scenes against renders in
-    held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them.
+    held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them,
+    all cropped to one ground size.
     ``sensor`` is a sensor name for every domain's renders, or "auto" for the one matching the domain's
     imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation, ``ground``
     the ground cover mix. Every segmenter is also scored on the domain's ``adapt`` scenes (row
@@ -393,8 +394,9 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         if realness:
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
             rows[domain]["colour"] = {"real": colour_stats(adapt_pool), "rendered": colour_stats(rendered)}
-            picture.append([(f"REAL {domain}", _srgb8(i)) for i in adapt_pool.images[:3]] +
-                           [("RENDERED", _srgb8(i)) for i in rendered.images[:3]])
+            shown = _same_ground(adapt_pool.images[:3] + rendered.images[:3])
+            picture.append([(f"REAL {domain}", _srgb8(i)) for i in shown[:3]] +
+                           [("RENDERED", _srgb8(i)) for i in shown[3:]])
     if picture:
         from ..task.score import prediction_sheet
 
@@ -446,6 +448,14 @@ def colour_stats(pool: Pool) -> dict:
         out[part] = {"brightness": float(pixels.mean()),
                      "saturation": float(np.mean(np.where(high > 0, (high - low) / np.maximum(high, 1e-6), 0.0)))}
     return out
+
+
+def _same_ground(images: list[np.ndarray]) -> list[np.ndarray]:
+    """Centre crops of images at one pixel size to the largest square all of them hold, so a picture
+    shows each on the same ground: real scenes and rendered tiles differ in size."""
+    side = min(min(i.shape[:2]) for i in images)
+    return [i[(i.shape[0] - side) // 2:(i.shape[0] - side) // 2 + side,
+              (i.shape[1] - side) // 2:(i.shape[1] - side) // 2 + side] for i in images]
 
 
 def _srgb8(image: np.ndarray) -> np.ndarray:

@@ -178,3 +178,19 @@ def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_meas
     checked = [line for line in lines if line.startswith("| banepa")][1]  # the validation table's row
     assert "| 12.5 +- 0.0 | 50.0 +- 10.0 | 75.0 +- 0.0 | 20.0 |" in checked
     assert len([line for line in lines if line.startswith("| kampala")]) == 1  # measured before validation
+
+
+def test_the_realism_picture_shows_real_scenes_and_renders_on_the_same_ground():
+    """Real scenes and rendered tiles differ in size at the working pixel size; the picture crops each to
+    the largest square all hold, around its centre."""
+    import numpy as np
+
+    from meta_sim.experiments.task_eval import _same_ground
+
+    real = np.zeros((111, 140, 3), np.float32)
+    real[55, 69] = 1.0  # the centre pixel of the crop
+    render = np.arange(192 * 192 * 3, dtype=np.float32).reshape(192, 192, 3)
+    shown = _same_ground([real, render])
+    assert [s.shape for s in shown] == [(111, 111, 3), (111, 111, 3)]
+    assert shown[0][55, 55].max() == 1.0
+    assert np.array_equal(shown[1], render[40:151, 40:151])
