@@ -670,6 +670,17 @@ class CityLayout:
         whose bbox shares positive area with the rectangle."""
         return _in_rect(getattr(self, name), self._detail_boxes[name], x0, y0, x1, y1)
 
+    def style_of(self, building: Building) -> str:
+        """The city style (one of `STYLES`) of the region a building stands in, read from its lot: a
+        dense town's lots hold one house each (block -1), downtown and industrial grids pave theirs, and
+        only the industrial style builds industrial halls on paved lots."""
+        lot = self.lots[building.lot_index]
+        if lot.block_index < 0:
+            return "dense"
+        if lot.surface == "paved":
+            return "industrial" if building.kind == "industrial" else "downtown"
+        return "suburban"
+
     def tile_grid(self, tile_m: float = TILE_M) -> list[Rect]:
         """Square tiles from the origin covering the city, row-major, row 0 at y = 0 (south).
 
