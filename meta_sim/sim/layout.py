@@ -59,6 +59,7 @@ from .clutter import (
     lane_cars,
     real_trees,
     through_roads,
+    through_sidewalks,
 )
 
 LAYOUT_VERSION = 1
@@ -248,9 +249,10 @@ class LayoutParams:
         with the crown, in rows along the verges and groups in yards and
         parks; the renderer draws them as lumpy, textured, per-tree tinted
         crowns).
-    street_details: kerbs and sidewalks in the verges, driveways to houses,
-        paved commercial and industrial lots with parking lots and painted
-        stalls, lane markings on the roads.
+    street_details: kerbs and sidewalks in the verges (and along the roads
+        between regions, beside the regions that have them), driveways to
+        houses, paved commercial and industrial lots with parking lots and
+        painted stalls, lane markings on the roads.
     car_density: 0..1, share of kerb parking spots (times 0.6), driveway and
         parking-lot stalls taken by a car, and traffic in the lanes (cars
         per 100 m of lane: 1.5 times it); cars stand on driveways and in
@@ -1471,7 +1473,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
                 [(plans[i].rect, plans[i].block_index - firsts[style]) for i in mine],
                 [replace(b, lot_index=renumber[i]) for i, b in local_buildings.items() if i in renumber])
         details, real = _styled_clutter(seed, params, width, height, regions, lanes, through, grids, road_space,
-                                        buildings)
+                                        buildings, lots)
         trees += real
     return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
                       tuple(trees), **{name: tuple(items) for name, items in details.items()})
@@ -1523,15 +1525,16 @@ CLUTTER_STREAM = 18  # after the seed in the clutter streams of styled cities: [
 
 def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float, regions: list[_Region],
                     lanes: dict, through: list[Road], grids: dict[str, _Grid], road_space: polygons.Occupancy,
-                    buildings: list[Building]) -> tuple[dict[str, list], list[Tree]]:
+                    buildings: list[Building], lots: list[Lot]) -> tuple[dict[str, list], list[Tree]]:
     """Street details, clutter and real trees of a styled city, region by region as its style has them.
 
     Each grid style's are made in its own frame by `clutter.generate_clutter` and `clutter.real_trees`
     with the style's `GRID_RULES`, then moved into the world and kept inside the style's regions (pavings
     and markings cut at their borders); dense towns get cars by their lanes, trees in the gaps between
-    houses and bushes in the yards; the through roads between regions get centre lines and traffic. Every
-    part draws from a generator of its own (`CLUTTER_STREAM`), so the city's stages keep their draws and
-    a styled city without clutter stays as it was.
+    houses and bushes in the yards; the through roads between regions get centre lines and traffic, and
+    kerbs and sidewalks on the sides of regions whose style has them. Every part draws from a generator of
+    its own (`CLUTTER_STREAM`), so the city's stages keep their draws and a styled city without clutter
+    stays as it was.
     """
     def rng(*part: int) -> np.random.Generator:
         return np.random.default_rng([seed, CLUTTER_STREAM, *part])
@@ -1603,6 +1606,14 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
         markings, cars = through_roads(rng(2, 0, 0), plan, road_space, taken)
         out["markings"] += markings
         out["cars"] += cars
+    if through and params.street_details:
+        # Last, from a stream of their own, and kept off lots and pavings rather than the knobs' items:
+        # everything above stays as it was, and they follow from the layout and street_details alone.
+        sides = [(region.cell, None if region.style == "dense" else GRID_RULES[region.style].sidewalk_m)
+                 for region in regions]
+        ground = polygons.Occupancy([lot.polygon for lot in lots] + [paving.polygon for paving in out["pavings"]])
+        paved = [road.polygon for road in through if road.surface == "asphalt"]
+        out["pavings"] += through_sidewalks(rng(3, 0, 0), paved, sides, road_space, ground)
     return {name: items for name, items in out.items() if items}, trees
 
 
