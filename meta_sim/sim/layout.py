@@ -63,6 +63,11 @@ from .clutter import (
 )
 
 LAYOUT_VERSION = 1
+# What a city of the richer scene (a style other than the suburban grid, or roof furniture) shows, beyond
+# its layout: tile headers and training-set keys of such cities carry it, so their caches are rendered and
+# trained again when it changes (``scene_version``). 2: water tanks on flat roofs and kerbs and sidewalks
+# along the roads between style regions.
+SCENE_VERSION = 2
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
 
 KINDS = ("residential", "apartment", "office", "industrial", "highrise")
@@ -1687,3 +1692,12 @@ def layout_for_tiles(seed: int, n_tiles: int, tile_m: float = TILE_M,
     rows = math.ceil(n_tiles / cols)
     layout = generate_layout(seed, cols * tile_m, rows * tile_m, params)
     return layout, layout.tile_grid(tile_m)[: int(n_tiles)]
+
+
+def scene_version(overrides: Mapping) -> dict:
+    """``{"scene": SCENE_VERSION}`` for a city with these layout overrides when it is of the richer
+    scene (a style other than the suburban grid, or roof furniture), else {}: what tile headers and
+    training-set keys add, so caches of plain cities stay valid when the richer scene changes."""
+    style = overrides.get("style", "suburban")
+    rich = float(overrides.get("roof_furniture", 0.0) or 0.0) > 0.0 or (style not in ("suburban", None))
+    return {"scene": SCENE_VERSION} if rich else {}
