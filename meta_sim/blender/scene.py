@@ -383,7 +383,9 @@ class CityScene:
     def _build_furniture(self, density: float) -> None:
         """The roof furniture (``sim/furniture.py``) of the buildings built, labelled as their roofs."""
         key = self.key
-        arrays = meshes.furniture_mesh([(b, roof_furniture(b, self.layout.seed, density)) for b in self.buildings])
+        lay = self.layout
+        arrays = meshes.furniture_mesh([(b, roof_furniture(b, lay.seed, density, lay.style_of(b)))
+                                        for b in self.buildings])
         if not arrays.n_polygons:
             return
         materials = []

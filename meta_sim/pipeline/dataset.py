@@ -76,15 +76,17 @@ class DatasetConfig:
         return self
 
     def identity(self) -> dict:
-        """Every input of the training set: the fields and what of the render preset's settings
-        sets its tiles apart (``RenderPreset.cache_fields``)."""
+        """Every input of the training set: the fields, what of the render preset's settings sets its
+        tiles apart (``RenderPreset.cache_fields``) and, for a space of the richer scene, the scene's
+        version (``DesignSpace.scene_version``)."""
         from ..sim.design import DesignSpace
         from ..sim.quality import get_preset
 
         identity = {**asdict(self), **get_preset(self.preset).cache_fields()}
+        space = DesignSpace.load(self.space)
         if Path(self.space).suffix:  # a space from a file: what it declares, not where it lies
-            identity["space"] = DesignSpace.load(self.space).to_dict()
-        return identity
+            identity["space"] = space.to_dict()
+        return {**identity, **space.scene_version()}
 
     def key(self) -> str:
         """A short hash of ``identity()``: the training set's folder name in the cache."""

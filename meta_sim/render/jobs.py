@@ -16,6 +16,7 @@ from ..core.names import safe_name
 from ..sim import tiles
 from ..sim.appearance import Appearance
 from ..sim.design import DesignSpace
+from ..sim.layout import scene_version
 from ..sim.quality import RenderPreset
 from ..sim.sensor import Sensor
 
@@ -65,10 +66,13 @@ class RenderSettings:
 
     def header(self, job: "Job") -> dict:
         """What a tile header of ``job`` records beyond a plain render: its look, the city style and the
-        roof furniture's density (so tiles rendered before a space had furniture are never taken for its)."""
-        furniture = self.space.layout_overrides(job.design).get("roof_furniture", 0.0)
+        roof furniture's density (so tiles rendered before a space had furniture are never taken for its) and,
+        for a city of the richer scene, its version (``layout.scene_version``)."""
+        overrides = self.space.layout_overrides(job.design)
+        furniture = overrides.get("roof_furniture", 0.0)
         return {**self.appearance(job).header(), **({"style": self.style} if self.style != "suburban" else {}),
-                **({"roof_furniture": furniture} if furniture else {})}
+                **({"roof_furniture": furniture} if furniture else {}),
+                **scene_version({"style": self.style, **overrides})}
 
     @property
     def tile_m(self) -> float:

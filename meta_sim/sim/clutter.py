@@ -24,7 +24,9 @@ industrial: trucks at the halls and in truck stalls, few trees; neither gets
 pools or hedges); dense towns get real trees in the gaps between their houses,
 bushes and a few cars parked by the lanes, and no kerbs, sidewalks or paint
 (`gap_trees`, `gap_bushes`, `lane_cars`); the through roads between regions
-get centre lines and traffic (`through_roads`).
+get centre lines and traffic (`through_roads`) and, on the sides of regions
+that have sidewalks, kerbs and sidewalks of those regions' widths
+(`through_sidewalks`).
 
 Everything here is ground clutter: the label passes see it as background.
 This module knows nothing of `layout` (which imports it): it takes blocks,
@@ -1099,3 +1101,63 @@ def through_roads(rng: np.random.Generator, roads, all_roads: polygons.Occupancy
                     cars.append(car)
                     taken.add(outline)
     return markings, cars
+
+
+THROUGH_STEP_M = 1.0  # a through road's kerbs and sidewalks are laid in pieces this long, each checked
+THROUGH_ROAD_GAP_M = 0.5  # they stop this far short of the roads that meet the through road
+SIDEWALK_NARROWING_M = 0.5  # a sidewalk narrows in steps of this where the ground beside it is taken
+SIDEWALK_MIN_M = 1.0  # and stops where less than this is left
+MIN_RUN_M = 2.0  # a kerb or sidewalk piece shorter than this is left out
+
+
+def _beside(frame, edge: float, sign: float, s0: float, s1: float, a: float, b: float,
+            grow: float = 0.0) -> Polygon:
+    """The counter-clockwise piece of ground from s0 to s1 along a road's `_road_frame`, a to b metres out
+    from its edge at `edge` across (on the side `sign` points to), grown by `grow` all round."""
+    c0, c1 = (edge + a, edge + b) if sign > 0 else (edge - b, edge - a)
+    return tuple(_on_road(frame, s, c) for s, c in ((s0 - grow, c0 - grow), (s1 + grow, c0 - grow),
+                                                    (s1 + grow, c1 + grow), (s0 - grow, c1 + grow)))
+
+
+def through_sidewalks(rng: np.random.Generator, roads: Sequence[Polygon], regions, all_roads: polygons.Occupancy,
+                      taken: polygons.Occupancy) -> list[Paving]:
+    """Kerbs and sidewalks along the straight through roads between city regions: on each side a kerb at
+    the road's edge and a sidewalk right behind it (no verge: the lots reach the road). `regions` are
+    (window, sidewalk width range) pairs, the range None where a region has no sidewalks (a dense town);
+    each side of a road takes the range of the region it borders and draws its width from it. A piece
+    stays inside its region's window, off every road but its own (`THROUGH_ROAD_GAP_M` short of those that
+    meet it) and off what `taken` holds (lots, pavings); where that ground comes nearer, the sidewalk
+    narrows, down to `SIDEWALK_MIN_M`, and stops below it."""
+    out: list[Paving] = []
+    for road in roads:
+        frame = _road_frame(road)
+        lo, hi, c_lo, c_hi = frame[3:]
+        steps = int((hi - lo) // THROUGH_STEP_M)
+        for sign, edge in ((-1.0, c_lo), (1.0, c_hi)):
+            u = rng.random()  # drawn for every side, so one side's region leaves the other's width alone
+            probe = _on_road(frame, (lo + hi) / 2, edge + sign * 1.0)
+            window, widths = next(((window, widths) for window, widths in regions
+                                   if polygons.inside((probe,), window, 0.0)), (None, None))
+            if widths is None:
+                continue
+            width = widths[0] + u * (widths[1] - widths[0])
+            narrowed = [width - k * SIDEWALK_NARROWING_M
+                        for k in range(int((width - SIDEWALK_MIN_M) // SIDEWALK_NARROWING_M) + 1)]
+            for kind, start, choices in (("kerb", 0.0, [KERB_M]), ("sidewalk", KERB_M, narrowed)):
+                runs: list[list] = []  # [first step, step after the last, width]
+                for i in range(steps):
+                    s0, s1 = lo + i * THROUGH_STEP_M, lo + (i + 1) * THROUGH_STEP_M
+                    w = next((w for w in choices
+                              if polygons.inside(_beside(frame, edge, sign, s0, s1, start, start + w), window, 0.0)
+                              and all_roads.clear(_beside(frame, edge, sign, s0, s1, start, start + w,
+                                                          THROUGH_ROAD_GAP_M), 0.0, skip=road)
+                              and taken.clear(_beside(frame, edge, sign, s0, s1, start, start + w, 0.01), 0.0)),
+                             None)
+                    if w is not None and runs and runs[-1][1] == i and runs[-1][2] == w:
+                        runs[-1][1] = i + 1
+                    elif w is not None:
+                        runs.append([i, i + 1, w])
+                out += [Paving(polygons.rounded_polygon(_beside(frame, edge, sign, lo + i0 * THROUGH_STEP_M,
+                                                                lo + i1 * THROUGH_STEP_M, start, start + w)), kind)
+                        for i0, i1, w in runs if (i1 - i0) * THROUGH_STEP_M >= MIN_RUN_M]
+    return out

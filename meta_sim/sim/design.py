@@ -343,6 +343,14 @@ class DesignSpace:
         """The inverse of ``parse``: ``flat_roof=<id>,sloped_roof=<id>``."""
         return ",".join(f"{n}={design[n]}" for n in self.names)
 
+    def scene_version(self) -> dict:
+        """``layout.scene_version`` of the cities this space can render: ``{"scene": N}`` when its fixed
+        layout asks for roof furniture or a style, or a parameter sets the style; else {}."""
+        from .layout import scene_version
+
+        styled = any(p.layout_field == "style" for p in self.parameters)
+        return scene_version({**self.layout, **({"style": "styled"} if styled else {})})
+
     def layout_overrides(self, design: Mapping) -> dict:
         """Fixed layout overrides plus the design's layout-bound values."""
         out = dict(self.layout)

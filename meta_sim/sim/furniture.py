@@ -8,13 +8,20 @@
   skylights (rows of them on halls), roof hatches, stair and lift housings on
   apartment, office and highrise roofs, and rows of tilted solar panels;
 * sloped roofs: chimneys by the ridge, rising above the roof where they
-  stand, roof windows and solar panels lying on one roof plane.
+  stand, roof windows and solar panels lying on one roof plane;
+* water tanks: plastic cylinders (mostly black, also blue, white or beige)
+  on flat roofs, alone or two or three together, some on a small steel
+  stand. How often a roof has them depends on the city style of its
+  building (`TANK_SHARE`): most flat roofs of a dense town, where water
+  comes by the tank, some suburban ones, few downtown or industrial ones.
 
 Nothing here is stored in the layout: a building's furniture follows from the
-city seed, the building and the density, drawn from a generator of its own
-(``default_rng([seed, building id, FURNITURE_STREAM])``). So the layout's
-streams and JSON stay as they were, a building carries the same furniture in
-every tile, and the renderer makes it only for the buildings a tile sees.
+city seed, the building, its style and the density, drawn from a generator of
+its own (``default_rng([seed, building id, FURNITURE_STREAM])``). So the
+layout's streams and JSON stay as they were, a building carries the same
+furniture in every tile, and the renderer makes it only for the buildings a
+tile sees. Water tanks came last and draw after every other piece of a roof,
+so the pieces from before them stand where they stood.
 
 Every piece stands inside its building's footprint, and the label passes
 paint it with its building's instance id and roof class: the labels of a
@@ -37,7 +44,8 @@ Rect = tuple[float, float, float, float]  # x0, y0, x1, y1 in the building's own
 
 FURNITURE_STREAM = 18  # the tag of each building's generator (roof jitter's is 7)
 # Material of a piece; meshes.furniture_mesh gives each its slot in this order.
-SURFACES = ("coping", "metal", "dark", "dome", "glass", "solar", "brick", "render")
+SURFACES = ("coping", "metal", "dark", "dome", "glass", "solar", "brick", "render",
+            "tank-black", "tank-blue", "tank-white", "tank-beige")
 
 PARAPET_WIDTH_M = (0.2, 0.4)
 HVAC_SIZE_M = (1.0, 3.0)
@@ -60,6 +68,12 @@ ROOF_WINDOW_M = ((0.7, 1.0), (1.0, 1.4))  # across, up the slope
 EDGE_M = 0.4  # pieces keep this far inside the roof edge (or the parapet)
 GAP_M = 0.5  # and this far apart
 MAX_PIECES = 40  # of one kind on one roof
+TANK_DIAMETER_M = (1.0, 1.6)
+TANK_HEIGHT_M = (1.0, 1.8)
+TANK_SIDES = 16  # of the polygon standing for a tank's circle
+TANK_STAND_M = (0.5, 1.5)  # height of a stand's deck above the roof
+TANK_DECK_M = 0.06  # thickness of a stand's deck and side of its square legs
+TANK_DECK_RIM_M = 0.05  # the deck reaches this far beyond its tank on every side
 
 # Expected pieces per square metre of flat roof at roof_furniture 1 are 1 / these.
 HVAC_M2 = {"residential": 400.0, "apartment": 150.0, "office": 90.0, "industrial": 110.0, "highrise": 70.0}
@@ -71,6 +85,13 @@ FLAT_SOLAR_SHARE = {"residential": 0.4, "apartment": 0.35, "office": 0.3, "indus
 CHIMNEY_SHARE = {"residential": 0.8, "apartment": 0.6, "office": 0.2, "industrial": 0.15}
 SLOPED_SOLAR_SHARE = {"residential": 0.45, "apartment": 0.35, "office": 0.3, "industrial": 0.4}
 ROOF_WINDOW_SHARE = {"residential": 0.35, "apartment": 0.4, "office": 0.1, "industrial": 0.05}
+# Chance at roof_furniture 1 that a flat roof carries water tanks, by the city style of its building
+# (``CityLayout.style_of``); then how many, their colours and how often a stand lifts one.
+TANK_SHARE = {"dense": 0.85, "suburban": 0.2, "downtown": 0.05, "industrial": 0.03}
+TANK_COUNT = {1: 0.55, 2: 0.35, 3: 0.1}
+TANK_COLOURS = {"tank-black": 0.55, "tank-blue": 0.2, "tank-white": 0.12, "tank-beige": 0.13}
+TANK_SAME_COLOUR = 0.7  # a roof's further tanks are of its first one's colour this often
+TANK_ON_STAND = 0.3
 
 
 @dataclass(frozen=True)
@@ -90,13 +111,15 @@ class Fixture:
     inner: Polygon = ()
 
 
-def roof_furniture(building, city_seed: int, density: float) -> tuple[Fixture, ...]:
-    """The furniture of one building (a `layout.Building`) at `density` 0..1; none at 0."""
+def roof_furniture(building, city_seed: int, density: float, style: str) -> tuple[Fixture, ...]:
+    """The furniture of one building (a `layout.Building`) at `density` 0..1 (none at 0); `style` is the
+    city style of the region it stands in (``CityLayout.style_of``), which sets how often it has tanks."""
     if density <= 0.0:
         return ()
     rng = np.random.default_rng([int(city_seed), int(building.id), FURNITURE_STREAM])
-    pieces = _flat_roof if building.roof == "flat" else _sloped_roof
-    return tuple(pieces(rng, building, float(density)))
+    if building.roof != "flat":
+        return tuple(_sloped_roof(rng, building, float(density)))
+    return tuple(_flat_roof(rng, building, float(density), TANK_SHARE[style]))
 
 
 def world_south(building) -> Point:
@@ -180,7 +203,7 @@ def _count(rng: np.random.Generator, mean: float) -> int:
 # ---------------------------------------------------------------- flat roofs
 
 
-def _flat_roof(rng: np.random.Generator, b, density: float) -> list[Fixture]:
+def _flat_roof(rng: np.random.Generator, b, density: float, tank_share: float) -> list[Fixture]:
     z = b.height_m
     footprint = b.footprint
     out = []
@@ -209,6 +232,44 @@ def _flat_roof(rng: np.random.Generator, b, density: float) -> list[Fixture]:
         rect = roof.place(rng, side, side)
         if rect:
             out.append(_box("hatch", "dark", rect, sink, z + rng.uniform(*HATCH_HEIGHT_M)))
+    if rng.random() < density * tank_share:  # the last draws: the pieces above stay where they were
+        out += _tanks(rng, roof, z, sink)
+    return out
+
+
+def _pick(rng: np.random.Generator, weights: dict) -> object:
+    names = list(weights)
+    return names[int(rng.choice(len(names), p=list(weights.values())))]
+
+
+def _tanks(rng: np.random.Generator, roof: _Roof, z: float, sink: float) -> list[Fixture]:
+    """One to three water tanks, each a cylinder standing on the roof or on a steel stand (a deck on four
+    legs, its square just holding the tank); the square of each is placed like any other piece."""
+    out: list[Fixture] = []
+    colour = _pick(rng, TANK_COLOURS)
+    for k in range(int(_pick(rng, TANK_COUNT))):
+        if k and rng.random() >= TANK_SAME_COLOUR:
+            colour = _pick(rng, TANK_COLOURS)
+        d = rng.uniform(*TANK_DIAMETER_M)
+        height = float(np.clip(d * rng.uniform(0.9, 1.3), *TANK_HEIGHT_M))
+        stand = rng.uniform(*TANK_STAND_M) if rng.random() < TANK_ON_STAND else 0.0
+        side = d + 2 * TANK_DECK_RIM_M if stand else d
+        rect = roof.place(rng, side, side)
+        if rect is None:
+            continue
+        x0, y0, x1, y1 = rect
+        cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+        foot = sink
+        if stand:
+            # Legs and tank reach into the deck, set in from its edges: no two faces share a plane.
+            t, top = TANK_DECK_M, z + stand
+            foot = top - t / 2
+            out.append(_box("tank-stand", "dark", rect, top - t, top))
+            out += [_box("tank-stand", "dark", (lx, ly, lx + t, ly + t), sink, foot)
+                    for lx in (x0 + 0.02, x1 - 0.02 - t) for ly in (y0 + 0.02, y1 - 0.02 - t)]
+        circle = tuple((cx + d / 2 * math.cos(a), cy + d / 2 * math.sin(a))
+                       for a in np.linspace(0.0, 2 * math.pi, TANK_SIDES, endpoint=False))
+        out.append(Fixture("tank", colour, circle, (foot,) * TANK_SIDES, (z + stand + height,) * TANK_SIDES))
     return out
 
 

@@ -59,9 +59,15 @@ from .clutter import (
     lane_cars,
     real_trees,
     through_roads,
+    through_sidewalks,
 )
 
 LAYOUT_VERSION = 1
+# What a city of the richer scene (a style other than the suburban grid, or roof furniture) shows, beyond
+# its layout: tile headers and training-set keys of such cities carry it, so their caches are rendered and
+# trained again when it changes (``scene_version``). 2: water tanks on flat roofs and kerbs and sidewalks
+# along the roads between style regions.
+SCENE_VERSION = 2
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
 
 KINDS = ("residential", "apartment", "office", "industrial", "highrise")
@@ -248,9 +254,10 @@ class LayoutParams:
         with the crown, in rows along the verges and groups in yards and
         parks; the renderer draws them as lumpy, textured, per-tree tinted
         crowns).
-    street_details: kerbs and sidewalks in the verges, driveways to houses,
-        paved commercial and industrial lots with parking lots and painted
-        stalls, lane markings on the roads.
+    street_details: kerbs and sidewalks in the verges (and along the roads
+        between regions, beside the regions that have them), driveways to
+        houses, paved commercial and industrial lots with parking lots and
+        painted stalls, lane markings on the roads.
     car_density: 0..1, share of kerb parking spots (times 0.6), driveway and
         parking-lot stalls taken by a car, and traffic in the lanes (cars
         per 100 m of lane: 1.5 times it); cars stand on driveways and in
@@ -669,6 +676,17 @@ class CityLayout:
         """Street details or clutter of one kind ("pavings", "markings", "cars", "pools", "shrubs")
         whose bbox shares positive area with the rectangle."""
         return _in_rect(getattr(self, name), self._detail_boxes[name], x0, y0, x1, y1)
+
+    def style_of(self, building: Building) -> str:
+        """The city style (one of `STYLES`) of the region a building stands in, read from its lot: a
+        dense town's lots hold one house each (block -1), downtown and industrial grids pave theirs, and
+        only the industrial style builds industrial halls on paved lots."""
+        lot = self.lots[building.lot_index]
+        if lot.block_index < 0:
+            return "dense"
+        if lot.surface == "paved":
+            return "industrial" if building.kind == "industrial" else "downtown"
+        return "suburban"
 
     def tile_grid(self, tile_m: float = TILE_M) -> list[Rect]:
         """Square tiles from the origin covering the city, row-major, row 0 at y = 0 (south).
@@ -1460,7 +1478,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
                 [(plans[i].rect, plans[i].block_index - firsts[style]) for i in mine],
                 [replace(b, lot_index=renumber[i]) for i, b in local_buildings.items() if i in renumber])
         details, real = _styled_clutter(seed, params, width, height, regions, lanes, through, grids, road_space,
-                                        buildings)
+                                        buildings, lots)
         trees += real
     return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
                       tuple(trees), **{name: tuple(items) for name, items in details.items()})
@@ -1512,15 +1530,16 @@ CLUTTER_STREAM = 18  # after the seed in the clutter streams of styled cities: [
 
 def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float, regions: list[_Region],
                     lanes: dict, through: list[Road], grids: dict[str, _Grid], road_space: polygons.Occupancy,
-                    buildings: list[Building]) -> tuple[dict[str, list], list[Tree]]:
+                    buildings: list[Building], lots: list[Lot]) -> tuple[dict[str, list], list[Tree]]:
     """Street details, clutter and real trees of a styled city, region by region as its style has them.
 
     Each grid style's are made in its own frame by `clutter.generate_clutter` and `clutter.real_trees`
     with the style's `GRID_RULES`, then moved into the world and kept inside the style's regions (pavings
     and markings cut at their borders); dense towns get cars by their lanes, trees in the gaps between
-    houses and bushes in the yards; the through roads between regions get centre lines and traffic. Every
-    part draws from a generator of its own (`CLUTTER_STREAM`), so the city's stages keep their draws and
-    a styled city without clutter stays as it was.
+    houses and bushes in the yards; the through roads between regions get centre lines and traffic, and
+    kerbs and sidewalks on the sides of regions whose style has them. Every part draws from a generator of
+    its own (`CLUTTER_STREAM`), so the city's stages keep their draws and a styled city without clutter
+    stays as it was.
     """
     def rng(*part: int) -> np.random.Generator:
         return np.random.default_rng([seed, CLUTTER_STREAM, *part])
@@ -1592,6 +1611,14 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
         markings, cars = through_roads(rng(2, 0, 0), plan, road_space, taken)
         out["markings"] += markings
         out["cars"] += cars
+    if through and params.street_details:
+        # Last, from a stream of their own, and kept off lots and pavings rather than the knobs' items:
+        # everything above stays as it was, and they follow from the layout and street_details alone.
+        sides = [(region.cell, None if region.style == "dense" else GRID_RULES[region.style].sidewalk_m)
+                 for region in regions]
+        ground = polygons.Occupancy([lot.polygon for lot in lots] + [paving.polygon for paving in out["pavings"]])
+        paved = [road.polygon for road in through if road.surface == "asphalt"]
+        out["pavings"] += through_sidewalks(rng(3, 0, 0), paved, sides, road_space, ground)
     return {name: items for name, items in out.items() if items}, trees
 
 
@@ -1665,3 +1692,12 @@ def layout_for_tiles(seed: int, n_tiles: int, tile_m: float = TILE_M,
     rows = math.ceil(n_tiles / cols)
     layout = generate_layout(seed, cols * tile_m, rows * tile_m, params)
     return layout, layout.tile_grid(tile_m)[: int(n_tiles)]
+
+
+def scene_version(overrides: Mapping) -> dict:
+    """``{"scene": SCENE_VERSION}`` for a city with these layout overrides when it is of the richer
+    scene (a style other than the suburban grid, or roof furniture), else {}: what tile headers and
+    training-set keys add, so caches of plain cities stay valid when the richer scene changes."""
+    style = overrides.get("style", "suburban")
+    rich = float(overrides.get("roof_furniture", 0.0) or 0.0) > 0.0 or (style not in ("suburban", None))
+    return {"scene": SCENE_VERSION} if rich else {}

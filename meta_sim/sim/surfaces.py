@@ -156,8 +156,11 @@ YARD_SHADE = 0.6  # paved commercial and industrial lots: concrete, weathered da
 # Roof furniture (sim/furniture.py): colours (linear RGB) and roughness of its surfaces; "solar" panels and
 # HVAC lids are images (below).
 FURNITURE = {"coping": COPING, "metal": (0.50, 0.51, 0.52), "dark": (0.09, 0.09, 0.10), "dome": (0.62, 0.66, 0.68),
-             "glass": (0.025, 0.035, 0.05), "brick": (0.25, 0.085, 0.055), "render": (0.44, 0.42, 0.39)}
-FURNITURE_ROUGHNESS = {"metal": 0.5, "dome": 0.3, "glass": 0.1, "solar": 0.2}
+             "glass": (0.025, 0.035, 0.05), "brick": (0.25, 0.085, 0.055), "render": (0.44, 0.42, 0.39),
+             "tank-black": (0.03, 0.03, 0.032), "tank-blue": (0.03, 0.11, 0.33), "tank-white": (0.66, 0.66, 0.63),
+             "tank-beige": (0.52, 0.40, 0.19)}
+FURNITURE_ROUGHNESS = {"metal": 0.5, "dome": 0.3, "glass": 0.1, "solar": 0.2, "tank-black": 0.5, "tank-blue": 0.5,
+                       "tank-white": 0.5, "tank-beige": 0.5}
 
 
 @_frozen

@@ -76,3 +76,29 @@ def test_a_training_set_in_a_space_from_a_file_is_named_by_what_the_file_declare
     assert DatasetConfig(space=str(path)).key() != first
     assert DatasetConfig(space="overhead-v1").key() != DatasetConfig().key()
     assert DatasetConfig().identity()["space"] == "rooftops-v1"  # built-in spaces keep their keys
+
+
+def test_caches_of_the_richer_scene_key_on_its_version_and_plain_ones_do_not(monkeypatch):
+    """A change to what styled or furnished cities show (layout.SCENE_VERSION) renames their training sets
+    and invalidates their tiles; rooftops-v1's training sets and tiles keep their names."""
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.render.jobs import Job, RenderSettings
+    from meta_sim.sim import layout
+    from meta_sim.sim.design import DesignSpace
+    from meta_sim.sim.quality import get_preset
+
+    rich, plain = DatasetConfig(space="overhead-v1"), DatasetConfig()
+    keys = rich.key(), plain.key()
+    assert rich.identity()["scene"] == layout.SCENE_VERSION and "scene" not in plain.identity()
+    space = DesignSpace.load("overhead-v1")
+    job = Job(space.sample(np.random.default_rng(0), 1)[0], 3, "d0")
+    settings = RenderSettings(space, [], get_preset("fast"), Path("unused"))
+    plain_settings = RenderSettings(DesignSpace.load("rooftops-v1"), [], get_preset("fast"), Path("unused"))
+    plain_job = Job(plain_settings.space.sample(np.random.default_rng(0), 1)[0], 3, "d0")
+    assert settings.header(job)["scene"] == layout.SCENE_VERSION
+    assert "scene" not in plain_settings.header(plain_job)
+    assert RenderSettings(plain_settings.space, [], get_preset("fast"), Path("unused"),
+                          style="dense").header(plain_job)["scene"] == layout.SCENE_VERSION
+    monkeypatch.setattr(layout, "SCENE_VERSION", layout.SCENE_VERSION + 1)
+    assert rich.key() != keys[0] and plain.key() == keys[1]
+    assert settings.header(job)["scene"] == layout.SCENE_VERSION

@@ -656,8 +656,9 @@ def test_white_roofs_do_not_clip_in_any_preset(space, bank, tmp_path, preset):
 
 @pytest.mark.parametrize("style, seed", [("suburban", 1), ("dense", 1)])
 def test_roof_furniture_keeps_the_labels_and_shows_on_the_roofs(space, bank, tmp_path, style, seed):
-    """One city with and without roof furniture (axis-aligned suburban buildings; turned dense houses):
-    the instance and roof-class labels are the same, the RGB differs where the pieces stand."""
+    """One city with and without roof furniture (axis-aligned suburban buildings; turned dense houses,
+    most flat ones with water tanks): the instance and roof-class labels are the same, the RGB differs
+    where the pieces stand."""
     from dataclasses import replace
 
     from meta_sim.sim import polygons
@@ -673,14 +674,20 @@ def test_roof_furniture_keeps_the_labels_and_shows_on_the_roofs(space, bank, tmp
     assert np.array_equal(on.instance, off.instance) and np.array_equal(on.roof_class, off.roof_class)
     assert on.meta["roof_furniture"] == 1.0 and "roof_furniture" not in off.meta
     layout, (rect,) = layout_for_tiles(seed, 1, px * gsd, LayoutParams(style=style))
-    outlines = []
+    outlines, tanks = [], []
     for b in layout.buildings_in_rect(*rect):
         x0, y0, x1, y1 = polygons.bbox(b.footprint)
-        outlines += [polygons.rotate(f.outline, (x0 + x1) / 2, (y0 + y1) / 2, b.rotation_deg)
-                     for f in roof_furniture(b, seed, 1.0) if f.kind != "parapet"]
+        for f in roof_furniture(b, seed, 1.0, layout.style_of(b)):
+            if f.kind != "parapet":
+                outlines.append(polygons.rotate(f.outline, (x0 + x1) / 2, (y0 + y1) / 2, b.rotation_deg))
+                if f.kind == "tank":
+                    tanks.append(outlines[-1])
     pieces = _rasterise_polygons(outlines, rect, px, gsd)
     changed = np.abs(on.rgb - off.rgb).max(axis=-1) > 0.02
     assert pieces.sum() > 100 and changed[pieces].mean() > 0.8
+    if style == "dense":
+        on_tanks = _rasterise_polygons(tanks, rect, px, gsd)
+        assert len(tanks) > 20 and on_tanks.sum() > 50 and changed[on_tanks].mean() > 0.8
     assert (pieces <= (on.instance > 0)).all()  # every piece stands on a roof
     roofs = on.instance > 0
     assert 0.03 < changed[roofs].mean() < 0.6  # furniture covers parts of the roofs, not whole roofs

@@ -3,15 +3,17 @@
 import hashlib
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from toys import distance_to_polygon
 
 from meta_sim.core.errors import MetaSimError
-from meta_sim.sim import meshes, polygons, surfaces
-from meta_sim.sim.clutter import CAR_COLOURS
-from meta_sim.sim.layout import VERGE_M, CityLayout, LayoutParams, generate_layout
+from meta_sim.sim import clutter, meshes, polygons, surfaces
+from meta_sim.sim import layout as layout_module
+from meta_sim.sim.clutter import CAR_COLOURS, GRID_RULES, KERB_M, SIDEWALK_MIN_M
+from meta_sim.sim.layout import VERGE_M, CityLayout, LayoutParams, generate_layout, stage_generators
 
 TOL = 1e-3
 ALL_ON = LayoutParams(tree_size="real", street_details=True, car_density=0.7, pool_share=0.6, shrub_density=0.7)
@@ -439,3 +441,73 @@ def test_greenness_tints_the_foliage_atlas_as_it_turns_the_small_trees():
     atlas = surfaces.foliage_atlas()
     dry, lush = (atlas * np.asarray(foliage_tint(g), np.float32) for g in (0.0, 1.0))
     assert dry[..., 0].mean() / dry[..., 1].mean() > 1.5 * lush[..., 0].mean() / lush[..., 1].mean()
+
+
+# --- kerbs and sidewalks along the through roads between regions ------------------------------------
+
+# Styled cities with everything on, taken before the through roads had kerbs and sidewalks: sha256 of the
+# sorted JSON and the number of pavings then. Those came after every other paving, so the city with its
+# first pavings only must be the one from before.
+BEFORE_THROUGH_SIDEWALKS = [
+    (*STYLED["mixed"], "f06cf421cd1d4836bd0d6b06070946601a430b977bcce1c094f108f2aab50e75", 505),
+    (8, 460.8, 460.8, {"suburban": 0.5, "dense": 0.5},
+     "e41d68eddd62070df69196730868068607c4f62f81d743cb9f853a112b521a7a", 110),
+]
+
+
+def _centroid(polygon):
+    return (sum(x for x, _ in polygon) / len(polygon), sum(y for _, y in polygon) / len(polygon))
+
+
+@pytest.mark.parametrize("seed,w,h,style,digest,before", BEFORE_THROUGH_SIDEWALKS)
+def test_through_roads_get_kerbs_and_sidewalks_by_each_sides_style_and_nothing_else_moves(seed, w, h, style, digest,
+                                                                                         before):
+    city = generate_layout(seed, w, h, LayoutParams(style=style, **KNOBS))
+    old = replace(city, pavings=city.pavings[:before])
+    assert hashlib.sha256(json.dumps(old.to_dict(), sort_keys=True).encode()).hexdigest() == digest
+    added = city.pavings[before:]
+    assert {p.kind for p in added} == {"kerb", "sidewalk"}
+    regions, through = layout_module._style_regions(stage_generators(seed, 6)[5], w, h, city.params.style)
+    paved = [road.polygon for road in through if road.surface == "asphalt"]
+    ground = [road.polygon for road in city.roads] + [lot.polygon for lot in city.lots] + [
+        p.polygon for p in city.pavings[:before]]
+    near = _overlap(_boxes(added), np.array([polygons.bbox(g) for g in ground]))
+    widths = {}
+    for p, row in zip(added, near):
+        outline = _ccw(p.polygon)
+        # Along a through road: a kerb at its edge, a sidewalk behind the kerb.
+        gap, road = min((polygons.separation(outline, road), road) for road in paved)
+        assert abs(gap - (0.0 if p.kind == "kerb" else KERB_M)) < 1e-3, p
+        # On nobody's ground: off every road, lot and paving there was (but for the rounding to 0.1 mm).
+        length = max(math.dist(a, b) for a, b in zip(outline, outline[1:] + outline[:1]))
+        assert all(polygons.overlap_area(outline, _ccw(ground[j])) < 2e-4 * length for j in np.flatnonzero(row)), p
+        (region,) = [r for r in regions if polygons.inside((_centroid(outline),), r.cell, 0.0)]
+        assert region.style != "dense", p  # a dense town has no sidewalks
+        if p.kind == "sidewalk":
+            width = max(distance_to_polygon(x, y, road) for x, y in outline) - KERB_M
+            assert SIDEWALK_MIN_M - TOL <= width <= GRID_RULES[region.style].sidewalk_m[1] + TOL
+            widths.setdefault(region.style, []).append(width)
+    # Every side of a long road that borders a region with sidewalks has a kerb.
+    for road in paved:
+        frame = clutter._road_frame(road)
+        lo, hi, c_lo, c_hi = frame[3:]
+        if hi - lo < 40.0:
+            continue
+        for sign, edge in ((-1, c_lo), (1, c_hi)):
+            probe = clutter._on_road(frame, (lo + hi) / 2, edge + sign * 1.0)
+            cells = [r for r in regions if polygons.inside((probe,), r.cell, 0.0)]
+            if not cells or cells[0].style == "dense":
+                continue
+            assert any(p.kind == "kerb" and polygons.separation(_ccw(p.polygon), road) < 1e-3
+                       and polygons.inside((_centroid(p.polygon),), cells[0].cell, 0.0) for p in added), road
+    if "downtown" in widths:  # full width downtown, narrower in the suburbs
+        assert np.median(widths["downtown"]) > 3.5 > 2.0 >= max(widths["suburban"]) - TOL
+
+
+def test_through_road_sidewalks_come_with_street_details_only(styled):
+    seed, w, h, style = STYLED["mixed"]
+    _, bare = styled["mixed"]
+    assert not bare.pavings
+    assert not generate_layout(seed, w, h, LayoutParams(style=style, car_density=0.5, tree_size="real")).pavings
+    details = generate_layout(seed, w, h, LayoutParams(style=style, street_details=True))
+    assert details.pavings == styled["mixed"][0].pavings  # the other knobs move none of them

@@ -1,16 +1,19 @@
 """Roof furniture: the knob, its streams, where the pieces stand, their sizes and their labels."""
 
+import hashlib
 import json
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
 
 from meta_sim.core.errors import MetaSimError
 from meta_sim.sim import furniture, meshes, polygons
+from meta_sim.sim import layout as layout_module
 from meta_sim.sim.design import DesignSpace
 from meta_sim.sim.furniture import roof_furniture
-from meta_sim.sim.layout import CityLayout, LayoutParams, generate_layout
+from meta_sim.sim.layout import STYLES, CityLayout, LayoutParams, generate_layout, stage_generators
 
 TOL = 1e-6
 MIX = {"suburban": 1.0, "dense": 1.0, "downtown": 1.0, "industrial": 1.0}  # every kind, turned buildings, L and T
@@ -23,7 +26,7 @@ def city():
 
 @pytest.fixture(scope="module")
 def furnished(city):
-    return [(b, roof_furniture(b, city.seed, 1.0)) for b in city.buildings]
+    return [(b, roof_furniture(b, city.seed, 1.0, city.style_of(b))) for b in city.buildings]
 
 
 @pytest.mark.parametrize("value", [1.5, -0.1, "lots", True, float("nan"), None])
@@ -50,18 +53,18 @@ def test_design_spaces_ask_for_it_where_intended():
 
 
 def test_same_seed_same_furniture_and_none_at_zero(city, furnished):
-    assert all(roof_furniture(b, city.seed, 1.0) == pieces for b, pieces in furnished)
-    assert not any(roof_furniture(b, city.seed, 0.0) for b in city.buildings)
-    other = [roof_furniture(b, city.seed + 1, 1.0) for b, _ in furnished]
+    assert all(roof_furniture(b, city.seed, 1.0, city.style_of(b)) == pieces for b, pieces in furnished)
+    assert not any(roof_furniture(b, city.seed, 0.0, city.style_of(b)) for b in city.buildings)
+    other = [roof_furniture(b, city.seed + 1, 1.0, city.style_of(b)) for b, _ in furnished]
     assert sum(o != pieces for o, (_, pieces) in zip(other, furnished)) > 0.5 * len(furnished)
-    fewer = sum(len(roof_furniture(b, city.seed, 0.3)) for b in city.buildings)
+    fewer = sum(len(roof_furniture(b, city.seed, 0.3, city.style_of(b))) for b in city.buildings)
     assert 0 < fewer < 0.7 * sum(len(pieces) for _, pieces in furnished)
 
 
 def test_every_kind_of_piece_is_there(furnished):
     kinds = {(b.roof == "flat", f.kind) for b, pieces in furnished for f in pieces}
-    assert kinds == {(True, k) for k in ("parapet", "housing", "solar", "hvac", "skylight", "hatch")} | {
-        (False, k) for k in ("chimney", "roof-window", "solar")}
+    assert kinds == {(True, k) for k in ("parapet", "housing", "solar", "hvac", "skylight", "hatch", "tank",
+                                         "tank-stand")} | {(False, k) for k in ("chimney", "roof-window", "solar")}
     assert all(f.surface in furniture.SURFACES for _, pieces in furnished for f in pieces)
 
 
@@ -85,8 +88,10 @@ def test_pieces_stand_inside_the_footprint_and_apart(furnished):
         wall = list(b.wall_outline)  # inside the walls, so inside the roof outline too
         assert all(_inside(x, y, wall) for x, y, _ in vertices), b.id
         turned += bool(pieces) and b.rotation_deg != 0.0
-        boxes = [polygons.bbox(f.outline) for f in pieces if f.kind != "parapet"]
-        for i, a in enumerate(boxes):  # in the building's frame every piece is an axis-aligned rectangle
+        # In the building's frame every piece but a tank's stand (under its tank) stands in an axis-aligned
+        # rectangle of its own.
+        boxes = [polygons.bbox(f.outline) for f in pieces if f.kind not in ("parapet", "tank-stand")]
+        for i, a in enumerate(boxes):
             for c in boxes[i + 1:]:
                 assert (a[0] >= c[2] or c[0] >= a[2] or a[1] >= c[3] or c[1] >= a[3]), b.id
     assert turned > 20
@@ -137,12 +142,142 @@ def test_big_commercial_roofs_carry_more_hvac_than_houses(furnished):
 
 
 def test_furniture_carries_its_buildings_labels(furnished):
+    assert sum(f.kind == "tank" for _, pieces in furnished[:200] for f in pieces) > 20
     for b, pieces in furnished[:200]:
         mesh = meshes.furniture_mesh([(b, pieces)])
         labels = {tuple(label) for label in mesh.label}
         assert labels <= {meshes.label_color(b.id, b.roof_class)}
     arrays = meshes.furniture_mesh(furnished).arrays()
     assert arrays["material"].max() == meshes.FAN_LID and np.isfinite(arrays["vertices"]).all()
+    tank_slots = {furniture.SURFACES.index(name) for name in furniture.TANK_COLOURS}
+    assert tank_slots <= set(arrays["material"].tolist()) and max(tank_slots) < meshes.FAN_LID
     ids, classes = meshes.decode_labels(arrays["label"][:, :3])
     roof_class = {b.id: b.roof_class for b, _ in furnished}
     assert all(roof_class[i] == c for i, c in zip(ids.tolist(), classes.tolist()))
+
+
+# --- water tanks --------------------------------------------------------------------------------------
+
+def test_water_tanks_are_cylinders_standing_on_flat_roofs_or_on_stands(furnished):
+    tanks = stands = 0
+    for b, pieces in furnished:
+        tank_boxes = [(polygons.bbox(f.outline), f) for f in pieces if f.kind == "tank"]
+        if b.roof != "flat":
+            assert not tank_boxes and not any(f.kind == "tank-stand" for f in pieces), b.id
+            continue
+        for (x0, y0, x1, y1), f in tank_boxes:
+            tanks += 1
+            d = x1 - x0
+            assert furniture.TANK_DIAMETER_M[0] - TOL <= d <= furniture.TANK_DIAMETER_M[1] + TOL
+            assert abs((y1 - y0) - d) < TOL and len(f.outline) == furniture.TANK_SIDES
+            centre = ((x0 + x1) / 2, (y0 + y1) / 2)
+            assert all(abs(math.dist(p, centre) - d / 2) < TOL for p in f.outline)
+            assert polygons.area(f.outline) > 0.95 * math.pi * d * d / 4  # counter-clockwise, round
+            assert f.surface in furniture.TANK_COLOURS and len(set(f.top)) == len(set(f.bottom)) == 1
+            # As tall as a tank, from a few centimetres inside the roof or inside its stand's deck.
+            tall = f.top[0] - f.bottom[0]
+            assert furniture.TANK_HEIGHT_M[0] <= tall <= furniture.TANK_HEIGHT_M[1] + 0.05 + TOL
+            lift = f.bottom[0] - b.height_m
+            assert lift == pytest.approx(-0.05) or (
+                furniture.TANK_STAND_M[0] - 0.05 < lift < furniture.TANK_STAND_M[1])
+        for f in pieces:
+            if f.kind != "tank-stand":
+                continue
+            stands += 1
+            # A deck or a leg: under one tank, inside the square that holds it and its deck's rim.
+            sx0, sy0, sx1, sy1 = polygons.bbox(f.outline)
+            rim = furniture.TANK_DECK_RIM_M + TOL
+            under = [t for (x0, y0, x1, y1), t in tank_boxes
+                     if x0 - rim <= sx0 and sx1 <= x1 + rim and y0 - rim <= sy0 and sy1 <= y1 + rim]
+            assert len(under) == 1 and max(f.top) <= under[0].bottom[0] + furniture.TANK_DECK_M, b.id
+            assert f.surface == "dark" and min(f.bottom) >= b.height_m - 0.05 - TOL
+    assert tanks > 300 and 0.1 * tanks * 5 < stands < 0.5 * tanks * 5  # a deck and four legs per stand
+
+
+@pytest.fixture(scope="module")
+def flat_city():
+    """Every style, flat roofs only: how often each style's roofs carry tanks."""
+    mix = {"suburban": 0.35, "dense": 0.05, "downtown": 0.3, "industrial": 0.3}
+    city = generate_layout(6, 1000.0, 1000.0, LayoutParams(style=mix, sloped_share=0.0, roof_furniture=1.0))
+    return city, [(b, roof_furniture(b, city.seed, 1.0, city.style_of(b))) for b in city.buildings]
+
+
+def _tanks(pieces):
+    return sum(f.kind == "tank" for f in pieces)
+
+
+def test_how_often_a_roof_has_tanks_follows_its_style(flat_city):
+    city, furnished = flat_city
+    # The same roofs as if they stood in each style.
+    share = {style: np.mean([_tanks(roof_furniture(b, city.seed, 1.0, style)) > 0 for b, _ in furnished])
+             for style in STYLES}
+    assert len(furnished) > 500
+    assert share["dense"] > 0.6  # most flat roofs of a dense town
+    assert 0.08 < share["suburban"] < 0.35  # some suburban ones
+    assert max(share["downtown"], share["industrial"]) < 0.1  # few downtown or industrial ones
+    # In the city, each roof as its own style has it.
+    own = {style: np.mean([_tanks(pieces) > 0 for b, pieces in furnished if city.style_of(b) == style])
+           for style in STYLES}
+    assert own["dense"] > 0.6 and own["dense"] > own["suburban"] > max(own["downtown"], own["industrial"])
+    per_roof, colours = Counter(), Counter()
+    for b, _ in furnished:
+        pieces = roof_furniture(b, city.seed, 1.0, "dense")
+        per_roof[_tanks(pieces)] += 1
+        colours.update(f.surface for f in pieces if f.kind == "tank")
+    assert set(per_roof) == {0, 1, 2, 3} and per_roof[1] > per_roof[2] > per_roof[3]
+    assert set(colours) == set(furniture.TANK_COLOURS) and colours.most_common(1)[0][0] == "tank-black"
+    # Half the density, about half the roofs with tanks.
+    half = np.mean([_tanks(roof_furniture(b, city.seed, 0.5, "dense")) > 0 for b, _ in furnished])
+    assert 0.35 < half / share["dense"] < 0.65
+
+
+def test_same_seed_same_tanks_and_another_seed_others(flat_city):
+    city, furnished = flat_city
+    dense = [(b, pieces) for b, pieces in furnished if city.style_of(b) == "dense"][:300]
+    again = [roof_furniture(b, city.seed, 1.0, "dense") for b, _ in dense]
+    assert again == [pieces for _, pieces in dense]
+    tanks = [[f for f in pieces if f.kind == "tank"] for _, pieces in dense]
+    assert sum(map(bool, tanks)) > 100
+    other = [[f for f in roof_furniture(b, city.seed + 1, 1.0, "dense") if f.kind == "tank"] for b, _ in dense]
+    assert sum(a != o for a, o in zip(tanks, other)) > 0.5 * len(dense)
+
+
+def _digest(furnished):
+    """sha256 of (building id, pieces) pairs, coordinates to the micrometre."""
+    def r(v):
+        return round(float(v), 6)
+    data = [[bid, [[f.kind, f.surface, [[r(x), r(y)] for x, y in f.outline], [r(z) for z in f.bottom],
+                    [r(z) for z in f.top], [[r(x), r(y)] for x, y in f.inner]] for f in pieces]]
+            for bid, pieces in furnished]
+    return hashlib.sha256(json.dumps(data).encode()).hexdigest()
+
+
+# The furniture of every building of the `city` fixture at two densities, taken before water tanks came.
+BEFORE_TANKS = {1.0: "3c8e8f5af4b8f42d7095eeb00bd71e0b774d8de1802aad0b9010fbf9014d62d1",
+                0.4: "7a72904e677b94ae343cb739d5eea345a77ead13dee83812148878599da435ce"}
+
+
+@pytest.mark.parametrize("density", sorted(BEFORE_TANKS))
+def test_tanks_leave_every_other_piece_where_it_stood(city, density):
+    furnished = [(b, roof_furniture(b, city.seed, density, city.style_of(b))) for b in city.buildings]
+    assert sum(f.kind == "tank" for _, pieces in furnished for f in pieces) > 100
+    for _, pieces in furnished:  # the tanks and their stands come after every other piece
+        kinds = [f.kind.startswith("tank") for f in pieces]
+        assert kinds == sorted(kinds)
+    bare = [(b.id, [f for f in pieces if not f.kind.startswith("tank")]) for b, pieces in furnished]
+    assert _digest(bare) == BEFORE_TANKS[density]
+
+
+def test_a_buildings_style_is_that_of_the_region_it_stands_in(city):
+    regions, _ = layout_module._style_regions(stage_generators(city.seed, 6)[5], city.width_m, city.height_m,
+                                              city.params.style)
+    seen = Counter()
+    for b in city.buildings:
+        x0, y0, x1, y1 = b.bbox
+        centre = ((x0 + x1) / 2, (y0 + y1) / 2)
+        (region,) = [r for r in regions if polygons.inside((centre,), r.cell, 0.0)]
+        assert city.style_of(b) == region.style, b.id
+        seen[region.style] += 1
+    assert set(seen) == set(STYLES)
+    plain = generate_layout(4, 300.0, 300.0)
+    assert {plain.style_of(b) for b in plain.buildings} == {"suburban"}
