@@ -38,10 +38,10 @@ import OpenImageIO as oiio
 
 from ..core.errors import MetaSimError
 from ..sim import meshes, surfaces
-from ..sim.appearance import TREE_COLOUR, foliage_tint, vegetation_colour
+from ..sim.appearance import TREE_COLOUR, foliage_tint, ground_colours, vegetation_colour
 from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.furniture import SURFACES, roof_furniture
-from ..sim.ground import COVERS, ground_image
+from ..sim.ground import ground_image
 from ..sim.quality import RenderPreset
 
 LABEL_ATTRIBUTE = "label"
@@ -276,11 +276,13 @@ class CityScene:
 
     def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0,
                  collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None,
-                 greenness: float | None = None, sun_elevation_deg: float | None = None):
+                 greenness: float | None = None, sun_elevation_deg: float | None = None,
+                 ground_albedo: float | None = None):
         self.layout = layout
         self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
         self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
         self.sun_elevation_deg = sun_elevation_deg  # None: drawn from the city seed
+        self.ground_albedo = ground_albedo  # ``sim.appearance.ground_colours``; None: today's ground
         self.pixel_size_m = pixel_size_m
         self._yard = None
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
@@ -333,16 +335,18 @@ class CityScene:
             meshes.SLOPED_ROOF: _image_material(
                 "sloped-roof-unset", _noise_image("unset-s", (0.5, 0.5, 0.5), 0.0, 0, key), key),
         }
-        lawn = vegetation_colour("lawn", self.greenness, COVERS["lawn"])
+        # The bare ground (lawn or cover mix, and the dirt tracks) in the design's colours and albedo:
+        # a property of the scene, so shadows, trees and cars fall on it as on any ground.
+        bare = ground_colours(self.greenness, self.ground_albedo)
         if self.ground_mix:
-            ground = _image_material("ground", self._ground_image(region, seed + 1, lawn), key)
+            ground = _image_material("ground", self._ground_image(region, seed + 1, bare), key)
         else:
-            ground = _image_material("ground", _noise_image("ground", lawn, 0.25, seed + 1, key), key)
+            ground = _image_material("ground", _noise_image("ground", bare["lawn"], 0.25, seed + 1, key), key)
         if params.street_details:
             road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(), key), key)
         else:
             road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
-        dirt = _image_material("dirt", _noise_image("dirt", (0.30, 0.22, 0.15), 0.18, seed + 4, key), key)
+        dirt = _image_material("dirt", _noise_image("dirt", bare["dirt"], 0.18, seed + 4, key), key)
         building_arrays = meshes.building_mesh(self.buildings)
         self.buildings_obj = None
         if building_arrays.n_polygons:
@@ -445,10 +449,10 @@ class CityScene:
         if shrubs:
             _new_mesh_object(meshes.shrub_mesh(shrubs), [foliage], self.collection, key, closed=True, smooth=True)
 
-    def _ground_image(self, region: Rect, seed: int, lawn) -> bpy.types.Image:
-        """The region's ground cover (``sim.ground``, its lawn in colour ``lawn``) as one image spanning
+    def _ground_image(self, region: Rect, seed: int, colours: dict) -> bpy.types.Image:
+        """The region's ground cover (``sim.ground``, its covers in ``colours``) as one image spanning
         the ground quad."""
-        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix, {"lawn": lawn})
+        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix, colours)
         return _rgb_image("ground-cover", rgb, self.key)  # row 0 at the quad's south edge
 
     def _add_camera_and_sun(self) -> None:

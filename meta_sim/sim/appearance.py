@@ -1,5 +1,5 @@
-"""How a city looks beyond its roofs: ground cover, vegetation colour, sun, brightness, roof variation
-and sensor.
+"""How a city looks beyond its roofs: ground cover and its albedo, vegetation colour, sun, brightness, roof
+variation and sensor.
 
 Each of these can be set for a whole render (``meta-sim render --ground mixed --sensor drone ...``)
 or declared as a parameter of a design space, so NAMS infers it for a target like a roof material::
@@ -20,14 +20,14 @@ from typing import Mapping
 import numpy as np
 
 from ..core.errors import MetaSimError
-from .ground import MIXES
+from .ground import COVERS, DIRT, MIXES
 from .jitter import roof_jitter
 from .sensor import SENSORS, Sensor, get_sensor
 
 # categorical field -> the choices it allows; continuous field -> (lowest, highest) value
 CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
 CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
-                     "brightness": (0.25, 4.0)}
+                     "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
@@ -40,9 +40,11 @@ TREE_COLOUR = (0.05, 0.13, 0.035)  # small trees' leaves when greenness is not s
 class Appearance:
     """Everything of a render's look that is not a roof texture or the layout.
 
-    ``greenness`` and ``sun_elevation_deg`` are None when not set: today's lawn and tree colours,
-    and a sun elevation drawn from the city seed. ``brightness`` scales the rendered light before the
-    sensor sees it (real images of one place differ in brightness by camera settings and haze).
+    ``greenness``, ``sun_elevation_deg`` and ``ground_albedo`` are None when not set: today's lawn and
+    tree colours, a sun elevation drawn from the city seed, and today's ground. ``brightness`` scales the
+    rendered light before the sensor sees it (real images of one place differ in brightness by camera
+    settings and haze); ``ground_albedo`` scales the reflectance of the bare ground only, in the scene
+    (``ground_colours``), so the ground can be darker or brighter than the roofs.
     """
 
     sensor: Sensor = Sensor()
@@ -51,6 +53,7 @@ class Appearance:
     greenness: float | None = None
     sun_elevation_deg: float | None = None
     brightness: float = 1.0
+    ground_albedo: float | None = None
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -65,7 +68,7 @@ class Appearance:
 
     def scene_key(self) -> tuple:
         """What the Blender scene of a city depends on (the rest is applied to finished renders)."""
-        return (self.ground, self.greenness, self.sun_elevation_deg)
+        return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo)
 
     def header(self) -> dict:
         """The fields that differ from a plain render, for a tile's header (empty for a plain one)."""
@@ -82,6 +85,8 @@ class Appearance:
             out["sun_elevation_deg"] = self.sun_elevation_deg
         if self.brightness != 1.0:
             out["brightness"] = self.brightness
+        if self.ground_albedo is not None:
+            out["ground_albedo"] = self.ground_albedo
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
@@ -132,3 +137,14 @@ def foliage_tint(greenness: float | None) -> tuple | None:
     if greenness is None:
         return None
     return tuple(t / d for t, d in zip(vegetation_colour("tree", greenness, TREE_COLOUR), TREE_COLOUR))
+
+
+def ground_colours(greenness: float | None, albedo: float | None) -> dict:
+    """The linear colour of each surface of the bare ground: every cover of ``ground.COVERS`` (the lawn at
+    ``greenness``, see ``vegetation_colour``) and "dirt", the unpaved tracks' earth, as ground-like as the
+    covers. ``albedo`` multiplies them all (clipped at 1, as a reflectance is); None leaves them as they
+    are. Roofs, walls, asphalt, pavings, yards, pools, cars and vegetation are not ground."""
+    colours = {**COVERS, "lawn": vegetation_colour("lawn", greenness, COVERS["lawn"]), "dirt": DIRT}
+    if albedo is None:
+        return {name: tuple(colour) for name, colour in colours.items()}
+    return {name: tuple(float(min(1.0, c * float(albedo))) for c in colour) for name, colour in colours.items()}

@@ -14,7 +14,7 @@ A categorical parameter with ``texture_kind`` sets the material of every roof
 of that kind; a parameter with ``layout_field`` sets that field of the city
 layout (a number, or a categorical choice such as a city style); a parameter
 with ``appearance`` sets a field of ``sim.appearance`` (ground cover, sensor,
-greenness, sun elevation, roof jitter). ``layout`` holds fixed layout
+greenness, sun elevation, brightness, roof jitter, ground albedo). ``layout`` holds fixed layout
 overrides the scene needs (a space without sloped roofs builds none).
 
 A design is a plain ``dict``: parameter name -> choice id (categorical) or

@@ -24,6 +24,7 @@ COVERS = {  # linear RGB
     "gravel": (0.33, 0.32, 0.30),
     "pavement": (0.40, 0.40, 0.39),
 }
+DIRT = (0.30, 0.22, 0.15)  # linear RGB of the unpaved tracks' bare earth (not a cover of the mixes)
 MIXES = {
     "plain": None,  # the lawn of today's cities
     "suburban": {"lawn": 0.6, "dry_grass": 0.2, "soil": 0.1, "pavement": 0.1},

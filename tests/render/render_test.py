@@ -516,6 +516,86 @@ def linear_luma(rgb):
     return rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
 
 
+ALBEDO = {"name": "ground_albedo", "type": "continuous", "appearance": "ground_albedo", "low": 0.4, "high": 1.1}
+
+
+@pytest.mark.parametrize("ground", ["plain", "mixed"])
+def test_ground_albedo_darkens_the_bare_ground_in_the_scene_and_leaves_roofs_and_roads(space, bank, tmp_path,
+                                                                                       ground):
+    """The same city with its ground's reflectance halved: the bare ground renders at half its linear
+    light, roofs and roads as they were; at 1.0 the render is that of a space without the field."""
+    albedo_space = DesignSpace.from_dict({**space.to_dict(), "name": "albedo",
+                                          "parameters": [*space.to_dict()["parameters"], ALBEDO]})
+    design = space.validate(_design(space, 5, 9))
+    _, (plain,) = _render(space, [bank], tmp_path / "plain", design, n_tiles=1, ground=ground)
+    settings = RenderSettings(space=albedo_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "a",
+                              n_tiles=1, ground=ground, **SMALL)
+    jobs = [single_job(albedo_space, {**design, "ground_albedo": a}, SEED) for a in (0.5, 1.0)]
+    summary = render_jobs(jobs, settings)
+    assert summary.written == 2 and summary.cities == 2  # the albedo is built into the scene
+    assert render_jobs(jobs, settings).skipped == 2  # the headers hold what the designs ask for
+    dark, same = (tiles.read_tile(tmp_path / "a" / f"{job.name}_t00.exr") for job in jobs)
+    assert dark.meta["ground_albedo"] == 0.5 and same.meta["ground_albedo"] == 1.0
+    assert "ground_albedo" not in plain.meta
+    assert np.array_equal(same.rgb, plain.rgb)
+    for name in ("instance", "roof_class", "building"):
+        assert np.array_equal(getattr(dark, name), getattr(plain, name))
+    px, gsd = SMALL["tile_px"], SMALL["pixel_size_m"]
+    layout, (rect,) = layout_for_tiles(SEED, 1, px * gsd, LayoutParams())
+    roads = _rasterise_polygons([r.polygon for r in layout.roads], rect, px, gsd)
+    crowns = _rasterise_polygons([polygons_disc(t) for t in layout.trees], rect, px, gsd)
+    knee = get_preset("fast").tone[0]  # below it the tone curve is the identity
+    linear = (plain.rgb.max(axis=-1) < knee) & (dark.rgb.max(axis=-1) < knee)
+    bare = _erode((plain.building == 0) & ~roads & ~crowns, 2) & linear
+    luma, dark_luma = linear_luma(plain.rgb), linear_luma(dark.rgb)
+    lit = bare & (luma > np.median(luma[bare]))  # away from the shadows
+    assert lit.sum() > 500
+    ratio = dark_luma[lit] / luma[lit]
+    assert np.median(ratio) == pytest.approx(0.5, abs=0.02) and (np.abs(ratio - 0.5) < 0.05).mean() > 0.9
+    # FXAA blends along edges as far as their contrast reaches (a few pixels along the bright roof outlines),
+    # so pixels near a darker ground change too: compare away from the edges
+    roofs = _erode(plain.building > 0, 4) & linear
+    road = _erode(roads & ~crowns & (plain.building == 0), 2) & linear
+    assert roofs.sum() > 300 and road.sum() > 300
+    for part in (roofs, road):
+        assert np.abs(dark.rgb[part] - plain.rgb[part]).max() < 2e-3
+        assert np.mean(dark_luma[part]) / np.mean(luma[part]) == pytest.approx(1.0, abs=0.005)
+
+
+def test_the_ground_albedo_reaches_the_lawn_the_ground_covers_and_the_dirt_tracks_only():
+    """What counts as ground: the ground quad's lawn or cover mix and the unpaved tracks' dirt. Walls, roads,
+    pavings, yards, pools, cars and foliage keep their images; without the albedo every image is today's."""
+    import bpy
+
+    from meta_sim.blender.scene import CITY_TAG, CityScene
+    from meta_sim.sim.ground import MIXES
+
+    layout, rects = layout_for_tiles(SEED, 9, 115.2, LayoutParams(**CLUTTER_KNOBS))
+
+    def images(**kw):
+        scene = CityScene(layout, [rects[4]], pixel_size_m=1.2, shadow_margin_m=20.0, **kw)
+        try:
+            out = {}
+            for image in bpy.data.images:
+                if image.get(CITY_TAG) == scene.key:
+                    pixels = np.empty(len(image.pixels), np.float32)
+                    image.pixels.foreach_get(pixels)
+                    out[image.name] = pixels.reshape(-1, 4)[:, :3]
+            return out
+        finally:
+            scene.close()
+
+    for mix, ground in ((None, "ground"), (MIXES["mixed"], "ground-cover")):
+        today, half = images(ground=mix), images(ground=mix, ground_albedo=0.5)
+        assert set(today) == set(half) and {ground, "dirt", "wall", "asphalt", "concrete", "yard", "water",
+                                             "foliage", "glass"} <= set(today)
+        for name, pixels in today.items():
+            if name in (ground, "dirt"):
+                assert pixels.mean() > 0.1 and np.allclose(half[name], 0.5 * pixels, rtol=1e-5, atol=1e-7), name
+            else:
+                assert np.array_equal(half[name], pixels), name
+
+
 def _rasterise_polygons(polygons_, rect, px, gsd):
     """Pixels (row 0 north) whose centres lie inside any of the convex counter-clockwise polygons."""
     x0, y0, x1, y1 = rect

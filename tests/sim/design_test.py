@@ -124,10 +124,53 @@ def test_appearance_parameters_set_the_look_of_a_design_and_round_trip():
      "at most one of"),
     ({"name": "x", "type": "categorical", "appearance": "sensor", "choices": ["drone"]}, "each appearance"),
     ({"name": "x", "type": "continuous", "appearance": "sun elevation", "low": 0, "high": 1}, "must be a field name"),
+    ({"name": "x", "type": "continuous", "appearance": "ground_albedo", "low": 0.1, "high": 1}, r"within \[0.2, 2\]"),
+    ({"name": "x", "type": "continuous", "appearance": "ground_albedo", "low": 0.5, "high": 2.5}, r"within \[0.2, 2\]"),
+    ({"name": "x", "type": "continuous", "appearance": "ground_albedo", "low": "dark", "high": 1}, "finite number"),
+    ({"name": "x", "type": "categorical", "appearance": "ground_albedo", "choices": ["dark"]},
+     "categorical appearance field"),
 ])
 def test_bad_appearance_parameters_raise(extra, message):
     with pytest.raises(MetaSimError, match=message):
         _appearance_space(extra)
+
+
+ALBEDO = {"name": "albedo", "type": "continuous", "appearance": "ground_albedo", "low": 0.4, "high": 1.1}
+
+
+def test_ground_albedo_is_a_continuous_look_of_the_scene_recorded_in_the_header():
+    from meta_sim.sim.appearance import Appearance
+
+    space = _appearance_space(ALBEDO)
+    design = space.parse("flat_roof=a,ground=arid,sensor=drone,greenness=0.5,sun=40,style=dense,albedo=0.5")
+    look = Appearance().with_design(space, design)
+    assert look.ground_albedo == 0.5 and look.header()["ground_albedo"] == 0.5
+    without = Appearance().with_design(_appearance_space(), {k: v for k, v in design.items() if k != "albedo"})
+    assert "ground_albedo" not in without.header() and without.ground_albedo is None
+    # a scene of its own: the ground's colours are built into it, unlike brightness or the sensor
+    assert look.scene_key() != without.scene_key()
+    assert look.scene_key() != Appearance().with_design(space, {**design, "albedo": 0.6}).scene_key()
+    assert Appearance().scene_key() == ("plain", None, None, None) and Appearance().header() == {}
+    assert space.decode(space.encode(design)) == pytest.approx(design)
+    for bad, message in (("2", "out of range"), ("0.3", "out of range"), ("dark", "not a number")):
+        with pytest.raises(MetaSimError, match=message):
+            space.parse(f"flat_roof=a,ground=arid,sensor=drone,greenness=0.5,sun=40,style=dense,albedo={bad}")
+
+
+def test_ground_albedo_scales_the_bare_ground_colours_and_none_leaves_them_as_they_were():
+    from meta_sim.sim.appearance import ground_colours, vegetation_colour
+    from meta_sim.sim.ground import COVERS, DIRT
+
+    # None: exactly the colours renders had before the field existed (their tiles stay valid)
+    assert ground_colours(None, None) == {**COVERS, "dirt": DIRT}
+    assert ground_colours(0.3, None)["lawn"] == vegetation_colour("lawn", 0.3, COVERS["lawn"])
+    assert DIRT == (0.30, 0.22, 0.15)
+    half = ground_colours(0.3, 0.5)
+    for name, colour in ground_colours(0.3, None).items():
+        assert half[name] == pytest.approx(tuple(0.5 * c for c in colour))
+    assert ground_colours(None, 1.0) == ground_colours(None, None)
+    assert max(max(c) for c in ground_colours(None, 2.0).values()) == 1.0  # a reflectance stays at most 1
+    assert ground_colours(None, 2.0)["lawn"] == pytest.approx((0.40, 0.52, 0.24))
 
 
 @pytest.mark.parametrize("patch, message", [
