@@ -24,7 +24,8 @@ def _dataset_options(command):
         click.option("--preset", default="fast", show_default=True, help="render preset of the training tiles"),
         click.option("--space", default="rooftops-v1", show_default=True,
                      help="design space: a built-in name (rooftops-v1; overhead-v1 adds city style, ground, "
-                          "vegetation, sun, brightness and sensor for real targets) or a JSON file"),
+                          "vegetation, sun, brightness and sensor for real targets; overhead-v2 also the "
+                          "ground's albedo) or a JSON file"),
         click.option("--tile-px", type=int, default=384, show_default=True, help="training tile size in pixels"),
         click.option("--gsd", type=float, default=0.3, show_default=True, help="training tiles' metres per pixel"),
         click.option("--extractor", default="colour-texture", show_default=True,

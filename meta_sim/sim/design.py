@@ -45,6 +45,11 @@ SPACES_DIR = Path(__file__).parent / "spaces"
 DEFAULT_SPACE = "rooftops-v1"
 
 
+def builtin_spaces() -> list[str]:
+    """The names of the built-in design spaces (``DesignSpace.load`` takes them by name)."""
+    return sorted(p.stem for p in SPACES_DIR.glob("*.json"))
+
+
 @dataclass(frozen=True)
 class Categorical:
     name: str
@@ -223,9 +228,8 @@ class DesignSpace:
         try:
             data = json.loads(path.read_text())
         except FileNotFoundError:
-            builtin = ", ".join(sorted(p.stem for p in SPACES_DIR.glob("*.json")))
             raise MetaSimError(f"design space {str(path_or_name)!r} not found; "
-                               f"give a JSON file or one of: {builtin}") from None
+                               f"give a JSON file or one of: {', '.join(builtin_spaces())}") from None
         except json.JSONDecodeError as exc:
             raise MetaSimError(f"{path}: not valid JSON ({exc})") from None
         return cls.from_dict(data)

@@ -173,6 +173,31 @@ def test_ground_albedo_scales_the_bare_ground_colours_and_none_leaves_them_as_th
     assert ground_colours(None, 2.0)["lawn"] == pytest.approx((0.40, 0.52, 0.24))
 
 
+def test_overhead_v2_is_overhead_v1_plus_the_ground_albedo():
+    from meta_sim.sim.appearance import Appearance
+    from meta_sim.sim.design import builtin_spaces
+
+    v1, v2 = DesignSpace.load("overhead-v1"), DesignSpace.load("overhead-v2")
+    assert {"overhead-v1", "overhead-v2"} <= set(builtin_spaces())
+    albedo = v2.parameter("ground_albedo")
+    assert (albedo.appearance, albedo.low, albedo.high) == ("ground_albedo", 0.4, 1.1)
+    assert tuple(p for p in v2.parameters if p.name != "ground_albedo") == v1.parameters
+    assert v2.layout == v1.layout and v2.dim == v1.dim + 1
+    # overhead-v1 as its models and caches know it: no albedo, the same parameters in the same order
+    assert v1.dim == 100 and "ground_albedo" not in v1.names
+    assert v1.names == ("flat_roof", "sloped_roof", "style", "ground", "greenness", "tree_density",
+                        "building_density", "sun_elevation", "brightness", "roof_jitter", "sensor")
+    designs = v2.sample(np.random.default_rng(4), 200)
+    assert designs == v2.sample(np.random.default_rng(4), 200)
+    values = np.array([d["ground_albedo"] for d in designs])
+    assert values.min() >= 0.4 and values.max() <= 1.1 and values.min() < 0.5 and values.max() > 1.0
+    for design in designs[:20]:
+        assert v2.decode(v2.encode(design)) == pytest.approx(design)
+        assert Appearance().with_design(v2, design).header()["ground_albedo"] == design["ground_albedo"]
+    for design in v1.sample(np.random.default_rng(4), 20):
+        assert "ground_albedo" not in Appearance().with_design(v1, design).header()
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),
@@ -189,7 +214,7 @@ def test_bad_space_files_raise(patch, message):
 
 
 def test_unknown_space_name_lists_the_built_in_ones():
-    with pytest.raises(MetaSimError, match="rooftops-v1"):
+    with pytest.raises(MetaSimError, match="overhead-v1, overhead-v2, rooftops-flat-v1, rooftops-v1"):
         DesignSpace.load("no-such-space")
 
 

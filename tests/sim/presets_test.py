@@ -64,3 +64,25 @@ def test_population_counts_designs(space):
     assert DesignPreset.from_dict(pop.to_dict(), space).distribution == pop.distribution
     with pytest.raises(MetaSimError):
         population([], space, "none")
+
+
+def test_a_preset_of_overhead_v2_carries_its_ground_albedo_and_an_unfit_one_is_refused(tmp_path):
+    import numpy as np
+
+    space = DesignSpace.load("overhead-v2")
+    design = {**space.sample(np.random.default_rng(1), 1)[0], "ground_albedo": 0.55}
+    preset = DesignPreset(kind="group", name="dark-ground", design_space=space.name, design=design)
+    loaded = load_preset(save_preset(tmp_path / "p.json", preset), space)
+    assert loaded.design["ground_albedo"] == 0.55 and loaded.to_dict() == preset.to_dict()
+    for value, message in ((1.5, "out of range"), (0.2, "out of range"), ("dark", "not a number"),
+                           (None, "finite number"), (float("nan"), "finite number")):
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps({**preset.to_dict(), "design": {**design, "ground_albedo": value}}))
+        with pytest.raises(MetaSimError, match=message):
+            load_preset(path, space)
+    path.write_text(json.dumps({**preset.to_dict(), "design": {k: v for k, v in design.items()
+                                                               if k != "ground_albedo"}}))
+    with pytest.raises(MetaSimError, match="missing ground_albedo"):
+        load_preset(path, space)
+    with pytest.raises(MetaSimError, match="unknown design parameter.*ground_albedo"):
+        load_preset(tmp_path / "p.json", DesignSpace.load("overhead-v1"))
