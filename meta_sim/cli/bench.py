@@ -250,8 +250,9 @@ def bench_task_command(out, docs, pictures, quick, realdata, cache):
 @bench.command("realism")
 @_task_bench_options("realism", "folder for realism*.png (real scenes beside renders of their inferred designs)")
 @click.option("--runs", default=None,
-              help="comma-separated runs to (re)measure, e.g. overhead-v1; their rows replace those in --out and "
-                   "the other rows stay (default: every run)")
+              help="comma-separated runs to (re)measure, e.g. overhead-v1, or another built-in design space "
+                   "(e.g. overhead-v2) to add its run; their rows replace those in --out and the other rows stay "
+                   "(default: every run)")
 def bench_realism_command(out, docs, pictures, quick, realdata, cache, runs):
     """How close renders are to each real domain: sim-only building IoU against the other real domains
     and the all-building answer, and a real-versus-rendered classifier's accuracy."""

@@ -39,6 +39,7 @@ from ..core.errors import MetaSimError
 from ..core.fileio import write_text_atomic
 from ..core.progress import Bars
 from ..render.jobs import Job
+from ..sim.design import builtin_spaces
 from ..task.data import Pool
 from ..task.score import Counts
 from ..task.train import TrainSettings
@@ -570,13 +571,16 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     classifier and a picture in ``out``, once per ``(sensor, roof jitter, ground)`` of ``variants`` with
     the default model, and once per design space of ``spaces`` with a model trained in that space
     (whose inferred designs set the look they declare; see ``run_sim_only``). ``only`` restricts the
-    runs to those names (``realism_runs`` lists them); MetaSimError for an unknown one."""
+    runs to those names (``realism_runs`` lists them); a built-in design space it names that ``spaces``
+    lacks adds that space's run. MetaSimError for an unknown name."""
     import time
 
+    spaces = (*spaces, *sorted(set(only or ()) & set(builtin_spaces()) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
-        raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)}")
+        raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
+                           f"or another built-in design space ({', '.join(builtin_spaces())})")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()

@@ -124,9 +124,35 @@ def test_realism_runs_are_named_and_an_unknown_one_is_refused_before_any_work(tm
     from meta_sim.experiments.task_eval import realism_runs, run_realism
 
     assert realism_runs()[-1] == "overhead-v1" and "none+jitter0+plain" in realism_runs()
-    with pytest.raises(MetaSimError, match="unknown realism run"):
-        run_realism(None, None, None, tmp_path / "pictures", only={"overhead-v2"})
+    with pytest.raises(MetaSimError, match="unknown realism run.*overhead-v9"):
+        run_realism(None, None, None, tmp_path / "pictures", only={"overhead-v9"})
     assert not (tmp_path / "pictures").exists()
+
+
+def test_a_built_in_space_named_in_the_runs_adds_its_realism_run_without_joining_the_default_ones(
+        tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    trained = []
+
+    def harness(dataset, *args):
+        trained.append((dataset.space, dataset.designs))
+        return SimpleNamespace(dataset=dataset, methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
+
+    monkeypatch.setattr(task_eval, "make_harness", harness)
+    monkeypatch.setattr(task_eval, "run_sim_only",
+                        lambda h, out, realness: {"domains": {"banepa": {"space": h.dataset.space}}})
+    dataset = DatasetConfig()
+    result = task_eval.run_realism(dataset, ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={"overhead-v2"})
+    assert trained == [("overhead-v2", 2 * dataset.designs)]  # trained like the overhead-v1 run
+    assert result["runs"] == {"overhead-v2": {"banepa": {"space": "overhead-v2"}}}
+    assert result["nams_models"] == {"overhead-v2": "m2"} and "nams_model" not in result
+    assert "overhead-v2" not in task_eval.realism_runs() and task_eval.REALISM_SPACES == ("overhead-v1",)
 
 
 def test_bench_realism_runs_option_replaces_its_rows_and_keeps_the_others(tmp_path, monkeypatch):
