@@ -80,15 +80,27 @@ def separation(a, b) -> float:
     return best
 
 
+def _extents(points) -> list[tuple[float, float, float, float]]:
+    """(nx, ny, lo, hi) for each edge normal of a convex polygon: the normal and the polygon's extent along it."""
+    out = []
+    for nx, ny in _axes(points):
+        p = [x * nx + y * ny for x, y in points]
+        out.append((nx, ny, min(p), max(p)))
+    return out
+
+
+def _separated(extents, points, gap: float) -> bool:
+    """Whether the points lie at least ``gap`` off a polygon of these `_extents` along one of its normals."""
+    for nx, ny, lo, hi in extents:
+        p = [x * nx + y * ny for x, y in points]
+        if min(p) - hi >= gap or lo - max(p) >= gap:
+            return True
+    return False
+
+
 def apart(a, b, gap: float) -> bool:
     """Whether `separation` of the two polygons is at least ``gap`` (stops at the first axis that shows it)."""
-    for axes_of in (a, b):
-        for nx, ny in _axes(axes_of):
-            pa = [x * nx + y * ny for x, y in a]
-            pb = [x * nx + y * ny for x, y in b]
-            if min(pb) - max(pa) >= gap or min(pa) - max(pb) >= gap:
-                return True
-    return False
+    return _separated(_extents(a), b, gap) or _separated(_extents(b), a, gap)
 
 
 def clip(subject, window) -> tuple[Point, ...]:
@@ -172,6 +184,7 @@ class Occupancy:
         self.cell_m = cell_m
         self.items: list[tuple[tuple[Point, ...], tuple[float, float, float, float]]] = []
         self.grid: dict[tuple[int, int], list[int]] = {}
+        self._extents: list = []  # of each item, made when a query first gets past its box
         for polygon in polygons_:
             self.add(polygon)
 
@@ -184,6 +197,7 @@ class Occupancy:
     def add(self, polygon) -> None:
         box = bbox(polygon)
         self.items.append((polygon, box))
+        self._extents.append(None)
         for key in self._keys(box):
             self.grid.setdefault(key, []).append(len(self.items) - 1)
 
@@ -194,6 +208,7 @@ class Occupancy:
         Only polygons filed in the cells under the polygon's box are looked at: to keep a positive gap
         from all of them, ask with the polygon grown by it and a gap of zero."""
         box = bbox(polygon)
+        own = None
         seen = set()
         for key in self._keys(box):
             for i in self.grid.get(key, ()):
@@ -206,7 +221,14 @@ class Occupancy:
                 # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
                 if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
                     continue
-                if not apart(polygon, other, gap):
+                # `apart`, with both polygons' extents along their own normals made once: the stored one's
+                # normals first (a long road's usually shows the gap at once), then the new one's.
+                if self._extents[i] is None:
+                    self._extents[i] = _extents(other)
+                if _separated(self._extents[i], polygon, gap):
+                    continue
+                own = _extents(polygon) if own is None else own
+                if not _separated(own, other, gap):
                     return False
         return True
 
