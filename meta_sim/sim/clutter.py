@@ -47,6 +47,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from . import polygons
+from .draws import pick
 
 Point = tuple[float, float]
 Polygon = tuple[Point, ...]
@@ -447,21 +448,15 @@ def _sidewalks(rng: np.random.Generator, blocks, verge: float, widths: tuple[flo
     return out
 
 
-def _colour(rng: np.random.Generator) -> str:
-    names = list(CAR_COLOURS)
-    return names[int(rng.choice(len(names), p=list(CAR_COLOURS.values())))]
-
-
 def _truck(rng: np.random.Generator, x: float, y: float, heading: float, longest: float) -> Car:
-    names = list(TRUCK_COLOURS)
     length = min(rng.uniform(*TRUCK_LENGTH_M), longest)
-    colour = names[int(rng.choice(len(names), p=list(TRUCK_COLOURS.values())))]
+    colour = pick(rng, TRUCK_COLOURS)
     return Car(_r(x), _r(y), _r(heading), _r(length), _r(rng.uniform(*TRUCK_WIDTH_M)), colour, "truck")
 
 
 def _car(rng: np.random.Generator, x: float, y: float, heading: float) -> Car:
     return Car(_r(x), _r(y), _r(heading), _r(rng.uniform(*CAR_LENGTH_M)), _r(rng.uniform(*CAR_WIDTH_M)),
-               _colour(rng))
+               pick(rng, CAR_COLOURS))
 
 
 def _kerb_cars(rng: np.random.Generator, roads: Sequence[Rect], mouths: Sequence[Rect], density: float) -> list[Car]:

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import polygons
+from .draws import pick, sign
 
 Point = tuple[float, float]
 Polygon = tuple[Point, ...]
@@ -237,19 +238,14 @@ def _flat_roof(rng: np.random.Generator, b, density: float, tank_share: float) -
     return out
 
 
-def _pick(rng: np.random.Generator, weights: dict) -> object:
-    names = list(weights)
-    return names[int(rng.choice(len(names), p=list(weights.values())))]
-
-
 def _tanks(rng: np.random.Generator, roof: _Roof, z: float, sink: float) -> list[Fixture]:
     """One to three water tanks, each a cylinder standing on the roof or on a steel stand (a deck on four
     legs, its square just holding the tank); the square of each is placed like any other piece."""
     out: list[Fixture] = []
-    colour = _pick(rng, TANK_COLOURS)
-    for k in range(int(_pick(rng, TANK_COUNT))):
+    colour = pick(rng, TANK_COLOURS)
+    for k in range(int(pick(rng, TANK_COUNT))):
         if k and rng.random() >= TANK_SAME_COLOUR:
-            colour = _pick(rng, TANK_COLOURS)
+            colour = pick(rng, TANK_COLOURS)
         d = rng.uniform(*TANK_DIAMETER_M)
         height = float(np.clip(d * rng.uniform(0.9, 1.3), *TANK_HEIGHT_M))
         stand = rng.uniform(*TANK_STAND_M) if rng.random() < TANK_ON_STAND else 0.0
@@ -431,7 +427,7 @@ def _chimney(rng: np.random.Generator, roof: _Slopes, room: _Roof) -> list[Fixtu
     half = roof.width / 2.0
     lo = roof.building.overhang_m + EDGE_M + side / 2.0
     for _ in range(8):
-        v = half + rng.choice((-1.0, 1.0)) * rng.uniform(*CHIMNEY_FROM_RIDGE_M)
+        v = half + sign(rng) * rng.uniform(*CHIMNEY_FROM_RIDGE_M)
         v = min(max(v, lo), roof.width - lo)
         u = rng.uniform(lo, roof.length - lo)
         u0, v0, u1, v1 = u - side / 2, v - side / 2, u + side / 2, v + side / 2

@@ -7,6 +7,7 @@ float of any style, with or without clutter, at any building density.
 import hashlib
 import json
 
+import numpy as np
 import pytest
 
 from meta_sim.sim.furniture import roof_furniture
@@ -61,3 +62,15 @@ def city_digest(seed, width, height, style, clutter, density):
 @pytest.mark.parametrize("case", sorted(PINNED, key=str), ids=str)
 def test_city_and_its_furniture_are_bit_identical_to_before_the_speed_up(case):
     assert city_digest(*case) == PINNED[case]
+
+
+def test_the_cheap_draws_take_what_generator_choice_takes():
+    from meta_sim.sim.draws import pick, sign
+
+    weights = {"a": 0.45, "b": 0.3, "c": 0.17, "d": 0.08}
+    for seed in range(200):
+        mine, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+        for _ in range(20):
+            assert pick(mine, weights) == list(weights)[theirs.choice(4, p=list(weights.values()))]
+            assert sign(mine) == theirs.choice((-1, 1))
+        assert mine.random() == theirs.random()  # and leave the stream where choice leaves it
