@@ -90,10 +90,20 @@ def _extents(points) -> list[tuple[float, float, float, float]]:
 
 
 def _separated(extents, points, gap: float) -> bool:
-    """Whether the points lie at least ``gap`` off a polygon of these `_extents` along one of its normals."""
+    """Whether the points lie at least ``gap`` off a polygon of these `_extents` along one of its normals.
+
+    ``min(p) - hi >= gap`` holds exactly when it holds for every point (rounding keeps order), so each
+    axis is left at the first points that show it cannot separate them.
+    """
     for nx, ny, lo, hi in extents:
-        p = [x * nx + y * ny for x, y in points]
-        if min(p) - hi >= gap or lo - max(p) >= gap:
+        beyond = before = True  # every point so far lies `gap` beyond hi / before lo
+        for x, y in points:
+            v = x * nx + y * ny
+            beyond = beyond and v - hi >= gap
+            before = before and lo - v >= gap
+            if not (beyond or before):
+                break
+        else:
             return True
     return False
 
