@@ -39,6 +39,7 @@ with it and cuts pavings and markings at region borders.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, replace
 from typing import Any, Sequence
@@ -968,18 +969,18 @@ class OpenGround:
     def _fill(self, outlines) -> np.ndarray:
         """Cells whose centres lie inside any of the (counter-clockwise, convex) outlines."""
         mask = np.zeros((len(self.ys), len(self.xs)), bool)
-        c = self.CELL_M
+        tolerance = -1e-9 * self.CELL_M
+        xs, ys = self.xs.tolist(), self.ys.tolist()  # bisect on lists finds what searchsorted finds, sooner
         for outline in outlines:
             x0, y0, x1, y1 = _polygon_bbox(outline)
-            i0, i1 = np.searchsorted(self.xs, (x0, x1))
-            j0, j1 = np.searchsorted(self.ys, (y0, y1))
+            i0, i1 = bisect.bisect_left(xs, x0), bisect.bisect_left(xs, x1)
+            j0, j1 = bisect.bisect_left(ys, y0), bisect.bisect_left(ys, y1)
             if i0 >= i1 or j0 >= j1:
                 continue
-            gx, gy = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
-            inside = np.ones(gx.shape, bool)
-            for (ax, ay), (bx, by) in zip(outline, outline[1:] + outline[:1]):
-                inside &= (bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= -1e-9 * c
-            mask[j0:j1, i0:i1] |= inside
+            gx, gy = self.xs[i0:i1], self.ys[j0:j1, None]  # broadcast to the (j, i) cells
+            inside = mask[j0:j1, i0:i1]  # a view: the cells are set in place
+            inside |= np.logical_and.reduce([(bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= tolerance
+                                             for (ax, ay), (bx, by) in zip(outline, outline[1:] + outline[:1])])
         return mask
 
     def _grown(self, mask: np.ndarray, reach: float) -> np.ndarray:
