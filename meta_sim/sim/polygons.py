@@ -25,10 +25,22 @@ def rect_polygon(x0: float, y0: float, x1: float, y1: float) -> tuple[Point, ...
 
 
 def bbox(points) -> tuple[float, float, float, float]:
-    """(x0, y0, x1, y1) of the points."""
-    xs = [p[0] for p in points]
-    ys = [p[1] for p in points]
-    return (min(xs), min(ys), max(xs), max(ys))
+    """(x0, y0, x1, y1) of the points (in one pass: the layout asks this of every polygon it tries)."""
+    points = iter(points)
+    first = next(points, None)
+    if first is None:
+        raise ValueError("bbox of no points")
+    x0, y0 = x1, y1 = first
+    for x, y in points:
+        if x < x0:
+            x0 = x
+        elif x > x1:
+            x1 = x
+        if y < y0:
+            y0 = y
+        elif y > y1:
+            y1 = y
+    return (x0, y0, x1, y1)
 
 
 def lot_to_world(rect, front: str, u0: float, u1: float, v0: float, v1: float) -> tuple[float, float, float, float]:
@@ -146,13 +158,15 @@ def overlap_area(a, b) -> float:
 def inside(points, window, tolerance: float = 1e-6) -> bool:
     """Whether every point lies in the convex counter-clockwise window (or within ``tolerance`` of it)."""
     n = len(window)
+    limit = -tolerance
     for i in range(n):
         (ax, ay), (bx, by) = window[i], window[(i + 1) % n]
-        length = math.hypot(bx - ax, by - ay)
+        ex, ey = bx - ax, by - ay
+        length = math.hypot(ex, ey)
         if length <= 1e-12:
             continue
         for x, y in points:
-            if ((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / length < -tolerance:
+            if (ex * (y - ay) - ey * (x - ax)) / length < limit:
                 return False
     return True
 
@@ -217,29 +231,26 @@ class Occupancy:
 
         Only polygons filed in the cells under the polygon's box are looked at: to keep a positive gap
         from all of them, ask with the polygon grown by it and a gap of zero."""
-        box = bbox(polygon)
+        box = qx0, qy0, qx1, qy1 = bbox(polygon)
+        cells = [self.grid.get(key, ()) for key in self._keys(box)]
+        near = cells[0] if len(cells) == 1 else dict.fromkeys(itertools.chain(*cells))  # each item once
         own = None
-        seen = set()
-        for key in self._keys(box):
-            for i in self.grid.get(key, ()):
-                if i in seen:
-                    continue
-                seen.add(i)
-                other, (x0, y0, x1, y1) = self.items[i]
-                if other is skip:
-                    continue
-                # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
-                if max(x0 - box[2], box[0] - x1, y0 - box[3], box[1] - y1) >= gap:
-                    continue
-                # `apart`, with both polygons' extents along their own normals made once: the stored one's
-                # normals first (a long road's usually shows the gap at once), then the new one's.
-                if self._extents[i] is None:
-                    self._extents[i] = _extents(other)
-                if _separated(self._extents[i], polygon, gap):
-                    continue
-                own = _extents(polygon) if own is None else own
-                if not _separated(own, other, gap):
-                    return False
+        for i in near:
+            other, (x0, y0, x1, y1) = self.items[i]
+            if other is skip:
+                continue
+            # The boxes' gap is a gap along an axis too: far enough apart, no need to look closer.
+            if x0 - qx1 >= gap or qx0 - x1 >= gap or y0 - qy1 >= gap or qy0 - y1 >= gap:
+                continue
+            # `apart`, with both polygons' extents along their own normals made once: the stored one's
+            # normals first (a long road's usually shows the gap at once), then the new one's.
+            if self._extents[i] is None:
+                self._extents[i] = _extents(other)
+            if _separated(self._extents[i], polygon, gap):
+                continue
+            own = _extents(polygon) if own is None else own
+            if not _separated(own, other, gap):
+                return False
         return True
 
 
