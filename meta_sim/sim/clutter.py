@@ -84,6 +84,7 @@ CLEARANCE_M = 0.05  # between a crown and a roof outline, after rounding
 
 
 _r = polygons.rounded
+_clamp = polygons.clamp
 _rect_polygon = polygons.rect_polygon
 _polygon_bbox = polygons.bbox
 
@@ -535,7 +536,7 @@ def _driveway(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Fr
     else:  # to the house front
         a = u1 - width - rng.uniform(0.3, 1.5) if on_right else u0 + rng.uniform(0.3, 1.5)
         end = v0
-    a = float(np.clip(a, 0.2, frame.frontage - width - 0.2))
+    a = _clamp(a, 0.2, frame.frontage - width - 0.2)
     cars = []
     length = CAR_LENGTH_M[1]
     for n in range(2):  # inside the lot (the sidewalk stays free), clear of the roof
@@ -791,11 +792,11 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
 
 def _diameter(rng: np.random.Generator, hi: float = TREE_DIAMETER_M[1]) -> float:
     """Crown diameters skewed to 5-9 m with a tail of big trees."""
-    return float(np.clip(rng.lognormal(math.log(6.8), 0.3), TREE_DIAMETER_M[0], hi))
+    return _clamp(rng.lognormal(math.log(6.8), 0.3), TREE_DIAMETER_M[0], hi)
 
 
 def _height(rng: np.random.Generator, diameter: float) -> float:
-    return float(np.clip(1.2 * diameter + 1.5 + rng.normal(0.0, 1.2), *TREE_HEIGHT_M))
+    return _clamp(1.2 * diameter + 1.5 + rng.normal(0.0, 1.2), *TREE_HEIGHT_M)
 
 
 class _Buckets:
@@ -879,7 +880,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
             d0 = _diameter(rng, STREET_TREE_DIAMETER_M)
             pos = lo + verge_m + rng.uniform(0.0, d0 / 2)
             while pos < hi - verge_m:
-                d = float(np.clip(d0 * rng.uniform(0.85, 1.15), TREE_DIAMETER_M[0], STREET_TREE_DIAMETER_M))
+                d = _clamp(d0 * rng.uniform(0.85, 1.15), TREE_DIAMETER_M[0], STREET_TREE_DIAMETER_M)
                 x, y = (pos, across) if side in "SN" else (across, pos)
                 if rng.random() < 0.75 + 0.25 * density and stand.fits(x, y, d / 2, 0.45):
                     stand.add(rng, x, y, d)
@@ -893,7 +894,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
             spread = d0 * rng.uniform(0.3, 0.6)  # neighbours' crowns touch and merge into one canopy
             for _ in range(1 + rng.poisson(1.5 if built else 3.0)):
                 for attempt in range(4):  # a crown too big for a yard is tried smaller
-                    d = float(np.clip(d0 * rng.uniform(0.75, 1.25) * 0.8 ** attempt, *TREE_DIAMETER_M))
+                    d = _clamp(d0 * rng.uniform(0.75, 1.25) * 0.8 ** attempt, *TREE_DIAMETER_M)
                     x, y = cx + rng.normal(0.0, spread), cy + rng.normal(0.0, spread)
                     if x0 < x < x1 and y0 < y < y1 and stand.fits(x, y, d / 2, 0.35):
                         stand.add(rng, x, y, d)

@@ -247,7 +247,7 @@ def _tanks(rng: np.random.Generator, roof: _Roof, z: float, sink: float) -> list
         if k and rng.random() >= TANK_SAME_COLOUR:
             colour = pick(rng, TANK_COLOURS)
         d = rng.uniform(*TANK_DIAMETER_M)
-        height = float(np.clip(d * rng.uniform(0.9, 1.3), *TANK_HEIGHT_M))
+        height = polygons.clamp(d * rng.uniform(0.9, 1.3), *TANK_HEIGHT_M)
         stand = rng.uniform(*TANK_STAND_M) if rng.random() < TANK_ON_STAND else 0.0
         side = d + 2 * TANK_DECK_RIM_M if stand else d
         rect = roof.place(rng, side, side)

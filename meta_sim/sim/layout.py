@@ -140,6 +140,7 @@ SLOPED_PRIORITY = ("residential", "apartment", "industrial", "office")
 
 
 _r = polygons.rounded
+_clamp = polygons.clamp
 rect_polygon = polygons.rect_polygon
 
 
@@ -909,10 +910,9 @@ def _footprint_rect(rng: np.random.Generator, plan: _LotPlan, kind: str, fill: f
         return None
     rules = MASSING[kind]
     setback = min(rng.uniform(*rules.setback_m), free_v - MIN_BUILDING_SIDE_M)
-    w = float(np.clip(rng.uniform(*rules.fill_scale) * fill * free_u,
-                      MIN_BUILDING_SIDE_M, min(rules.max_size_m[0], free_u)))
-    h = float(np.clip(rng.uniform(*rules.fill_scale) * fill * free_v,
-                      MIN_BUILDING_SIDE_M, min(rules.max_size_m[1], free_v - setback)))
+    w = _clamp(rng.uniform(*rules.fill_scale) * fill * free_u, MIN_BUILDING_SIDE_M, min(rules.max_size_m[0], free_u))
+    h = _clamp(rng.uniform(*rules.fill_scale) * fill * free_v, MIN_BUILDING_SIDE_M,
+               min(rules.max_size_m[1], free_v - setback))
     u0 = inset + rng.uniform(0.0, free_u - w)
     v0 = inset + setback
     return _to_world(plan, u0, u0 + w, v0, v0 + h)
@@ -956,8 +956,8 @@ def _eave_height(rng: np.random.Generator, kind: str) -> float:
         return rng.uniform(lo, hi)
     base = rng.uniform(3.0, 3.5) if rng.random() < 0.5 else rng.uniform(5.0, 6.5)  # one or two storeys
     # Synthinel's height factor lies in [0.5, 2]; most houses stay near their storey height.
-    factor = np.clip(rng.lognormal(0.0, 0.25), 0.5, 2.0)
-    return float(np.clip(base * factor, lo, hi))
+    factor = _clamp(rng.lognormal(0.0, 0.25), 0.5, 2.0)
+    return _clamp(base * factor, lo, hi)
 
 
 def _sketch_buildings(rng: np.random.Generator, plans: list[_LotPlan], density: float) -> list[_Sketch]:

@@ -18,6 +18,12 @@ def rounded(value: float) -> float:
     return round(float(value), 4)
 
 
+def clamp(value: float, lo: float, hi: float) -> float:
+    """``np.clip`` of one finite number, without numpy's per-call cost: the same value, even the sign of a zero."""
+    value = value if value > lo else lo
+    return value if value < hi else hi
+
+
 def rect_polygon(x0: float, y0: float, x1: float, y1: float) -> tuple[Point, ...]:
     """Axis-aligned rectangle as a CCW polygon starting at its south-west corner (rounded coordinates)."""
     x0, y0, x1, y1 = rounded(x0), rounded(y0), rounded(x1), rounded(y1)
