@@ -160,20 +160,27 @@ class _Roof:
     def __init__(self, footprint: Polygon, margin: float):
         self.footprint = footprint
         self.margin = margin
-        x0, y0, x1, y1 = polygons.bbox(footprint)
+        self.bbox = x0, y0, x1, y1 = polygons.bbox(footprint)
         self.box = (x0 + margin, y0 + margin, x1 - margin, y1 - margin)
+        self.rectangular = set(footprint) == set(_rect_outline(self.bbox)) and polygons.area(footprint) > 0.0
         self.taken: list[Rect] = []
 
     def fits(self, rect: Rect) -> bool:
         x0, y0, x1, y1 = rect
+        if not all(x0 >= t[2] + GAP_M or t[0] >= x1 + GAP_M or y0 >= t[3] + GAP_M or t[1] >= y1 + GAP_M
+                   for t in self.taken):
+            return False
         m = self.margin
-        grown = _rect_outline((x0 - m, y0 - m, x1 + m, y1 + m))
+        gx0, gy0, gx1, gy1 = x0 - m, y0 - m, x1 + m, y1 + m
+        fx0, fy0, fx1, fy1 = self.bbox
+        if self.rectangular and fx0 <= gx0 and fy0 <= gy0 and gx1 <= fx1 and gy1 <= fy1:
+            # Inside a rectangular footprint: the clipping below would give the rectangle back, its area
+            # within rounding (far below the 1e-6 m2 allowed, even 5 km from the origin) of the rectangle's: yes.
+            return True
+        grown = _rect_outline((gx0, gy0, gx1, gy1))
         # Clipping the (perhaps L- or T-shaped) footprint by the rectangle keeps all of the rectangle
         # exactly when the rectangle lies inside.
-        if polygons.overlap_area(self.footprint, grown) < polygons.area(grown) - 1e-6:
-            return False
-        return all(x0 >= t[2] + GAP_M or t[0] >= x1 + GAP_M or y0 >= t[3] + GAP_M or t[1] >= y1 + GAP_M
-                   for t in self.taken)
+        return polygons.overlap_area(self.footprint, grown) >= polygons.area(grown) - 1e-6
 
     def take(self, rect: Rect) -> bool:
         if self.fits(rect):
