@@ -74,13 +74,16 @@ def area(points) -> float:
                      for i in range(n))
 
 
-def _axes(points):
+def _axes(points) -> list[tuple[float, float]]:
+    """The unit normals of a polygon's edges (but the vanishing ones)."""
     n = len(points)
+    out = []
     for i in range(n):
         (x0, y0), (x1, y1) = points[i], points[(i + 1) % n]
         length = math.hypot(x1 - x0, y1 - y0)
         if length > 1e-12:
-            yield (y1 - y0) / length, (x0 - x1) / length
+            out.append(((y1 - y0) / length, (x0 - x1) / length))
+    return out
 
 
 def separation(a, b) -> float:
@@ -101,9 +104,16 @@ def separation(a, b) -> float:
 def _extents(points) -> list[tuple[float, float, float, float]]:
     """(nx, ny, lo, hi) for each edge normal of a convex polygon: the normal and the polygon's extent along it."""
     out = []
+    (fx, fy), rest = points[0], points[1:]
     for nx, ny in _axes(points):
-        p = [x * nx + y * ny for x, y in points]
-        out.append((nx, ny, min(p), max(p)))
+        lo = hi = fx * nx + fy * ny  # then as min() and max() find them: the first of equal values
+        for x, y in rest:
+            v = x * nx + y * ny
+            if v < lo:
+                lo = v
+            elif v > hi:
+                hi = v
+        out.append((nx, ny, lo, hi))
     return out
 
 
