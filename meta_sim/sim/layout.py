@@ -1341,13 +1341,19 @@ class _Frame:
     side: float
     centre: Point
 
+    @cached_property
+    def _turning(self) -> tuple[float, float]:
+        return polygons.turning(self.angle_deg)
+
+    def _points(self, points) -> tuple[Point, ...]:
+        half, (cx, cy) = self.side / 2, self.centre
+        return polygons.turn([(x - half + cx, y - half + cy) for x, y in points], cx, cy, *self._turning)
+
     def point(self, x: float, y: float) -> Point:
-        (wx, wy), = polygons.rotate(((x - self.side / 2 + self.centre[0], y - self.side / 2 + self.centre[1]),),
-                                    *self.centre, self.angle_deg)
-        return wx, wy
+        return self._points(((x, y),))[0]
 
     def polygon(self, polygon: Polygon) -> Polygon:
-        return polygons.rounded_polygon(self.point(x, y) for x, y in polygon)
+        return polygons.rounded_polygon(self._points(polygon))
 
     def sketch(self, sketch: _Sketch) -> _Sketch:
         """The sketch moved so its footprint's centre lands where the frame puts it, turned with the frame."""
@@ -1501,12 +1507,15 @@ class _Grid:
     def angle_deg(self) -> float:
         return self.frame.angle_deg if self.frame else 0.0
 
+    @cached_property
+    def _cell_boxes(self) -> list[Rect]:
+        return [polygon_bbox(cell) for cell in self.cells]
+
     def cut(self, polygon: Polygon) -> list[Polygon]:
         """The pieces of a (small, convex) world polygon inside the cells."""
         x0, y0, x1, y1 = polygon_bbox(polygon)
         out = []
-        for cell in self.cells:
-            cx0, cy0, cx1, cy1 = polygon_bbox(cell)
+        for cell, (cx0, cy0, cx1, cy1) in zip(self.cells, self._cell_boxes):
             if x1 <= cx0 or cx1 <= x0 or y1 <= cy0 or cy1 <= y0:
                 continue
             if polygons.inside(polygon, cell, 0.0):

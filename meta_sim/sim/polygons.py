@@ -63,7 +63,16 @@ def lot_to_world(rect, front: str, u0: float, u1: float, v0: float, v1: float) -
 
 def rotate(points, cx: float, cy: float, degrees: float) -> tuple[Point, ...]:
     """The points turned counter-clockwise by ``degrees`` about (cx, cy)."""
-    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return turn(points, cx, cy, *turning(degrees))
+
+
+def turning(degrees: float) -> tuple[float, float]:
+    """The cosine and sine `rotate` turns by."""
+    return math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+
+
+def turn(points, cx: float, cy: float, c: float, s: float) -> tuple[Point, ...]:
+    """`rotate` by the angle of `turning` (c, s), for many turns by one angle."""
     return tuple((cx + c * (x - cx) - s * (y - cy), cy + s * (x - cx) + c * (y - cy)) for x, y in points)
 
 
