@@ -806,19 +806,24 @@ class _Buckets:
 
     def __init__(self, boxes: np.ndarray):
         self.boxes = boxes
-        self.cells: dict[tuple[int, int], list[int]] = {}
+        cells: dict[tuple[int, int], list[int]] = {}
         for i, (x0, y0, x1, y1) in enumerate(boxes):
             for cx in range(int(x0 // self.CELL_M), int(x1 // self.CELL_M) + 1):
                 for cy in range(int(y0 // self.CELL_M), int(y1 // self.CELL_M) + 1):
-                    self.cells.setdefault((cx, cy), []).append(i)
+                    cells.setdefault((cx, cy), []).append(i)
+        self.cells = {key: boxes[found] for key, found in cells.items()}
 
     def near(self, x: float, y: float, reach: float) -> np.ndarray:
-        """The boxes of the cells within `reach` of (x, y)."""
-        found: set[int] = set()
+        """The boxes of the cells within `reach` of (x, y); a box in several of them comes as often (the
+        callers ask for a nearest box or for any: it makes no difference)."""
+        found = []
         for cx in range(int((x - reach) // self.CELL_M), int((x + reach) // self.CELL_M) + 1):
             for cy in range(int((y - reach) // self.CELL_M), int((y + reach) // self.CELL_M) + 1):
-                found.update(self.cells.get((cx, cy), ()))
-        return self.boxes[sorted(found)].reshape(-1, 4)
+                if (cx, cy) in self.cells:
+                    found.append(self.cells[cx, cy])
+        if len(found) < 2:
+            return found[0] if found else self.boxes[:0]
+        return np.concatenate(found)
 
 
 class _Stand:
