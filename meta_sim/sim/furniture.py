@@ -72,6 +72,7 @@ MAX_PIECES = 40  # of one kind on one roof
 TANK_DIAMETER_M = (1.0, 1.6)
 TANK_HEIGHT_M = (1.0, 1.8)
 TANK_SIDES = 16  # of the polygon standing for a tank's circle
+_TANK_CIRCLE = [(math.cos(a), math.sin(a)) for a in np.linspace(0.0, 2 * math.pi, TANK_SIDES, endpoint=False)]
 TANK_STAND_M = (0.5, 1.5)  # height of a stand's deck above the roof
 TANK_DECK_M = 0.06  # thickness of a stand's deck and side of its square legs
 TANK_DECK_RIM_M = 0.05  # the deck reaches this far beyond its tank on every side
@@ -270,8 +271,7 @@ def _tanks(rng: np.random.Generator, roof: _Roof, z: float, sink: float) -> list
             out.append(_box("tank-stand", "dark", rect, top - t, top))
             out += [_box("tank-stand", "dark", (lx, ly, lx + t, ly + t), sink, foot)
                     for lx in (x0 + 0.02, x1 - 0.02 - t) for ly in (y0 + 0.02, y1 - 0.02 - t)]
-        circle = tuple((cx + d / 2 * math.cos(a), cy + d / 2 * math.sin(a))
-                       for a in np.linspace(0.0, 2 * math.pi, TANK_SIDES, endpoint=False))
+        circle = tuple((cx + d / 2 * cos, cy + d / 2 * sin) for cos, sin in _TANK_CIRCLE)
         out.append(Fixture("tank", colour, circle, (foot,) * TANK_SIDES, (z + stand + height,) * TANK_SIDES))
     return out
 

@@ -7,6 +7,7 @@ Polygons are sequences of (x, y) vertices, counter-clockwise.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -213,9 +214,16 @@ def strip(x0: float, y0: float, x1: float, y1: float, width: float, extend: floa
 
 def disc(x: float, y: float, r: float, sides: int = 12) -> tuple[Point, ...]:
     """A regular polygon holding the disc of radius r about (x, y) (its edges touch the circle)."""
-    R = r / math.cos(math.pi / sides)
-    return tuple((x + R * math.cos(2 * math.pi * k / sides), y + R * math.sin(2 * math.pi * k / sides))
-                 for k in range(sides))
+    stretch, corners = _regular(sides)
+    R = r / stretch
+    return tuple((x + R * cos, y + R * sin) for cos, sin in corners)
+
+
+@functools.lru_cache(maxsize=None)
+def _regular(sides: int) -> tuple[float, tuple[Point, ...]]:
+    """cos(pi / sides) and the corners of the regular polygon of that many sides on the unit circle."""
+    return math.cos(math.pi / sides), tuple((math.cos(2 * math.pi * k / sides), math.sin(2 * math.pi * k / sides))
+                                            for k in range(sides))
 
 
 def grown_box(points, margin: float) -> tuple[Point, ...]:
