@@ -804,32 +804,28 @@ class _Buckets:
 
     CELL_M = 40.0
 
-    def __init__(self, boxes: np.ndarray):
-        self.boxes = boxes
-        cells: dict[tuple[int, int], list[int]] = {}
-        for i, (x0, y0, x1, y1) in enumerate(boxes):
+    def __init__(self, boxes: Sequence[Rect]):
+        self.cells: dict[tuple[int, int], list[Rect]] = {}
+        for box in boxes:
+            x0, y0, x1, y1 = box
             for cx in range(int(x0 // self.CELL_M), int(x1 // self.CELL_M) + 1):
                 for cy in range(int(y0 // self.CELL_M), int(y1 // self.CELL_M) + 1):
-                    cells.setdefault((cx, cy), []).append(i)
-        self.cells = {key: boxes[found] for key, found in cells.items()}
+                    self.cells.setdefault((cx, cy), []).append(box)
 
-    def near(self, x: float, y: float, reach: float) -> np.ndarray:
+    def near(self, x: float, y: float, reach: float) -> list[Rect]:
         """The boxes of the cells within `reach` of (x, y); a box in several of them comes as often (the
-        callers ask for a nearest box or for any: it makes no difference)."""
-        found = []
+        callers ask whether any is near: it makes no difference)."""
+        found: list[Rect] = []
         for cx in range(int((x - reach) // self.CELL_M), int((x + reach) // self.CELL_M) + 1):
             for cy in range(int((y - reach) // self.CELL_M), int((y + reach) // self.CELL_M) + 1):
-                if (cx, cy) in self.cells:
-                    found.append(self.cells[cx, cy])
-        if len(found) < 2:
-            return found[0] if found else self.boxes[:0]
-        return np.concatenate(found)
+                found += self.cells.get((cx, cy), ())
+        return found
 
 
 class _Stand:
     """The trees placed so far, and the test a new crown must pass."""
 
-    def __init__(self, roofs: np.ndarray, no_trunks: np.ndarray, width: float, height: float):
+    def __init__(self, roofs: Sequence[Rect], no_trunks: Sequence[Rect], width: float, height: float):
         self.roofs, self.no_trunks = _Buckets(roofs), _Buckets(no_trunks)
         self.width, self.height = width, height
         self._xyr = np.zeros((64, 3))  # grown by doubling; the first len(self.trees) rows are placed
@@ -842,16 +838,15 @@ class _Stand:
     def fits(self, x: float, y: float, r: float, overlap: float) -> bool:
         if x - r < 0 or y - r < 0 or x + r > self.width or y + r > self.height:
             return False
-        roofs = self.roofs.near(x, y, r + CLEARANCE_M)
-        if len(roofs):
-            dx = np.maximum(np.maximum(roofs[:, 0] - x, x - roofs[:, 2]), 0.0)
-            dy = np.maximum(np.maximum(roofs[:, 1] - y, y - roofs[:, 3]), 0.0)
-            if np.min(np.hypot(dx, dy)) < r + CLEARANCE_M:
+        reach = r + CLEARANCE_M
+        for x0, y0, x1, y1 in self.roofs.near(x, y, reach):
+            dx, dy = max(x0 - x, x - x1, 0.0), max(y0 - y, y - y1, 0.0)
+            # The distance to a box is at least either leg: only a box within reach along both is measured.
+            if dx < reach and dy < reach and np.hypot(dx, dy) < reach:
                 return False
-        t = self.no_trunks.near(x, y, 0.5)
-        if len(t):
-            if np.any((t[:, 0] - 0.5 < x) & (x < t[:, 2] + 0.5) & (t[:, 1] - 0.5 < y) & (y < t[:, 3] + 0.5)):
-                return False
+        trunks = self.no_trunks.near(x, y, 0.5)
+        if any(x0 - 0.5 < x < x1 + 0.5 and y0 - 0.5 < y < y1 + 0.5 for x0, y0, x1, y1 in trunks):
+            return False
         if len(self.xyr):
             gap = np.hypot(self.xyr[:, 0] - x, self.xyr[:, 1] - y)
             if np.any(gap < overlap * (self.xyr[:, 2] + r)):
@@ -872,8 +867,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
     `row_offset_m` from the kerb) and groups in yards and parks, as often as the grid's `rules` say.
     Crowns may reach over roads and neighbouring yards but never over a roof outline (the roof boxes
     given)."""
-    stand = _Stand(np.asarray(roofs, float).reshape(-1, 4), np.asarray(no_trunks, float).reshape(-1, 4),
-                   width, height)
+    stand = _Stand(roofs, no_trunks, width, height)
     for rect, sides in blocks:
         x0, y0, x1, y1 = rect
         for side in sorted(sides):
