@@ -86,3 +86,16 @@ def test_clamp_is_np_clip_of_one_number_to_the_sign_of_zero():
     for value, lo, hi in itertools.product(values, repeat=3):
         mine, theirs = clamp(value, lo, hi), float(np.clip(value, lo, hi))
         assert (mine, math.copysign(1.0, mine)) == (theirs, math.copysign(1.0, theirs)), (value, lo, hi)
+
+
+def test_rounded_is_round_to_four_places_to_the_last_bit():
+    from meta_sim.sim.polygons import rounded
+
+    rng = np.random.default_rng(0)
+    values = np.concatenate([rng.uniform(-6000.0, 6000.0, 200000), rng.uniform(-1.0, 1.0, 50000),
+                             rng.uniform(-1e-4, 1e-4, 10000), np.round(rng.uniform(-6000.0, 6000.0, 50000), 4),
+                             (np.round(rng.uniform(-6000.0, 6000.0, 50000), 4) + 0.00005),  # the halfway points
+                             [0.0, -0.0, 0.00005, -0.00005, 0.00015, 2.5e-5, 1e12, -3e15, 0.1, 0.3]])
+    for value in values.tolist():
+        mine, theirs = rounded(value), round(value, 4)
+        assert (mine, math.copysign(1.0, mine)) == (theirs, math.copysign(1.0, theirs)), value
