@@ -1063,9 +1063,14 @@ def _road_frame(polygon: Polygon) -> tuple[float, float, float, float, float, fl
 
 def _on_road(frame, along: float, across: float) -> tuple[float, float]:
     """The world point `along` and `across` a road's `_road_frame`."""
+    return _on_road_all(frame, ((along, across),))[0]
+
+
+def _on_road_all(frame, points) -> Polygon:
+    """`_on_road` of each (along, across) pair, the road's direction turned into a vector once."""
     cx, cy, angle = frame[:3]
     dx, dy = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-    return cx + along * dx - across * dy, cy + along * dy + across * dx
+    return tuple((cx + along * dx - across * dy, cy + along * dy + across * dx) for along, across in points)
 
 
 def through_roads(rng: np.random.Generator, roads, all_roads: polygons.Occupancy,
@@ -1111,8 +1116,8 @@ def _beside(frame, edge: float, sign: float, s0: float, s1: float, a: float, b: 
     """The counter-clockwise piece of ground from s0 to s1 along a road's `_road_frame`, a to b metres out
     from its edge at `edge` across (on the side `sign` points to), grown by `grow` all round."""
     c0, c1 = (edge + a, edge + b) if sign > 0 else (edge - b, edge - a)
-    return tuple(_on_road(frame, s, c) for s, c in ((s0 - grow, c0 - grow), (s1 + grow, c0 - grow),
-                                                    (s1 + grow, c1 + grow), (s0 - grow, c1 + grow)))
+    return _on_road_all(frame, ((s0 - grow, c0 - grow), (s1 + grow, c0 - grow), (s1 + grow, c1 + grow),
+                                (s0 - grow, c1 + grow)))
 
 
 def through_sidewalks(rng: np.random.Generator, roads: Sequence[Polygon], regions, all_roads: polygons.Occupancy,
