@@ -39,6 +39,7 @@ with it and cuts pavings and markings at region borders.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, replace
 from typing import Any, Sequence
@@ -47,6 +48,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from . import polygons
+from .draws import pick
 
 Point = tuple[float, float]
 Polygon = tuple[Point, ...]
@@ -82,6 +84,7 @@ CLEARANCE_M = 0.05  # between a crown and a roof outline, after rounding
 
 
 _r = polygons.rounded
+_clamp = polygons.clamp
 _rect_polygon = polygons.rect_polygon
 _polygon_bbox = polygons.bbox
 
@@ -447,21 +450,15 @@ def _sidewalks(rng: np.random.Generator, blocks, verge: float, widths: tuple[flo
     return out
 
 
-def _colour(rng: np.random.Generator) -> str:
-    names = list(CAR_COLOURS)
-    return names[int(rng.choice(len(names), p=list(CAR_COLOURS.values())))]
-
-
 def _truck(rng: np.random.Generator, x: float, y: float, heading: float, longest: float) -> Car:
-    names = list(TRUCK_COLOURS)
     length = min(rng.uniform(*TRUCK_LENGTH_M), longest)
-    colour = names[int(rng.choice(len(names), p=list(TRUCK_COLOURS.values())))]
+    colour = pick(rng, TRUCK_COLOURS)
     return Car(_r(x), _r(y), _r(heading), _r(length), _r(rng.uniform(*TRUCK_WIDTH_M)), colour, "truck")
 
 
 def _car(rng: np.random.Generator, x: float, y: float, heading: float) -> Car:
     return Car(_r(x), _r(y), _r(heading), _r(rng.uniform(*CAR_LENGTH_M)), _r(rng.uniform(*CAR_WIDTH_M)),
-               _colour(rng))
+               pick(rng, CAR_COLOURS))
 
 
 def _kerb_cars(rng: np.random.Generator, roads: Sequence[Rect], mouths: Sequence[Rect], density: float) -> list[Car]:
@@ -539,7 +536,7 @@ def _driveway(rng: np.random.Generator, car_rng: np.random.Generator, frame: _Fr
     else:  # to the house front
         a = u1 - width - rng.uniform(0.3, 1.5) if on_right else u0 + rng.uniform(0.3, 1.5)
         end = v0
-    a = float(np.clip(a, 0.2, frame.frontage - width - 0.2))
+    a = _clamp(a, 0.2, frame.frontage - width - 0.2)
     cars = []
     length = CAR_LENGTH_M[1]
     for n in range(2):  # inside the lot (the sidewalk stays free), clear of the roof
@@ -795,11 +792,11 @@ def generate_clutter(rng: np.random.Generator, params, blocks, lots, buildings, 
 
 def _diameter(rng: np.random.Generator, hi: float = TREE_DIAMETER_M[1]) -> float:
     """Crown diameters skewed to 5-9 m with a tail of big trees."""
-    return float(np.clip(rng.lognormal(math.log(6.8), 0.3), TREE_DIAMETER_M[0], hi))
+    return _clamp(rng.lognormal(math.log(6.8), 0.3), TREE_DIAMETER_M[0], hi)
 
 
 def _height(rng: np.random.Generator, diameter: float) -> float:
-    return float(np.clip(1.2 * diameter + 1.5 + rng.normal(0.0, 1.2), *TREE_HEIGHT_M))
+    return _clamp(1.2 * diameter + 1.5 + rng.normal(0.0, 1.2), *TREE_HEIGHT_M)
 
 
 class _Buckets:
@@ -807,27 +804,28 @@ class _Buckets:
 
     CELL_M = 40.0
 
-    def __init__(self, boxes: np.ndarray):
-        self.boxes = boxes
-        self.cells: dict[tuple[int, int], list[int]] = {}
-        for i, (x0, y0, x1, y1) in enumerate(boxes):
+    def __init__(self, boxes: Sequence[Rect]):
+        self.cells: dict[tuple[int, int], list[Rect]] = {}
+        for box in boxes:
+            x0, y0, x1, y1 = box
             for cx in range(int(x0 // self.CELL_M), int(x1 // self.CELL_M) + 1):
                 for cy in range(int(y0 // self.CELL_M), int(y1 // self.CELL_M) + 1):
-                    self.cells.setdefault((cx, cy), []).append(i)
+                    self.cells.setdefault((cx, cy), []).append(box)
 
-    def near(self, x: float, y: float, reach: float) -> np.ndarray:
-        """The boxes of the cells within `reach` of (x, y)."""
-        found: set[int] = set()
+    def near(self, x: float, y: float, reach: float) -> list[Rect]:
+        """The boxes of the cells within `reach` of (x, y); a box in several of them comes as often (the
+        callers ask whether any is near: it makes no difference)."""
+        found: list[Rect] = []
         for cx in range(int((x - reach) // self.CELL_M), int((x + reach) // self.CELL_M) + 1):
             for cy in range(int((y - reach) // self.CELL_M), int((y + reach) // self.CELL_M) + 1):
-                found.update(self.cells.get((cx, cy), ()))
-        return self.boxes[sorted(found)].reshape(-1, 4)
+                found += self.cells.get((cx, cy), ())
+        return found
 
 
 class _Stand:
     """The trees placed so far, and the test a new crown must pass."""
 
-    def __init__(self, roofs: np.ndarray, no_trunks: np.ndarray, width: float, height: float):
+    def __init__(self, roofs: Sequence[Rect], no_trunks: Sequence[Rect], width: float, height: float):
         self.roofs, self.no_trunks = _Buckets(roofs), _Buckets(no_trunks)
         self.width, self.height = width, height
         self._xyr = np.zeros((64, 3))  # grown by doubling; the first len(self.trees) rows are placed
@@ -840,16 +838,15 @@ class _Stand:
     def fits(self, x: float, y: float, r: float, overlap: float) -> bool:
         if x - r < 0 or y - r < 0 or x + r > self.width or y + r > self.height:
             return False
-        roofs = self.roofs.near(x, y, r + CLEARANCE_M)
-        if len(roofs):
-            dx = np.maximum(np.maximum(roofs[:, 0] - x, x - roofs[:, 2]), 0.0)
-            dy = np.maximum(np.maximum(roofs[:, 1] - y, y - roofs[:, 3]), 0.0)
-            if np.min(np.hypot(dx, dy)) < r + CLEARANCE_M:
+        reach = r + CLEARANCE_M
+        for x0, y0, x1, y1 in self.roofs.near(x, y, reach):
+            dx, dy = max(x0 - x, x - x1, 0.0), max(y0 - y, y - y1, 0.0)
+            # The distance to a box is at least either leg: only a box within reach along both is measured.
+            if dx < reach and dy < reach and np.hypot(dx, dy) < reach:
                 return False
-        t = self.no_trunks.near(x, y, 0.5)
-        if len(t):
-            if np.any((t[:, 0] - 0.5 < x) & (x < t[:, 2] + 0.5) & (t[:, 1] - 0.5 < y) & (y < t[:, 3] + 0.5)):
-                return False
+        trunks = self.no_trunks.near(x, y, 0.5)
+        if any(x0 - 0.5 < x < x1 + 0.5 and y0 - 0.5 < y < y1 + 0.5 for x0, y0, x1, y1 in trunks):
+            return False
         if len(self.xyr):
             gap = np.hypot(self.xyr[:, 0] - x, self.xyr[:, 1] - y)
             if np.any(gap < overlap * (self.xyr[:, 2] + r)):
@@ -870,8 +867,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
     `row_offset_m` from the kerb) and groups in yards and parks, as often as the grid's `rules` say.
     Crowns may reach over roads and neighbouring yards but never over a roof outline (the roof boxes
     given)."""
-    stand = _Stand(np.asarray(roofs, float).reshape(-1, 4), np.asarray(no_trunks, float).reshape(-1, 4),
-                   width, height)
+    stand = _Stand(roofs, no_trunks, width, height)
     for rect, sides in blocks:
         x0, y0, x1, y1 = rect
         for side in sorted(sides):
@@ -883,7 +879,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
             d0 = _diameter(rng, STREET_TREE_DIAMETER_M)
             pos = lo + verge_m + rng.uniform(0.0, d0 / 2)
             while pos < hi - verge_m:
-                d = float(np.clip(d0 * rng.uniform(0.85, 1.15), TREE_DIAMETER_M[0], STREET_TREE_DIAMETER_M))
+                d = _clamp(d0 * rng.uniform(0.85, 1.15), TREE_DIAMETER_M[0], STREET_TREE_DIAMETER_M)
                 x, y = (pos, across) if side in "SN" else (across, pos)
                 if rng.random() < 0.75 + 0.25 * density and stand.fits(x, y, d / 2, 0.45):
                     stand.add(rng, x, y, d)
@@ -897,7 +893,7 @@ def real_trees(rng: np.random.Generator, density: float, blocks, lots, roofs: Se
             spread = d0 * rng.uniform(0.3, 0.6)  # neighbours' crowns touch and merge into one canopy
             for _ in range(1 + rng.poisson(1.5 if built else 3.0)):
                 for attempt in range(4):  # a crown too big for a yard is tried smaller
-                    d = float(np.clip(d0 * rng.uniform(0.75, 1.25) * 0.8 ** attempt, *TREE_DIAMETER_M))
+                    d = _clamp(d0 * rng.uniform(0.75, 1.25) * 0.8 ** attempt, *TREE_DIAMETER_M)
                     x, y = cx + rng.normal(0.0, spread), cy + rng.normal(0.0, spread)
                     if x0 < x < x1 and y0 < y < y1 and stand.fits(x, y, d / 2, 0.35):
                         stand.add(rng, x, y, d)
@@ -973,18 +969,18 @@ class OpenGround:
     def _fill(self, outlines) -> np.ndarray:
         """Cells whose centres lie inside any of the (counter-clockwise, convex) outlines."""
         mask = np.zeros((len(self.ys), len(self.xs)), bool)
-        c = self.CELL_M
+        tolerance = -1e-9 * self.CELL_M
+        xs, ys = self.xs.tolist(), self.ys.tolist()  # bisect on lists finds what searchsorted finds, sooner
         for outline in outlines:
             x0, y0, x1, y1 = _polygon_bbox(outline)
-            i0, i1 = np.searchsorted(self.xs, (x0, x1))
-            j0, j1 = np.searchsorted(self.ys, (y0, y1))
+            i0, i1 = bisect.bisect_left(xs, x0), bisect.bisect_left(xs, x1)
+            j0, j1 = bisect.bisect_left(ys, y0), bisect.bisect_left(ys, y1)
             if i0 >= i1 or j0 >= j1:
                 continue
-            gx, gy = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
-            inside = np.ones(gx.shape, bool)
-            for (ax, ay), (bx, by) in zip(outline, outline[1:] + outline[:1]):
-                inside &= (bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= -1e-9 * c
-            mask[j0:j1, i0:i1] |= inside
+            gx, gy = self.xs[i0:i1], self.ys[j0:j1, None]  # broadcast to the (j, i) cells
+            inside = mask[j0:j1, i0:i1]  # a view: the cells are set in place
+            inside |= np.logical_and.reduce([(bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= tolerance
+                                             for (ax, ay), (bx, by) in zip(outline, outline[1:] + outline[:1])])
         return mask
 
     def _grown(self, mask: np.ndarray, reach: float) -> np.ndarray:
@@ -1067,9 +1063,14 @@ def _road_frame(polygon: Polygon) -> tuple[float, float, float, float, float, fl
 
 def _on_road(frame, along: float, across: float) -> tuple[float, float]:
     """The world point `along` and `across` a road's `_road_frame`."""
+    return _on_road_all(frame, ((along, across),))[0]
+
+
+def _on_road_all(frame, points) -> Polygon:
+    """`_on_road` of each (along, across) pair, the road's direction turned into a vector once."""
     cx, cy, angle = frame[:3]
     dx, dy = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-    return cx + along * dx - across * dy, cy + along * dy + across * dx
+    return tuple((cx + along * dx - across * dy, cy + along * dy + across * dx) for along, across in points)
 
 
 def through_roads(rng: np.random.Generator, roads, all_roads: polygons.Occupancy,
@@ -1115,8 +1116,8 @@ def _beside(frame, edge: float, sign: float, s0: float, s1: float, a: float, b: 
     """The counter-clockwise piece of ground from s0 to s1 along a road's `_road_frame`, a to b metres out
     from its edge at `edge` across (on the side `sign` points to), grown by `grow` all round."""
     c0, c1 = (edge + a, edge + b) if sign > 0 else (edge - b, edge - a)
-    return tuple(_on_road(frame, s, c) for s, c in ((s0 - grow, c0 - grow), (s1 + grow, c0 - grow),
-                                                    (s1 + grow, c1 + grow), (s0 - grow, c1 + grow)))
+    return _on_road_all(frame, ((s0 - grow, c0 - grow), (s1 + grow, c0 - grow), (s1 + grow, c1 + grow),
+                                (s0 - grow, c1 + grow)))
 
 
 def through_sidewalks(rng: np.random.Generator, roads: Sequence[Polygon], regions, all_roads: polygons.Occupancy,

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import polygons
+from .draws import pick, sign
 
 Point = tuple[float, float]
 Polygon = tuple[Point, ...]
@@ -71,6 +72,7 @@ MAX_PIECES = 40  # of one kind on one roof
 TANK_DIAMETER_M = (1.0, 1.6)
 TANK_HEIGHT_M = (1.0, 1.8)
 TANK_SIDES = 16  # of the polygon standing for a tank's circle
+_TANK_CIRCLE = [(math.cos(a), math.sin(a)) for a in np.linspace(0.0, 2 * math.pi, TANK_SIDES, endpoint=False)]
 TANK_STAND_M = (0.5, 1.5)  # height of a stand's deck above the roof
 TANK_DECK_M = 0.06  # thickness of a stand's deck and side of its square legs
 TANK_DECK_RIM_M = 0.05  # the deck reaches this far beyond its tank on every side
@@ -159,20 +161,27 @@ class _Roof:
     def __init__(self, footprint: Polygon, margin: float):
         self.footprint = footprint
         self.margin = margin
-        x0, y0, x1, y1 = polygons.bbox(footprint)
+        self.bbox = x0, y0, x1, y1 = polygons.bbox(footprint)
         self.box = (x0 + margin, y0 + margin, x1 - margin, y1 - margin)
+        self.rectangular = set(footprint) == set(_rect_outline(self.bbox)) and polygons.area(footprint) > 0.0
         self.taken: list[Rect] = []
 
     def fits(self, rect: Rect) -> bool:
         x0, y0, x1, y1 = rect
+        if not all(x0 >= t[2] + GAP_M or t[0] >= x1 + GAP_M or y0 >= t[3] + GAP_M or t[1] >= y1 + GAP_M
+                   for t in self.taken):
+            return False
         m = self.margin
-        grown = _rect_outline((x0 - m, y0 - m, x1 + m, y1 + m))
+        gx0, gy0, gx1, gy1 = x0 - m, y0 - m, x1 + m, y1 + m
+        fx0, fy0, fx1, fy1 = self.bbox
+        if self.rectangular and fx0 <= gx0 and fy0 <= gy0 and gx1 <= fx1 and gy1 <= fy1:
+            # Inside a rectangular footprint: the clipping below would give the rectangle back, its area
+            # within rounding (far below the 1e-6 m2 allowed, even 5 km from the origin) of the rectangle's: yes.
+            return True
+        grown = _rect_outline((gx0, gy0, gx1, gy1))
         # Clipping the (perhaps L- or T-shaped) footprint by the rectangle keeps all of the rectangle
         # exactly when the rectangle lies inside.
-        if polygons.overlap_area(self.footprint, grown) < polygons.area(grown) - 1e-6:
-            return False
-        return all(x0 >= t[2] + GAP_M or t[0] >= x1 + GAP_M or y0 >= t[3] + GAP_M or t[1] >= y1 + GAP_M
-                   for t in self.taken)
+        return polygons.overlap_area(self.footprint, grown) >= polygons.area(grown) - 1e-6
 
     def take(self, rect: Rect) -> bool:
         if self.fits(rect):
@@ -237,21 +246,16 @@ def _flat_roof(rng: np.random.Generator, b, density: float, tank_share: float) -
     return out
 
 
-def _pick(rng: np.random.Generator, weights: dict) -> object:
-    names = list(weights)
-    return names[int(rng.choice(len(names), p=list(weights.values())))]
-
-
 def _tanks(rng: np.random.Generator, roof: _Roof, z: float, sink: float) -> list[Fixture]:
     """One to three water tanks, each a cylinder standing on the roof or on a steel stand (a deck on four
     legs, its square just holding the tank); the square of each is placed like any other piece."""
     out: list[Fixture] = []
-    colour = _pick(rng, TANK_COLOURS)
-    for k in range(int(_pick(rng, TANK_COUNT))):
+    colour = pick(rng, TANK_COLOURS)
+    for k in range(int(pick(rng, TANK_COUNT))):
         if k and rng.random() >= TANK_SAME_COLOUR:
-            colour = _pick(rng, TANK_COLOURS)
+            colour = pick(rng, TANK_COLOURS)
         d = rng.uniform(*TANK_DIAMETER_M)
-        height = float(np.clip(d * rng.uniform(0.9, 1.3), *TANK_HEIGHT_M))
+        height = polygons.clamp(d * rng.uniform(0.9, 1.3), *TANK_HEIGHT_M)
         stand = rng.uniform(*TANK_STAND_M) if rng.random() < TANK_ON_STAND else 0.0
         side = d + 2 * TANK_DECK_RIM_M if stand else d
         rect = roof.place(rng, side, side)
@@ -267,8 +271,7 @@ def _tanks(rng: np.random.Generator, roof: _Roof, z: float, sink: float) -> list
             out.append(_box("tank-stand", "dark", rect, top - t, top))
             out += [_box("tank-stand", "dark", (lx, ly, lx + t, ly + t), sink, foot)
                     for lx in (x0 + 0.02, x1 - 0.02 - t) for ly in (y0 + 0.02, y1 - 0.02 - t)]
-        circle = tuple((cx + d / 2 * math.cos(a), cy + d / 2 * math.sin(a))
-                       for a in np.linspace(0.0, 2 * math.pi, TANK_SIDES, endpoint=False))
+        circle = tuple((cx + d / 2 * cos, cy + d / 2 * sin) for cos, sin in _TANK_CIRCLE)
         out.append(Fixture("tank", colour, circle, (foot,) * TANK_SIDES, (z + stand + height,) * TANK_SIDES))
     return out
 
@@ -431,7 +434,7 @@ def _chimney(rng: np.random.Generator, roof: _Slopes, room: _Roof) -> list[Fixtu
     half = roof.width / 2.0
     lo = roof.building.overhang_m + EDGE_M + side / 2.0
     for _ in range(8):
-        v = half + rng.choice((-1.0, 1.0)) * rng.uniform(*CHIMNEY_FROM_RIDGE_M)
+        v = half + sign(rng) * rng.uniform(*CHIMNEY_FROM_RIDGE_M)
         v = min(max(v, lo), roof.width - lo)
         u = rng.uniform(lo, roof.length - lo)
         u0, v0, u1, v1 = u - side / 2, v - side / 2, u + side / 2, v + side / 2

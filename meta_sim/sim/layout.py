@@ -61,6 +61,7 @@ from .clutter import (
     through_roads,
     through_sidewalks,
 )
+from .draws import pick, sign
 
 LAYOUT_VERSION = 1
 # What a city of the richer scene (a style other than the suburban grid, or roof furniture) shows, beyond
@@ -139,6 +140,7 @@ SLOPED_PRIORITY = ("residential", "apartment", "industrial", "office")
 
 
 _r = polygons.rounded
+_clamp = polygons.clamp
 rect_polygon = polygons.rect_polygon
 
 
@@ -825,17 +827,12 @@ class _LotPlan:
     block_index: int
 
 
-def _pick(rng: np.random.Generator, weights: dict[str, float]) -> str:
-    names = list(weights)
-    return names[int(rng.choice(len(names), p=list(weights.values())))]
-
-
 def _zone_of(rng: np.random.Generator, rect: Rect, width: float, height: float) -> str:
     x0, y0, x1, y1 = rect
     central = math.hypot((x0 + x1 - width) / 2, (y0 + y1 - height) / 2) < CENTRAL_RADIUS_SHARE * min(width, height)
     if central:
-        return _pick(rng, {"downtown": 0.7, "commercial": 0.15, "residential": 0.15})
-    return _pick(rng, {"industrial": 0.28, "commercial": 0.07, "residential": 0.65})
+        return pick(rng, {"downtown": 0.7, "commercial": 0.15, "residential": 0.15})
+    return pick(rng, {"industrial": 0.28, "commercial": 0.07, "residential": 0.65})
 
 
 def _frontage_cuts(rng: np.random.Generator, length: float, frontage: tuple[float, float]) -> list[float]:
@@ -862,7 +859,7 @@ def _plan_block(rng: np.random.Generator, block: _Block, index: int, width: floa
     min_side = MIN_BUILDING_SIDE_M + 2 * (BUILDING_MARGIN_M + OVERHANG_RANGE_M[1])
     if min(x1 - x0, y1 - y0) < min_side:
         return []  # a sliver between a street and the city edge stays open ground
-    zone = _zone_of(rng, block.rect, width, height) if style == "suburban" else _pick(rng, STYLE_ZONES[style])
+    zone = _zone_of(rng, block.rect, width, height) if style == "suburban" else pick(rng, STYLE_ZONES[style])
     along_x = x1 - x0 >= y1 - y0
     lo, hi, near, far = (x0, x1, y0, y1) if along_x else (y0, y1, x0, x1)
     fronts = ("S", "N") if along_x else ("W", "E")
@@ -913,10 +910,9 @@ def _footprint_rect(rng: np.random.Generator, plan: _LotPlan, kind: str, fill: f
         return None
     rules = MASSING[kind]
     setback = min(rng.uniform(*rules.setback_m), free_v - MIN_BUILDING_SIDE_M)
-    w = float(np.clip(rng.uniform(*rules.fill_scale) * fill * free_u,
-                      MIN_BUILDING_SIDE_M, min(rules.max_size_m[0], free_u)))
-    h = float(np.clip(rng.uniform(*rules.fill_scale) * fill * free_v,
-                      MIN_BUILDING_SIDE_M, min(rules.max_size_m[1], free_v - setback)))
+    w = _clamp(rng.uniform(*rules.fill_scale) * fill * free_u, MIN_BUILDING_SIDE_M, min(rules.max_size_m[0], free_u))
+    h = _clamp(rng.uniform(*rules.fill_scale) * fill * free_v, MIN_BUILDING_SIDE_M,
+               min(rules.max_size_m[1], free_v - setback))
     u0 = inset + rng.uniform(0.0, free_u - w)
     v0 = inset + setback
     return _to_world(plan, u0, u0 + w, v0, v0 + h)
@@ -960,8 +956,8 @@ def _eave_height(rng: np.random.Generator, kind: str) -> float:
         return rng.uniform(lo, hi)
     base = rng.uniform(3.0, 3.5) if rng.random() < 0.5 else rng.uniform(5.0, 6.5)  # one or two storeys
     # Synthinel's height factor lies in [0.5, 2]; most houses stay near their storey height.
-    factor = np.clip(rng.lognormal(0.0, 0.25), 0.5, 2.0)
-    return float(np.clip(base * factor, lo, hi))
+    factor = _clamp(rng.lognormal(0.0, 0.25), 0.5, 2.0)
+    return _clamp(base * factor, lo, hi)
 
 
 def _sketch_buildings(rng: np.random.Generator, plans: list[_LotPlan], density: float) -> list[_Sketch]:
@@ -971,7 +967,7 @@ def _sketch_buildings(rng: np.random.Generator, plans: list[_LotPlan], density: 
     for lot_index, plan in enumerate(plans):
         if rng.random() >= occupancy:
             continue
-        kind = _pick(rng, ZONES[plan.zone].kinds)
+        kind = pick(rng, ZONES[plan.zone].kinds)
         rect = _footprint_rect(rng, plan, kind, fill)
         if rect is None:
             continue
@@ -1239,7 +1235,6 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
     """
     window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
     placed: list[_Placed] = []
-    storeys, storey_p = list(DENSE_STOREYS), list(DENSE_STOREYS.values())
 
     def attempt(cx: float, cy: float, along: float, depth: float, angle: float) -> bool:
         footprint = rect_polygon(cx - along / 2, cy - depth / 2, cx + along / 2, cy + depth / 2)
@@ -1251,7 +1246,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
         if not built.clear(outline, -TOUCH_M):
             return False
         built.add(outline)
-        floors = int(rng.choice(storeys, p=storey_p))
+        floors = pick(rng, DENSE_STOREYS)
         eave = floors * STOREY_M + rng.uniform(-0.2, 0.4)
         kind = "residential" if eave <= HEIGHT_RANGES_M["residential"][1] else "apartment"
         placed.append(_Placed(outline, footprint, rotation, kind, _r(eave)))
@@ -1309,7 +1304,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
                 a, d = max(DENSE_FRONTAGE_M[0], along * shrink), max(DENSE_FRONTAGE_M[0], depth * shrink)
                 if side < 2:  # beside: along the house's frontage, one of the long lines even
                     u = (1 if side == 0 else -1) * (half_u + a / 2 + gap)
-                    v = rng.uniform(-0.5, 0.5) + (d / 2 - half_v) * rng.choice((-1, 1))
+                    v = rng.uniform(-0.5, 0.5) + (d / 2 - half_v) * sign(rng)
                 else:  # behind or in front
                     u = rng.uniform(-1.0, 1.0) * abs(half_u - a / 2)
                     v = (1 if side == 2 else -1) * (half_v + d / 2 + gap)
@@ -1346,13 +1341,19 @@ class _Frame:
     side: float
     centre: Point
 
+    @cached_property
+    def _turning(self) -> tuple[float, float]:
+        return polygons.turning(self.angle_deg)
+
+    def _points(self, points) -> tuple[Point, ...]:
+        half, (cx, cy) = self.side / 2, self.centre
+        return polygons.turn([(x - half + cx, y - half + cy) for x, y in points], cx, cy, *self._turning)
+
     def point(self, x: float, y: float) -> Point:
-        (wx, wy), = polygons.rotate(((x - self.side / 2 + self.centre[0], y - self.side / 2 + self.centre[1]),),
-                                    *self.centre, self.angle_deg)
-        return wx, wy
+        return self._points(((x, y),))[0]
 
     def polygon(self, polygon: Polygon) -> Polygon:
-        return polygons.rounded_polygon(self.point(x, y) for x, y in polygon)
+        return polygons.rounded_polygon(self._points(polygon))
 
     def sketch(self, sketch: _Sketch) -> _Sketch:
         """The sketch moved so its footprint's centre lands where the frame puts it, turned with the frame."""
@@ -1506,12 +1507,15 @@ class _Grid:
     def angle_deg(self) -> float:
         return self.frame.angle_deg if self.frame else 0.0
 
+    @cached_property
+    def _cell_boxes(self) -> list[Rect]:
+        return [polygon_bbox(cell) for cell in self.cells]
+
     def cut(self, polygon: Polygon) -> list[Polygon]:
         """The pieces of a (small, convex) world polygon inside the cells."""
         x0, y0, x1, y1 = polygon_bbox(polygon)
         out = []
-        for cell in self.cells:
-            cx0, cy0, cx1, cy1 = polygon_bbox(cell)
+        for cell, (cx0, cy0, cx1, cy1) in zip(self.cells, self._cell_boxes):
             if x1 <= cx0 or cx1 <= x0 or y1 <= cy0 or cy1 <= y0:
                 continue
             if polygons.inside(polygon, cell, 0.0):

@@ -16,6 +16,7 @@ from meta_sim.sim.furniture import roof_furniture
 from meta_sim.sim.layout import STYLES, CityLayout, LayoutParams, generate_layout, stage_generators
 
 TOL = 1e-6
+_r = polygons.rounded
 MIX = {"suburban": 1.0, "dense": 1.0, "downtown": 1.0, "industrial": 1.0}  # every kind, turned buildings, L and T
 
 
@@ -281,3 +282,25 @@ def test_a_buildings_style_is_that_of_the_region_it_stands_in(city):
     assert set(seen) == set(STYLES)
     plain = generate_layout(4, 300.0, 300.0)
     assert {plain.style_of(b) for b in plain.buildings} == {"suburban"}
+
+
+def test_a_roof_takes_a_piece_where_clipping_the_footprint_keeps_all_of_it():
+    # Inside a rectangular footprint _Roof answers without clipping: it must answer as the clipping does,
+    # on rectangles and L shapes, far from the origin, for pieces inside, on the edge and across it.
+    rng = np.random.default_rng(0)
+    l_shape = ((0.0, 0.0), (20.0, 0.0), (20.0, 8.0), (9.0, 8.0), (9.0, 15.0), (0.0, 15.0))
+    for k in range(4000):
+        ox, oy = rng.uniform(0.0, 5000.0, 2)
+        if k % 2:
+            footprint = tuple((_r(x + ox), _r(y + oy)) for x, y in l_shape)
+        else:
+            footprint = polygons.rect_polygon(ox, oy, ox + rng.uniform(6.0, 120.0), oy + rng.uniform(6.0, 120.0))
+        roof = furniture._Roof(footprint, rng.uniform(0.0, 0.8))
+        x0, y0, x1, y1 = roof.bbox
+        w, h = rng.uniform(0.5, 4.0, 2)
+        x = rng.choice([x0, x0 + roof.margin, rng.uniform(x0 - 1.0, x1 - w + 1.0), x1 - w - roof.margin])
+        y = rng.choice([y0, y0 + roof.margin, rng.uniform(y0 - 1.0, y1 - h + 1.0), y1 - h - roof.margin])
+        m = roof.margin
+        grown = ((x - m, y - m), (x + w + m, y - m), (x + w + m, y + h + m), (x - m, y + h + m))
+        clipped = polygons.overlap_area(footprint, grown) >= polygons.area(grown) - 1e-6
+        assert roof.fits((x, y, x + w, y + h)) == clipped, (footprint, x, y, w, h, m)
