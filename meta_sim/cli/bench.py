@@ -127,22 +127,25 @@ def bench_reference_command(out, docs, targets, cache):
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.json"), show_default=True)
 @click.option("--plot", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.png"), show_default=True)
 @click.option("--targets", type=int, default=100, show_default=True,
-              help="E1 target groups of 9 tiles per seed of the validation split (as bench-nams)")
+              help="E1 target groups of 9 tiles per seed of each split, validation and test (as bench-nams)")
 @click.option("--adjoint-targets", type=int, default=20, show_default=True,
-              help="target groups for the (slow) neural-adjoint settings")
+              help="target groups of each split for the (slow) neural-adjoint settings")
 @click.option("--presets", default="fast,balanced", show_default=True, help="render presets to compare")
 @click.option("--profiles", default="fast,balanced,paper", show_default=True,
               help="profiles measured end to end (paper renders 15,300 tiles)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
 def bench_tradeoff_command(out, docs, plot, targets, adjoint_targets, presets, profiles, cache):
-    """E1 accuracy against time for every knob that costs time, and the fast/balanced/paper profiles."""
+    """E1 accuracy against time for every knob that costs time, and the fast/balanced/paper profiles, on the
+    test split (reported) and the validation split (where the profiles are chosen) beside it."""
+    from ..core.extras import require
     from ..experiments.tradeoff import bench_tradeoff, format_tradeoff_table, plot_tradeoff
     from ..pipeline.profiles import get_profile
 
     names = [p for p in profiles.split(",") if p]
     for name in names:
         get_profile(name)
+    require("matplotlib", "the trade-off plot")  # before hours of measuring, not after
     bars = _Bars()
     result = bench_tradeoff(targets=targets, adjoint_targets=adjoint_targets, root=cache,
                             presets=[p for p in presets.split(",") if p], profiles=names, bars=bars)

@@ -1,11 +1,11 @@
 """What each knob that costs time buys in accuracy (`meta-sim bench tradeoff`, `make bench-tradeoff`).
 
-Every point is measured on E1's validation split (bank designs in cities
-never trained on; ``splits.py``), since the profiles are chosen on it: top-1
-and top-10 for flat and sloped roofs, and two costs:
+Every point is measured on both of E1's splits (bank designs in cities never trained on; ``splits.py``):
+the validation split, on which the profiles and the defaults are chosen, and the test split, which only
+reports. Per split: top-1 and top-10 for flat and sloped roofs; and two costs, the same for both:
 
 * ``seconds_per_group``: inference, per target group: features of its tiles
-  (x views) plus the search;
+  (x views) plus the search, timed over the groups of both splits;
 * ``one_off_seconds``: before any inference, once: rendering the training
   set (tiles x the render preset's seconds per tile from ``make
   bench-render``), its features and training NAMS.
@@ -14,10 +14,11 @@ Knobs, each varied alone from the default (``DatasetConfig()``, "fast"
 renders, target groups of 9 tiles, exhaustive search):
 
 * ``tiles per target group``: 1, 2, 4, 9;
-* ``search``: exhaustive, and the neural-adjoint search at several (M,
-  iterations), the paper's (1000, 200) first, plus DR and MS2: taken from
-  ``make bench-nams`` (``benchmarks/nams.json``, the same model and E1
-  validation targets), with this bench's feature time per tile added;
+* ``search``, ``architecture``, ``roof colour``, ``roof finder``, ``roof weight power``: the exhaustive
+  search, the neural-adjoint search at several (M, iterations), the paper's (1000, 200) first, DR, MS2
+  and the sbi baseline, the other NAMS architectures and the roof-colour ablations: taken from ``make
+  bench-nams`` (``benchmarks/nams.json``, the same model and E1 targets, split for split), with this
+  bench's feature time per tile added;
 * ``views``: the default extractor is invariant to the 8 dihedral views, so
   8 views give the features of 1 at the cost of 1 (checked, not assumed:
   the bench compares the vectors); a backbone pays 8x;
@@ -32,6 +33,8 @@ from __future__ import annotations
 
 import io
 import json
+import math
+import re
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -42,26 +45,30 @@ from ..core.fileio import write_bytes_atomic
 from ..core.progress import Bars
 from ..pipeline.dataset import DatasetConfig
 from ..pipeline.profiles import PROFILES
-from .splits import get_split, spread
+from .splits import SPLIT_NAMES, get_split, spread
 
 GROUP_TILES = (1, 2, 4, 9)
 TRAINING_SETS = ((150, 4), (300, 2), (300, 4), (600, 2), (600, 4), (1700, 9))
 RENDER_PRESETS = ("fast", "balanced")
 METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
-SPLIT = get_split("e1", "validation")  # the profiles and defaults are choices: made on validation only
+# Validation: every choice (the profiles and the defaults) is made on it; test: only reported.
+SPLITS = tuple(get_split("e1", name) for name in SPLIT_NAMES)
+REPORTED = "test"
+ONE_OFF_KNOBS = ("training set", "render preset")  # plotted against the one-off cost; the others per group
 
 
 @dataclass
 class Point:
-    """One row of the trade-off: a knob's setting, its E1 metrics, inference seconds per target group,
-    one-off seconds, the number of targets, and anything else worth keeping in the JSON."""
+    """One row of the trade-off: a knob's setting, its E1 metrics and number of targets per split (split
+    name -> ...; a split a source lacks is absent), inference seconds per target group, one-off seconds, and
+    anything else worth keeping in the JSON."""
 
     knob: str
     setting: str
     metrics: dict
     seconds_per_group: float
     one_off_seconds: float
-    targets: int
+    targets: dict
     detail: dict = field(default_factory=dict)
 
 
@@ -73,10 +80,13 @@ def _render_seconds_per_tile(preset: str, render_bench: Path) -> float:
 
 
 class _Experiment:
-    """One training set and model, E1 targets rendered with its preset, per-tile target features."""
+    """One training set and model, and per split its E1 targets rendered with its preset and their
+    per-tile features."""
 
     def __init__(self, dataset: DatasetConfig, views: int, targets: int, root: Path,
                  render_bench: Path, bars: Bars | None = None):
+        import torch
+
         from ..nams import load_checkpoint
         from ..pipeline.dataset import job_tiles
         from ..pipeline.features import features_for_groups
@@ -93,15 +103,24 @@ class _Experiment:
         self.training_designs = sample_designs(DesignSpace.load(dataset.space), dataset.designs, dataset.seed)
         models = ensure_models(dataset, ModelSettings(views=views), root, bars)
         self.nams = load_checkpoint(models.nams_path, "nams")
-        self.seeds, self.per_seed = len(SPLIT.seeds), targets
-        self.jobs, folders = render_split_targets(SPLIT, targets, max(GROUP_TILES), dataset.preset, root,
-                                                  dataset.tile_px, dataset.pixel_size_m, bars)
+        self.per_seed = targets
         extractor = checkpoint_extractor(self.nams)
-        tiles = [[read_image(p)] for job, folder in zip(self.jobs, folders)
-                 for p in job_tiles(folder, job.name, max(GROUP_TILES))]
-        started = time.perf_counter()
-        self.tile_features = features_for_groups(tiles, extractor, 1).reshape(len(self.jobs), max(GROUP_TILES), -1)
-        self.feature_seconds_per_tile = (time.perf_counter() - started) / len(tiles)
+        tiles = max(GROUP_TILES)
+        self.targets, seconds, featurised = {}, 0.0, 0
+        for split in SPLITS:
+            jobs, folders = render_split_targets(split, targets, tiles, dataset.preset, root, dataset.tile_px,
+                                                 dataset.pixel_size_m, bars)
+            features = []
+            for start in range(0, len(jobs), targets):  # a seed's tiles at a time: a split's would fill the memory
+                groups = [[read_image(p)] for job, folder in zip(jobs[start:start + targets],
+                                                                 folders[start:start + targets])
+                          for p in job_tiles(folder, job.name, tiles)]
+                started = time.perf_counter()
+                features.append(features_for_groups(groups, extractor, 1))
+                seconds += time.perf_counter() - started
+                featurised += len(groups)
+            self.targets[split.name] = (split, jobs, torch.cat(features).reshape(len(jobs), tiles, -1))
+        self.feature_seconds_per_tile = seconds / featurised
         self.ranks = rankings("e1", ensure_default_bank(), ensure_heldout_bank())
         feature_total = self.feature_seconds_per_tile * dataset.designs * dataset.tiles
         train = float(self.nams.extra.get("seconds", 0.0))
@@ -110,31 +129,36 @@ class _Experiment:
         self.train_seconds = train
 
     def run(self, knob: str, setting: str, group_tiles: int = 9, method: str = "exhaustive",
-            adjoint: dict | None = None, targets: int | None = None, seed: int = 1) -> Point:
+            adjoint: dict | None = None, targets: int | None = None) -> Point:
+        """One point: every split's targets (``targets`` groups of each, spread over its seeds: the
+        adjoint's few) searched with ``method``; the search time is over the groups of all splits."""
         import torch
 
         from ..nams import adjoint_search, exhaustive_search
         from .evaluate import mean_scores, score, unseen_rows
 
-        chosen = spread(self.seeds, self.per_seed, targets or len(self.jobs))  # the adjoint's few: every seed's
-        n, jobs = len(chosen), [self.jobs[i] for i in chosen]
-        feats = self.tile_features[chosen, :group_tiles].mean(dim=1)
-        normed = self.nams.feature_norm.apply(feats)
-        started = time.perf_counter()
-        if method == "exhaustive":
-            results = exhaustive_search(self.nams.model, normed, self.nams.space)
-        else:
-            results = adjoint_search(self.nams.model, normed, self.nams.space,
-                                     generator=torch.Generator().manual_seed(seed),
-                                     **{"S": min(50, adjoint["M"]), **adjoint})
-        search_seconds = (time.perf_counter() - started) / n
-        rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, jobs)]
-        unseen = unseen_rows(rows, jobs, self.training_designs)
-        metrics = {**mean_scores(rows), "unseen_targets": len(unseen),
-                   **{f"unseen_{k}": v for k, v in mean_scores(unseen).items()}}
+        metrics, counts, search_seconds = {}, {}, 0.0
+        for name, (split, all_jobs, tile_features) in self.targets.items():
+            chosen = spread(len(split.seeds), self.per_seed, targets or len(all_jobs))
+            jobs = [all_jobs[i] for i in chosen]
+            normed = self.nams.feature_norm.apply(tile_features[chosen, :group_tiles].mean(dim=1))
+            started = time.perf_counter()
+            if method == "exhaustive":
+                results = exhaustive_search(self.nams.model, normed, self.nams.space)
+            else:  # the searches' random starts seeded as bench-nams's: by the split's first target seed
+                results = adjoint_search(self.nams.model, normed, self.nams.space,
+                                         generator=torch.Generator().manual_seed(split.seeds[0]),
+                                         **{"S": min(50, adjoint["M"]), **adjoint})
+            search_seconds += time.perf_counter() - started
+            rows = [score(r.design, job.design, self.ranks) for r, job in zip(results, jobs)]
+            unseen = unseen_rows(rows, jobs, self.training_designs)
+            metrics[name] = {**mean_scores(rows), "unseen_targets": len(unseen),
+                             **{f"unseen_{k}": v for k, v in mean_scores(unseen).items()}}
+            counts[name] = len(jobs)
+        search_seconds /= sum(counts.values())
         return Point(knob, setting, metrics,
                      round(search_seconds + group_tiles * self.feature_seconds_per_tile, 5),
-                     round(self.one_off, 1), n,
+                     round(self.one_off, 1), counts,
                      {"search_seconds_per_group": round(search_seconds, 5),
                       "feature_seconds_per_tile": round(self.feature_seconds_per_tile, 5),
                       "train_seconds": round(self.train_seconds, 1),
@@ -167,35 +191,82 @@ class _AllViews:
         return self.inner(batch)
 
 
-def _search_points(nams_bench: Path, base: _Experiment) -> list[Point]:
-    """The search methods' E1 validation rows of ``make bench-nams`` as points: search time plus 9 tiles'
-    features."""
+def read_nams_rows(nams_bench: Path, per_seed: int) -> dict:
+    """The E1 rows of ``make bench-nams`` per split (split name -> method name -> row), checked to be on
+    this bench's targets: ``per_seed`` groups of 9 tiles per seed of each split. A split the file lacks is
+    left out (its figures are missing, never another split's); MetaSimError without the validation split's,
+    for a file from before the splits, or for other targets."""
     try:
         bench = json.loads(nams_bench.read_text())
-        rows = bench["splits"]["validation"]["experiments"]["e1"]
-        seeds = bench["splits"]["validation"]["settings"]["e1"]["seeds"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise MetaSimError(f"no E1 validation rows in {nams_bench} ({exc}); run `make bench-nams` first") from None
-    if (seeds, bench.get("targets_per_seed")) != (list(SPLIT.seeds), base.per_seed):
-        raise MetaSimError(f"{nams_bench} was measured on {bench.get('targets_per_seed')} target groups of seeds "
-                           f"{seeds}, not {base.per_seed} of {list(SPLIT.seeds)}: run `make bench-nams` again "
-                           "with as many --targets")
+    except (OSError, ValueError) as exc:
+        raise MetaSimError(f"cannot read {nams_bench} ({exc}); run `make bench-nams` first") from None
+    if "splits" not in bench:
+        raise MetaSimError(f"{nams_bench} predates the validation and test splits (its E1 rows are target seed 1's "
+                           "alone): run `make bench-nams` again")
     if bench.get("tiles_per_target") != max(GROUP_TILES):
         raise MetaSimError(f"{nams_bench} was measured on groups of {bench.get('tiles_per_target')} tiles, "
                            f"not {max(GROUP_TILES)}: run `make bench-nams` again")
+    rows = {}
+    for split in SPLITS:
+        part = bench["splits"].get(split.name)
+        if part is None:
+            continue
+        try:
+            rows[split.name], seeds = part["experiments"]["e1"], part["settings"]["e1"]["seeds"]
+        except (KeyError, TypeError) as exc:
+            raise MetaSimError(f"no E1 {split.name} rows in {nams_bench} ({exc}); run `make bench-nams` "
+                               "again") from None
+        if (seeds, bench.get("targets_per_seed")) != (list(split.seeds), per_seed):
+            raise MetaSimError(f"{nams_bench} was measured on {bench.get('targets_per_seed')} target groups of "
+                               f"{split.name} seeds {seeds}, not {per_seed} of {list(split.seeds)}: run "
+                               "`make bench-nams` again with as many --targets")
+    if "validation" not in rows:
+        raise MetaSimError(f"no E1 validation rows in {nams_bench}, on which the choices are made; run "
+                           "`make bench-nams` again")
+    return rows
+
+
+# bench-nams's variants of the default model (rows nams_exhaustive_NAME), each a knob of its own.
+_VARIANTS = {"no_roof_colour": ("roof colour", "none"), "colour_roof_finder": ("roof finder", "colour"),
+             "roof_weight_power_1": ("roof weight power", "1")}
+
+
+def _nams_knob(name: str) -> tuple[str, str]:
+    """The knob and setting of a bench-nams row: a search method or setting, another architecture, or a
+    variant of the roof colours."""
+    from ..nams.model import ARCHITECTURES
+
+    adjoint = re.fullmatch(r"nams_adjoint_M(\d+)_it(\d+)", name)
+    if adjoint:
+        return "search", f"adjoint M={adjoint[1]}, {adjoint[2]} it"
+    if name == "nams_exhaustive":
+        return "search", "exhaustive"
+    variant = name.removeprefix("nams_exhaustive_")
+    if variant in _VARIANTS:
+        return _VARIANTS[variant]
+    if variant in ARCHITECTURES:
+        return "architecture", variant
+    return "search", name
+
+
+def _search_points(rows: dict, base: _Experiment) -> list[Point]:
+    """bench-nams's E1 rows (``read_nams_rows``) as points, every split's beside the others: search time
+    (over the groups of all splits) plus 9 tiles' features of this bench."""
     features = max(GROUP_TILES) * base.feature_seconds_per_tile
     points = []
-    for name, row in rows.items():
+    for name in rows["validation"]:
         if name == "uniform":
             continue
-        setting = name.replace("nams_adjoint_M", "adjoint M=").replace("_it", ", ") + (" it" if "_it" in name else "")
-        setting = setting.replace("nams_exhaustive", "exhaustive")
-        unseen = ({"unseen_targets": row["unseen_targets"], **{f"unseen_{k}": v for k, v in row["unseen"].items()}}
-                  if row.get("unseen") else {})
-        points.append(Point("search", setting, {**{k: row[k] for k in METRICS}, **unseen},
-                            round(row["seconds_per_target"] + features, 5), round(base.one_off, 1),
-                            int(row["targets"]),
-                            {"search_seconds_per_group": row["seconds_per_target"], "from": str(nams_bench)}))
+        per_split = {split: split_rows[name] for split, split_rows in rows.items() if name in split_rows}
+        metrics = {split: {**{k: row[k] for k in METRICS},
+                           **({"unseen_targets": row["unseen_targets"],
+                               **{f"unseen_{k}": v for k, v in row["unseen"].items()}} if row.get("unseen") else {})}
+                   for split, row in per_split.items()}
+        targets = {split: int(row["targets"]) for split, row in per_split.items()}
+        search = sum(row["seconds_per_target"] * targets[split] for split, row in per_split.items()) / sum(
+            targets.values())
+        points.append(Point(*_nams_knob(name), metrics, round(search + features, 5), round(base.one_off, 1), targets,
+                            {"search_seconds_per_group": round(search, 5), "from": f"bench-nams row {name}"}))
     return points
 
 
@@ -204,31 +275,34 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
                    nams_bench: Path = Path("benchmarks/nams.json"), presets=RENDER_PRESETS,
                    training_sets=TRAINING_SETS, profiles=tuple(PROFILES), bars: Bars | None = None) -> dict:
     """Measure every knob alone, then every profile end to end, on ``targets`` groups of each seed of E1's
-    validation split (the adjoint search on ``adjoint_targets`` of them); returns a JSON-able dict."""
+    validation and test splits (the adjoint search on ``adjoint_targets`` of each split); returns a
+    JSON-able dict. A training set met twice (the default is a setting of several knobs) is featurised once."""
     from ..core.cache import cache_root
 
     root = Path(root or cache_root())
-    points: list[Point] = []
-    base = _Experiment(DatasetConfig(), 8, targets, root, render_bench, bars)
-    for g in GROUP_TILES:
-        points.append(base.run("tiles per target group", str(g), group_tiles=g))
-    points += _search_points(nams_bench, base)
-    for designs, tiles in training_sets:
-        experiment = _Experiment(DatasetConfig(designs=designs, tiles=tiles), 8, targets, root, render_bench, bars)
-        points.append(experiment.run("training set", f"{designs} x {tiles}"))
-    for preset in presets:
-        experiment = _Experiment(DatasetConfig(preset=preset), 8, targets, root, render_bench, bars)
-        points.append(experiment.run("render preset", preset))
+    nams_rows = read_nams_rows(nams_bench, targets)  # before hours of work, not after
+    experiments: dict = {}
+
+    def experiment(dataset: DatasetConfig, views: int = 8) -> _Experiment:
+        if (dataset, views) not in experiments:
+            experiments[dataset, views] = _Experiment(dataset, views, targets, root, render_bench, bars)
+        return experiments[dataset, views]
+
+    base = experiment(DatasetConfig())
+    points = [base.run("tiles per target group", str(g), group_tiles=g) for g in GROUP_TILES]
+    points += _search_points(nams_rows, base)
+    points += [experiment(DatasetConfig(designs=d, tiles=t)).run("training set", f"{d} x {t}")
+               for d, t in training_sets]
+    points += [experiment(DatasetConfig(preset=preset)).run("render preset", preset) for preset in presets]
     for name in profiles:
         profile = PROFILES[name]
-        experiment = _Experiment(profile.dataset, profile.views, targets, root, render_bench, bars)
-        n = adjoint_targets if profile.method == "adjoint" else targets
-        points.append(experiment.run("profile", name, profile.group_size, profile.method,
-                                     profile.search_options(), targets=n))
+        n = adjoint_targets if profile.method == "adjoint" else None  # None: every target group
+        points.append(experiment(profile.dataset, profile.views).run(
+            "profile", name, profile.group_size, profile.method, profile.search_options(), targets=n))
     import torch
 
-    return {"experiment": "e1", "split": SPLIT.to_dict(), "targets_per_seed": targets,
-            "targets": len(base.jobs), "adjoint_targets": adjoint_targets,
+    return {"experiment": "e1", "splits": {s.name: s.to_dict() for s in SPLITS}, "reported": REPORTED,
+            "targets_per_seed": targets, "adjoint_targets": adjoint_targets,
             "tiles_per_target_group_default": max(GROUP_TILES),
             "views": _views_check(), "points": [asdict(p) for p in points],
             "profiles": {name: {**asdict(PROFILES[name]), "dataset": asdict(PROFILES[name].dataset)}
@@ -241,20 +315,49 @@ def accuracy(metrics: dict) -> float:
     return (metrics["flat_top1"] + metrics["sloped_top1"]) / 2
 
 
+def _by_split(result: dict) -> tuple[tuple[str, ...], list[dict]]:
+    """The splits a result holds, the reported one first, and its points with metrics and targets per split.
+    A result from before the test split was measured holds one: the validation split, or target seed 1 alone
+    for one from before the splits."""
+    if "splits" in result:
+        return tuple(sorted(result["splits"], key=lambda name: name != result["reported"])), result["points"]
+    name = "validation" if "split" in result else "seed 1"
+    return (name,), [{**p, "metrics": {name: p["metrics"]}, "targets": {name: p["targets"]}}
+                     for p in result["points"]]
+
+
 def format_tradeoff_table(result: dict) -> str:
-    """The trade-off's result as the Markdown table of docs/benchmarks.md, with the views note."""
-    lines = ["| knob | setting | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per group | "
-             "one-off min | targets | top-1 flat / sloped, unseen designs |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
-    for p in result["points"]:
-        m = p["metrics"]
-        unseen = (f"{m['unseen_flat_top1']:.2f} / {m['unseen_sloped_top1']:.2f} ({m['unseen_targets']})"
-                  if "unseen_flat_top1" in m else "-")
-        lines.append(f"| {p['knob']} | {p['setting']} | " + " | ".join(f"{m[k]:.2f}" for k in METRICS)
-                     + f" | {p['seconds_per_group']:.3f} | {p['one_off_seconds'] / 60:.1f} | {p['targets']} "
-                     f"| {unseen} |")
+    """The trade-off's result as the Markdown table of docs/benchmarks.md: per point the test split's row and
+    the validation split's beside it ("-" where a source lacks the split), the splits note and the views note.
+    Reads results from before the test split too."""
+    splits, points = _by_split(result)
+    lines = ["| knob | setting | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per group | "
+             "one-off min | targets | top-1 flat / sloped, unseen designs |", "|---" * 11 + "|"]
+    for p in points:
+        for split in splits:
+            m = p["metrics"].get(split)
+            if m is None:
+                cells, targets, unseen = " | ".join("-" for _ in METRICS), "-", "-"
+            else:
+                cells, targets = " | ".join(f"{m[k]:.2f}" for k in METRICS), p["targets"][split]
+                unseen = (f"{m['unseen_flat_top1']:.2f} / {m['unseen_sloped_top1']:.2f} ({m['unseen_targets']})"
+                          if "unseen_flat_top1" in m else "-")
+            lines.append(f"| {p['knob']} | {p['setting']} | {split} | {cells} | {p['seconds_per_group']:.3f} | "
+                         f"{p['one_off_seconds'] / 60:.1f} | {targets} | {unseen} |")
+    if "splits" in result:
+        described = " and ".join(f"its {name} split (seeds {', '.join(map(str, result['splits'][name]['seeds']))})"
+                                 for name in splits)
+        note = (f"E1 on {described}, {result['targets_per_seed']} target groups of "
+                f"{result['tiles_per_target_group_default']} tiles per seed, the neural-adjoint rows on "
+                f"{result['adjoint_targets']} of each split's. The {result['reported']} rows report; the profiles "
+                "and defaults are chosen on the validation rows only.")
+    elif "split" in result:
+        note = (f"E1 on its validation split alone (seeds {', '.join(map(str, result['split']['seeds']))}), "
+                "measured before the test split was.")
+    else:
+        note = "E1 on target seed 1 alone, measured before the splits existed."
     v = result["views"]
-    lines += ["", f"Views: the default extractor's features of 1 and 8 dihedral views differ by at most "
+    lines += ["", note, "", f"Views: the default extractor's features of 1 and 8 dihedral views differ by at most "
               f"{v['max_abs_difference_1_vs_8_views']:.1e}, so it computes one "
               f"({v['seconds_per_9_tiles_1_view']:.3f} s "
               f"per 9 tiles; {v['seconds_per_9_tiles_8_views_if_not_invariant']:.3f} s if all 8 were computed, "
@@ -262,55 +365,130 @@ def format_tradeoff_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def plot_tradeoff(result: dict, path: Path) -> Path:
-    """Two panels: accuracy against seconds per target group, and against the one-off cost."""
+LABEL_GID = "tradeoff-label"  # the gid of the plot's point labels
+_LABELS = {"tiles per target group": "group of {}", "training set": "set {}", "render preset": "{} renders",
+           "profile": "profile {}", "architecture": "{} architecture", "roof finder": "{} roof finder",
+           "roof colour": "roof colour: {}", "roof weight power": "roof weight power {}"}
+_MARKERS = "os^Dv<>pXhP"
+_RING_POINTS = 8  # the step between rings of candidate label places, in points
+_DIRECTIONS = tuple(math.radians(a) for a in (0, 30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180))
+_PAD_PX = 2
+
+
+def tradeoff_figure(result: dict):
+    """The trade-off plot as a matplotlib figure: test accuracy against seconds per target group (left, log)
+    and against the one-off cost (right), the profiles on both, every point labelled (``_place_labels``)."""
     require("matplotlib", "the trade-off plot")
     import matplotlib
 
     matplotlib.use("Agg")
     from matplotlib import pyplot as plt
 
-    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.8), dpi=110)
+    splits, points = _by_split(result)
+    if REPORTED not in splits:
+        raise MetaSimError(f"this trade-off result has no {REPORTED} figures to plot; run `make bench-tradeoff` again")
+    shown = [p for p in points if REPORTED in p["metrics"]]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 6), dpi=110)
     left.set_xscale("log")
-    placed: dict = {left: [], right: []}
-
-    def label(axis, x, y, text):
-        """Annotate, moving the text down a line while it would sit on an earlier label."""
-        px, py = axis.transData.transform((x, y))
-        shift = 0
-        while any(abs(px - qx) < 60 and abs(py - shift - qy) < 9 for qx, qy in placed[axis]):
-            shift += 9
-        placed[axis].append((px, py - shift))
-        axis.annotate(text, (x, y), textcoords="offset points", xytext=(5, 4 - shift * 72 / fig.dpi), fontsize=7)
-
-    markers = {"tiles per target group": "o", "search": "s", "training set": "^", "render preset": "D",
-               "profile": "*"}
-    for knob, marker in markers.items():
-        points = [p for p in result["points"] if p["knob"] == knob]
-        if not points:
-            continue
-        axis = left if knob in ("tiles per target group", "search") else right
-        xs = [p["seconds_per_group"] if axis is left else p["one_off_seconds"] / 60 for p in points]
-        ys = [accuracy(p["metrics"]) for p in points]
-        size = 160 if knob == "profile" else 50
-        axis.scatter(xs, ys, marker=marker, s=size, label=knob, zorder=3)
-        for x, y, p in zip(xs, ys, points):
-            label(axis, x, y, p["setting"])
-        if knob == "profile":  # profiles go on both panels
-            lx = [p["seconds_per_group"] for p in points]
-            left.scatter(lx, ys, marker=marker, s=size, label=knob, zorder=3)
-            for x, y, p in zip(lx, ys, points):
-                label(left, x, y, p["setting"])
+    labels = []
+    for i, knob in enumerate(dict.fromkeys(p["knob"] for p in shown)):
+        mine = [p for p in shown if p["knob"] == knob]
+        ys = [accuracy(p["metrics"][REPORTED]) for p in mine]
+        for axis in (left, right) if knob == "profile" else (right if knob in ONE_OFF_KNOBS else left,):
+            xs = [p["one_off_seconds"] / 60 if axis is right else p["seconds_per_group"] for p in mine]
+            size = 160 if knob == "profile" else 45  # points squared
+            axis.scatter(xs, ys, marker="*" if knob == "profile" else _MARKERS[i % len(_MARKERS)], s=size,
+                         color=f"C{i % 10}", label=knob, zorder=3)
+            labels += [(axis, x, y, math.sqrt(size) / 2, _LABELS.get(knob, "{}").format(p["setting"]))
+                       for x, y, p in zip(xs, ys, mine)]
     left.set_xlabel("seconds per target group (features + search), log scale")
     right.set_xlabel("one-off minutes (render + features + training)")
     for axis in (left, right):
-        axis.set_ylabel("E1 top-1, mean of flat and sloped")
+        axis.set_ylabel(f"E1 {REPORTED} top-1, mean of flat and sloped")
         axis.grid(True, alpha=0.3)
-        axis.legend(fontsize=8, loc="lower right")
-    fig.suptitle(f"meta-sim: accuracy bought by time (E1 validation, {result['targets']} target groups; "
-                 f"adjoint on {result['adjoint_targets']})")
-    fig.tight_layout()
+    handles = {label: handle for axis in (left, right) for handle, label in zip(*axis.get_legend_handles_labels())}
+    legend = fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(len(handles), 6), fontsize=8)
+    missing = len(points) - len(shown)
+    title = fig.suptitle(f"meta-sim: E1 accuracy on the {REPORTED} split bought by time\n"
+                         f"{result['targets_per_seed']} target groups per seed, the adjoint on "
+                         f"{result['adjoint_targets']} per split; the profiles are chosen on the validation split"
+                         + (f"; rows without {REPORTED} figures, not drawn: {missing}" if missing else ""), fontsize=10)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    for axis in (left, right):  # fixed before the labels are placed: they are placed in display space
+        axis.set_xlim(axis.get_xlim())
+        axis.set_ylim(axis.get_ylim())
+    _place_labels(fig, labels, [legend, title])
+    return fig
+
+
+def _overlaps(box, others) -> bool:
+    return any(box.x0 < o.x1 + _PAD_PX and o.x0 < box.x1 + _PAD_PX and box.y0 < o.y1 + _PAD_PX
+               and o.y0 < box.y1 + _PAD_PX for o in others)
+
+
+def _place_labels(fig, labels, fixed) -> None:
+    """Write each (axis, x, y, marker half-side in points, text) label beside its point: at the first free
+    place on rings of growing radius around it, free meaning its box overlaps no label placed before, no
+    point and none of the ``fixed`` artists (legend, title); inside its axes while the rings fit in them,
+    then outside every axes. The rings grow without bound and the obstacles are finitely many, so every
+    label gets a place. A label anywhere but right beside its point is joined to it by a line."""
+    from matplotlib.lines import Line2D
+    from matplotlib.transforms import Bbox
+
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    px_per_point = fig.dpi / 72
+    obstacles = []
+    for axis, x, y, half, _ in labels:
+        (px, py), half = axis.transData.transform((x, y)), half * px_per_point
+        obstacles.append(Bbox.from_extents(px - half, py - half, px + half, py + half))
+    obstacles += [artist.get_window_extent(renderer) for artist in fixed]
+    panels = [axis.get_tightbbox(renderer) for axis in fig.axes]
+    for axis, x, y, _, text in labels:
+        frame = axis.get_window_extent(renderer)
+        inside = math.hypot(frame.width, frame.height) / px_per_point
+        artist = axis.text(x, y, text, fontsize=7, gid=LABEL_GID, zorder=4)
+        radius, place = 0, None
+        while place is None:
+            radius += _RING_POINTS
+            place = _free_place(artist, axis, fig, renderer, radius, obstacles,
+                                None if radius <= inside else panels, frame)
+        box, direction = place
+        obstacles.append(box)
+        if (radius, direction) != (_RING_POINTS, 0):
+            dx, dy = artist.get_transform().transform((x, y)) - axis.transData.transform((x, y))
+            end = axis.transData.inverted().transform(axis.transData.transform((x, y)) + (dx, dy))
+            axis.add_line(Line2D([x, end[0]], [y, end[1]], lw=0.6, color="0.4", zorder=2, clip_on=False))
+
+
+def _free_place(artist, axis, fig, renderer, radius: float, obstacles: list, panels: list | None, frame):
+    """Try ``artist`` in each direction on the ring of ``radius`` points: (its window box, the direction's
+    index) at the first place that overlaps no obstacle and lies inside ``frame`` (with ``panels`` None) or
+    outside every one of ``panels``; None when the ring has no such place."""
+    from matplotlib.transforms import offset_copy
+
+    for index, angle in enumerate(_DIRECTIONS):
+        dx, dy = radius * math.cos(angle), radius * math.sin(angle)
+        artist.set_transform(offset_copy(axis.transData, fig, dx, dy, units="points"))
+        artist.set_horizontalalignment("left" if dx > 0.25 * radius else "right" if dx < -0.25 * radius
+                                       else "center")
+        artist.set_verticalalignment("bottom" if dy > 0.25 * radius else "top" if dy < -0.25 * radius
+                                     else "center")
+        box = artist.get_window_extent(renderer)
+        within = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+                  if panels is None else not _overlaps(box, panels))
+        if within and not _overlaps(box, obstacles):
+            return box, index
+    return None
+
+
+def plot_tradeoff(result: dict, path: Path) -> Path:
+    """``tradeoff_figure`` written to ``path`` as a PNG (cropped to what was drawn: a label may sit
+    outside the axes)."""
+    fig = tradeoff_figure(result)
+    from matplotlib import pyplot as plt
+
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
+    fig.savefig(buffer, format="png", dpi=fig.dpi, bbox_inches="tight")
     plt.close(fig)
     return write_bytes_atomic(path, buffer.getvalue())

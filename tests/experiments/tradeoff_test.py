@@ -12,21 +12,32 @@ from meta_sim.pipeline.profiles import PROFILES, get_profile
 from meta_sim.sim.imageio import read_rgb8
 
 
-def _result():
-    def point(knob, setting, top1, seconds, one_off):
-        metrics = {"flat_top1": top1, "flat_top10": 1.0, "sloped_top1": top1 - 0.1, "sloped_top10": 0.9}
-        return {"knob": knob, "setting": setting, "metrics": metrics, "seconds_per_group": seconds,
-                "one_off_seconds": one_off, "targets": 10, "detail": {}}
+def _metrics(top1):
+    return {"flat_top1": top1, "flat_top10": 1.0, "sloped_top1": top1 - 0.1, "sloped_top10": 0.9}
 
-    return {"experiment": "e1", "targets": 10, "adjoint_targets": 5,
+
+def _point(knob, setting, top1, seconds, one_off, test=True):
+    """A point measured on validation with ``top1`` and, with ``test``, on test with 0.2 less."""
+    metrics, targets = {"validation": _metrics(top1)}, {"validation": 300}
+    if test:
+        metrics["test"], targets["test"] = _metrics(top1 - 0.2), 300
+    return {"knob": knob, "setting": setting, "metrics": metrics, "seconds_per_group": seconds,
+            "one_off_seconds": one_off, "targets": targets, "detail": {}}
+
+
+def _result(points=None):
+    from meta_sim.experiments.splits import get_split
+
+    return {"experiment": "e1", "splits": {name: get_split("e1", name).to_dict() for name in ("validation", "test")},
+            "reported": "test", "targets_per_seed": 100, "adjoint_targets": 20, "tiles_per_target_group_default": 9,
             "views": {"max_abs_difference_1_vs_8_views": 1e-7, "seconds_per_9_tiles_1_view": 0.1,
                       "seconds_per_9_tiles_8_views_if_not_invariant": 0.8},
-            "points": [point("tiles per target group", "1", 0.5, 0.01, 300),
-                       point("tiles per target group", "9", 0.9, 0.09, 300),
-                       point("search", "adjoint M=1000, 200 it", 0.85, 16.0, 300),
-                       point("training set", "600 x 4", 0.95, 0.09, 700),
-                       point("render preset", "balanced", 0.9, 0.09, 900),
-                       point("profile", "fast", 0.9, 0.09, 300)]}
+            "points": points or [_point("tiles per target group", "1", 0.5, 0.01, 300),
+                                 _point("tiles per target group", "9", 0.9, 0.09, 300),
+                                 _point("search", "adjoint M=1000, 200 it", 0.85, 16.0, 300),
+                                 _point("training set", "600 x 4", 0.95, 0.09, 700),
+                                 _point("render preset", "balanced", 0.9, 0.09, 900),
+                                 _point("profile", "fast", 0.9, 0.09, 300)]}
 
 
 def test_profiles_are_the_three_recommended_ones_and_unknown_names_are_clear_errors():
@@ -42,20 +53,93 @@ def test_profiles_are_the_three_recommended_ones_and_unknown_names_are_clear_err
         get_profile("turbo")
 
 
-def test_table_and_plot(tmp_path):
+def test_the_table_gives_each_point_a_test_row_and_its_validation_row_beside_it():
     result = _result()
+    result["points"][2] = _point("search", "adjoint M=1000, 200 it", 0.85, 16.0, 300, test=False)
     table = format_tradeoff_table(result)
-    assert table.count("\n| ") == len(result["points"])  # one row per point below the header
-    assert "| search | adjoint M=1000, 200 it | 0.85 |" in table and "1.0e-07" in table
-    assert accuracy(result["points"][1]["metrics"]) == pytest.approx(0.85)
-    assert table.count("| - |") == len(result["points"])  # no unseen-design scores given
-    result["points"][3]["metrics"].update(unseen_targets=83, unseen_flat_top1=0.9, unseen_sloped_top1=0.55)
-    assert "| 0.90 / 0.55 (83) |" in format_tradeoff_table(result)
+    rows = [line for line in table.splitlines() if line.startswith("| ") and not line.startswith("| knob")]
+    assert len(rows) == 2 * len(result["points"])
+    assert [r.split(" | ")[2] for r in rows] == ["test", "validation"] * len(result["points"])
+    assert rows[0].startswith("| tiles per target group | 1 | test | 0.30 | 1.00 | 0.20 | 0.90 | 0.010 | 5.0 | 300 |")
+    assert rows[1].startswith("| tiles per target group | 1 | validation | 0.50 | 1.00 | 0.40 | 0.90 |")
+    # A point without test figures says so instead of showing another split's.
+    assert "| search | adjoint M=1000, 200 it | test | - | - | - | - | 16.000 | 5.0 | - | - |" in table
+    assert "| search | adjoint M=1000, 200 it | validation | 0.85 |" in table
+    assert "seeds 21, 22, 23" in table and "seeds 1, 2, 7" in table and "1.0e-07" in table
+    assert "chosen on the validation rows only" in table
+    assert all(r.endswith("| - |") for r in rows)  # no unseen-design scores given
+    result["points"][3]["metrics"]["test"].update(unseen_targets=83, unseen_flat_top1=0.9, unseen_sloped_top1=0.55)
+    assert "| training set | 600 x 4 | test | 0.75 | 1.00 | 0.65 | 0.90 | 0.090 | 11.7 | 300 | 0.90 / 0.55 (83) |" \
+        in format_tradeoff_table(result)
+    json.dumps(result)
+
+
+def test_the_table_reads_results_from_before_the_test_split_and_the_plot_refuses_them(tmp_path):
+    old = {"experiment": "e1", "targets": 100, "adjoint_targets": 20, "views": _result()["views"],
+           "points": [{"knob": "training set", "setting": "600 x 2", "metrics": _metrics(0.9),
+                       "seconds_per_group": 0.07, "one_off_seconds": 300.0, "targets": 100, "detail": {}}]}
+    table = format_tradeoff_table(old)
+    assert "| training set | 600 x 2 | seed 1 | 0.90 | 1.00 | 0.80 | 0.90 | 0.070 | 5.0 | 100 | - |" in table
+    assert "before the splits" in table
+    from meta_sim.experiments.splits import get_split
+
+    table = format_tradeoff_table({**old, "split": get_split("e1", "validation").to_dict()})
+    assert "| 600 x 2 | validation | 0.90 |" in table and "| test |" not in table
+    assert "validation split alone (seeds 1, 2, 7)" in table
+    with pytest.raises(MetaSimError, match="no test figures"):
+        plot_tradeoff(old, tmp_path / "plot.png")
+    assert not (tmp_path / "plot.png").exists()
+
+
+def _crowded_result():
+    """Many points close together and some on the very same spot (the default is a setting of every knob),
+    on both panels, and one point without test figures."""
+    points = [_point("tiles per target group", str(g), 0.9 + 0.002 * g, 0.05 + 0.002 * g, 300) for g in range(1, 10)]
+    points += [_point("search", f"adjoint M={m}, {it} it", 0.9 + 0.001 * it / 50, 0.06 + 0.0001 * m, 300)
+               for m in (16, 64, 250, 1000) for it in (50, 100, 200)]
+    points += [_point("search", name, 0.9, 0.068, 300) for name in ("exhaustive", "dr", "ms2", "sbi_nre")]
+    points += [_point("architecture", name, 0.91, 0.068, 300) for name in ("paper", "factorised")]
+    points += [_point("roof finder", "colour", 0.9, 0.068, 300, test=False)]
+    points += [_point("training set", f"{d} x {t}", 0.9 + 0.003 * t, 0.07, 300 + d // 10 + t)
+               for d in (150, 300, 600, 1700) for t in (2, 4, 9)]
+    points += [_point("render preset", p, 0.9, 0.07, 306) for p in ("fast", "balanced", "quality")]
+    points += [_point("profile", name, 0.9, 0.068, 306) for name in ("fast", "balanced", "paper")]
+    return _result(points)
+
+
+def test_the_plot_shows_test_accuracy_and_no_two_labels_overlap(tmp_path):
+    from matplotlib import pyplot as plt
+
+    from meta_sim.experiments.tradeoff import LABEL_GID, tradeoff_figure
+
+    result = _crowded_result()
+    shown = [p for p in result["points"] if "test" in p["metrics"]]
+    fig = tradeoff_figure(result)
+    try:
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        labels = [t for axis in fig.axes for t in axis.texts if t.get_gid() == LABEL_GID]
+        profiles = sum(p["knob"] == "profile" for p in shown)
+        assert len(labels) == len(shown) + profiles  # every drawn point labelled, the profiles on both panels
+        boxes = [t.get_window_extent(renderer) for t in labels]
+        overlapping = [(labels[i].get_text(), labels[j].get_text()) for i in range(len(boxes))
+                       for j in range(i + 1, len(boxes)) if boxes[i].overlaps(boxes[j])]
+        assert overlapping == []
+        legend = fig.legends[0].get_window_extent(renderer)
+        assert not any(box.overlaps(legend) for box in boxes)
+        # The points are at the test split's accuracy, which the axes and the title name.
+        drawn = sorted(round(y, 6) for axis in fig.axes for c in axis.collections for y in c.get_offsets()[:, 1])
+        expected = sorted(round(accuracy(p["metrics"]["test"]), 6) for p in shown
+                          for _ in range(2 if p["knob"] == "profile" else 1))
+        assert drawn == expected
+        assert all("test" in axis.get_ylabel() for axis in fig.axes)
+        assert "test split" in fig.get_suptitle() and "without test figures, not drawn: 1" in fig.get_suptitle()
+    finally:
+        plt.close(fig)
     path = plot_tradeoff(result, tmp_path / "plot.png")
     image = read_rgb8(path)
     assert image.shape[0] > 300 and image.shape[1] > 600
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 20  # points, text and grid, not a blank canvas
-    json.dumps(result)
 
 
 def test_stage_times_come_from_the_measured_parts(tmp_path):
@@ -80,33 +164,77 @@ def test_stage_times_come_from_the_measured_parts(tmp_path):
     assert stage_times({k: v for k, v in result.items() if k != "train_seconds"}, render) == []  # a quick run
 
 
-def test_search_points_come_from_the_nams_benchmarks_validation_rows(tmp_path):
+def test_search_points_come_from_the_nams_benchmarks_rows_split_for_split(tmp_path):
     from types import SimpleNamespace
 
-    from meta_sim.experiments.tradeoff import _search_points
+    from meta_sim.experiments.tradeoff import _search_points, read_nams_rows
 
     bench = _nams_result()
-    bench["splits"]["validation"]["experiments"]["e1"]["uniform"] = _nams_row(0.02, 0.0)
+    for split in bench["splits"].values():
+        rows = split["experiments"]["e1"]
+        rows.update(uniform=_nams_row(0.02, 0.0), dr=_nams_row(0.8, 0.001), nams_exhaustive_paper=_nams_row(0.7, 0.002),
+                    nams_exhaustive_colour_roof_finder=_nams_row(0.85, 0.002))
+    bench["splits"]["test"]["experiments"]["e1"]["nams_adjoint_M1000_it200"]["seconds_per_target"] = 50.0
     path = tmp_path / "nams.json"
     path.write_text(json.dumps(bench))
-    base = SimpleNamespace(per_seed=100, feature_seconds_per_tile=0.01, one_off=300.0)
-    points = {p.setting: p for p in _search_points(path, base)}
-    assert set(points) == {"exhaustive", "adjoint M=1000, 200 it", "adjoint M=64, 100 it", "adjoint M=16, 50 it"}
-    assert points["exhaustive"].seconds_per_group == pytest.approx(0.002 + 0.09)
-    assert points["adjoint M=1000, 200 it"].targets == 20 and points["exhaustive"].targets == 300
-    assert points["adjoint M=1000, 200 it"].metrics["flat_top1"] == 0.95  # validation's, not test's 0.5
+    base = SimpleNamespace(feature_seconds_per_tile=0.01, one_off=300.0)
+    points = {(p.knob, p.setting): p for p in _search_points(read_nams_rows(path, 100), base)}
+    assert set(points) == {("search", "exhaustive"), ("search", "adjoint M=1000, 200 it"),
+                           ("search", "adjoint M=64, 100 it"), ("search", "adjoint M=16, 50 it"), ("search", "dr"),
+                           ("architecture", "paper"), ("roof finder", "colour")}
+    exhaustive, paper = points["search", "exhaustive"], points["search", "adjoint M=1000, 200 it"]
+    assert exhaustive.seconds_per_group == pytest.approx(0.002 + 0.09)
+    assert paper.seconds_per_group == pytest.approx((30.0 + 50.0) / 2 + 0.09)  # timed over both splits' groups
+    assert paper.targets == {"validation": 20, "test": 20} and exhaustive.targets == {"validation": 300, "test": 300}
+    assert paper.metrics["validation"]["flat_top1"] == 0.95 and paper.metrics["test"]["flat_top1"] == 0.5
+    del bench["splits"]["test"]
+    path.write_text(json.dumps(bench))
+    points = _search_points(read_nams_rows(path, 100), base)
+    assert all(set(p.metrics) == {"validation"} for p in points)  # test missing, not validation's copied
+    bench = _nams_result()
     bench["tiles_per_target"] = 4
     path.write_text(json.dumps(bench))
     with pytest.raises(MetaSimError, match="groups of 4 tiles"):
-        _search_points(path, base)
+        read_nams_rows(path, 100)
     path.write_text(json.dumps(_nams_result(validation_targets_per_seed=20)))
-    with pytest.raises(MetaSimError, match="run `make bench-nams` again"):
-        _search_points(path, base)
-    path.write_text(json.dumps({"targets": 100, "experiments": {}}))  # a bench-nams result from before the splits
+    with pytest.raises(MetaSimError, match="run `make bench-nams` again with as many --targets"):
+        read_nams_rows(path, 100)
+    bench = _nams_result()
+    bench["splits"]["test"]["settings"]["e1"]["seeds"] = [1, 2, 7]
+    path.write_text(json.dumps(bench))
+    with pytest.raises(MetaSimError, match="test seeds"):
+        read_nams_rows(path, 100)
+    bench = _nams_result()
+    del bench["splits"]["validation"]
+    path.write_text(json.dumps(bench))
     with pytest.raises(MetaSimError, match="no E1 validation rows"):
-        _search_points(path, base)
+        read_nams_rows(path, 100)
+    path.write_text(json.dumps({"targets": 100, "experiments": {}}))  # a bench-nams result from before the splits
+    with pytest.raises(MetaSimError, match="predates the validation and test splits"):
+        read_nams_rows(path, 100)
     with pytest.raises(MetaSimError, match="bench-nams"):
-        _search_points(tmp_path / "missing.json", base)
+        read_nams_rows(tmp_path / "missing.json", 100)
+
+
+@pytest.mark.slow
+def test_a_tiny_experiment_measures_every_point_on_both_splits(tmp_path):
+    """The measuring side on a tiny training set and 2 target groups per seed (renders; not a measurement)."""
+    from meta_sim.experiments.tradeoff import SPLITS, _Experiment
+
+    render = tmp_path / "render.json"
+    render.write_text(json.dumps({"presets": {"fast": {"seconds_per_tile": 0.1}}}))
+    dataset = DatasetConfig(designs=24, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    experiment = _Experiment(dataset, 8, 2, tmp_path / "cache", render)
+    cities = {name: {job.city_seed for job in jobs} for name, (_, jobs, _) in experiment.targets.items()}
+    assert set(cities) == {"validation", "test"} and not cities["validation"] & cities["test"]
+    assert all(features.shape[:2] == (6, 9) for _, _, features in experiment.targets.values())
+    one, paper = experiment.run("tiles per target group", "1", group_tiles=1), \
+        experiment.run("profile", "paper", 9, "adjoint", {"M": 8, "iterations": 3}, targets=2)
+    assert one.targets == {"validation": 6, "test": 6} and paper.targets == {"validation": 2, "test": 2}
+    for point in (one, paper):
+        assert set(point.metrics) == {s.name for s in SPLITS}
+        assert all(0 <= m[k] <= 1 for m in point.metrics.values() for k in ("flat_top1", "sloped_top10"))
+        assert point.seconds_per_group > 0 and point.one_off_seconds >= 24 * 0.1  # at least the rendering
 
 
 def test_torch_side_commands_take_their_thread_count_from_meta_sim_threads(tmp_path, monkeypatch):
