@@ -165,6 +165,7 @@ class _Run:
         """Features, search and one preset file per group, for one batch of groups."""
         from ..nams import search
         from .features import features_for_groups
+        from .roofcolour import roof_evidence
 
         started = time.perf_counter()
         feats = features_for_groups([[t for _, t in g] for g in groups], self.extractor, self.views)
@@ -173,13 +174,15 @@ class _Run:
         results = search(self.ckpt.model, self.ckpt.feature_norm.apply(feats), self.ckpt.space, self.settings.method,
                          generator=self.generator, **self.settings.search_options())
         self.seconds["search"] += time.perf_counter() - started
-        for group, result in zip(groups, results):
+        evidence = roof_evidence(feats, self.extractor) or {}
+        for k, (group, result) in enumerate(zip(groups, results)):
             index = len(self.presets)
+            roof_pixels = {f"roof_pixels_{kind}": round(float(share[k]), 6) for kind, share in evidence.items()}
             preset = DesignPreset(kind="group", name=f"{self.stem}-{index:03d}", design_space=self.ckpt.space.name,
                                   design=result.design, vote_shares=result.votes,
                                   search={"method": result.method, "loss": result.best_loss,
                                           "mean_loss": result.mean_loss, **self.settings.search_options(),
-                                          "views": self.views, "tiles": len(group)},
+                                          "views": self.views, "tiles": len(group), **roof_pixels},
                                   source_images=sorted({str(p) for p, _ in group}), model_id=self.ckpt.model_id)
             save_preset(out_dir / "presets" / f"{preset.name}.json", preset)
             self.presets.append(preset)
@@ -204,6 +207,8 @@ class _Run:
                   "population": pop.distribution,
                   "groups": [{"name": p.name, "design": p.design,
                               "confidence": {n: p.confidence(n) for n in ckpt.space.names},
+                              "roof_pixels": {k[len("roof_pixels_"):]: v for k, v in p.search.items()
+                                              if k.startswith("roof_pixels_")},
                               "sources": p.source_images} for p in presets]}
         _write_report(out_dir, report, self.thumbnails, presets, ckpt.space)
         return report
@@ -215,15 +220,21 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
     from ..sim.textures.sheet import render_sheet
 
     write_text_atomic(out_dir / "report.json", json.dumps(report, indent=2) + "\n")
+    kinds = list(report["groups"][0]["roof_pixels"]) if report["groups"] else []
     lines = [f"# meta-sim infer: {report['target_dir']}", "",
              f"{report['images']} images, {report['tiles']} tiles, {report['group_count']} groups; "
              f"search `{report['method']}`, {report['seconds']['search_per_group']:.4f} s per group; "
              f"model `{report['model_id']}` ({report['architecture']} NAMS).", "",
-             "| group | " + " | ".join(space.names) + " |",
-             "|---|" + "---|" * len(space.names)]
+             "| group | " + " | ".join(space.names) + " |" + "".join(f" {k} roof pixels |" for k in kinds),
+             "|---|" + "---|" * (len(space.names) + len(kinds))]
     for g in report["groups"]:
         cells = " | ".join(f"{g['design'][n]} ({g['confidence'][n]:.0%})" for n in space.names)
-        lines.append(f"| {g['name']} | {cells} |")
+        evidence = "".join(f" {g['roof_pixels'][k]:.2%} |" for k in kinds)
+        lines.append(f"| {g['name']} | {cells} |{evidence}")
+    if kinds:
+        lines += ["", "Roof pixels: the share of a group's pixels the model's roof finder counts as roofs of each "
+                  "kind, which the inferred roof textures rest on. Near 0, the roof textures rest on a few pixels "
+                  "and say little: the roof finder learnt roofs from renders and may not see them in this imagery."]
     if report["skipped"]:
         lines += ["", "Skipped files:", ""] + [f"- {s['path']}: {s['reason']}" for s in report["skipped"]]
     if report["nodata_tiles"]:

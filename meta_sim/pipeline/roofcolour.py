@@ -215,6 +215,23 @@ class RoofColourExtractor:
         return torch.cat(parts)
 
 
+def roof_evidence(features: torch.Tensor, extractor) -> dict | None:
+    """Per roof kind, (N,) the share of each group's pixels that ``extractor``'s roof finder counts as
+    roofs of that kind (each pixel by its probability to the weight power): the sum of the kind's raw
+    histogram block in group features (``RoofColourExtractor.roof_histograms``). The histograms are
+    compared once they sum to 1, so a share near 0 means the inferred roof colours rest on a few pixels
+    (docs/design.md, "On real imagery the roof finder is the weak link"). None for an extractor without
+    roof colour."""
+    blocks = getattr(extractor, "hist_blocks", ())
+    if not blocks:
+        return None
+    start, out = extractor.base_dim, {}
+    for kind, width in zip(KINDS, blocks):
+        out[kind] = features[:, start:start + width].sum(dim=1)
+        start += width
+    return out
+
+
 def checkpoint_extractor(ckpt, weights: Path | None = None):
     """The extractor a checkpoint's features came from: its base extractor, with the roof colour
     part when the checkpoint has one. ``weights``: a backbone's weights file, when it needs one."""

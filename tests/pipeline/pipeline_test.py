@@ -145,12 +145,17 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
         assert set(preset.design) == {"flat_roof", "sloped_roof"}
         for _param, shares in preset.vote_shares.items():
             assert abs(sum(shares.values()) - 1.0) < 1e-6
+        # How much roof the finder saw: the share of the group's pixels, for each roof kind.
+        assert 0.0 <= preset.search["roof_pixels_flat"] <= 1.0 and 0.0 <= preset.search["roof_pixels_sloped"] <= 1.0
+        assert preset.search["roof_pixels_flat"] + preset.search["roof_pixels_sloped"] > 0.0
     population = load_preset(tmp_path / "inferred" / "population.json")
     assert population.kind == "population" and sum(d["count"] for d in population.designs) == 2
     report = json.loads((tmp_path / "inferred" / "report.json").read_text())
     assert report["group_count"] == 2 and len(report["groups"]) == 2 and len(report["skipped"]) == 3
     assert report["architecture"] == "additive"
     assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
+    assert set(report["groups"][0]["roof_pixels"]) == {"flat", "sloped"}
+    assert "| flat roof pixels |" in (tmp_path / "inferred" / "report.md").read_text()
     assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
 
 

@@ -27,6 +27,7 @@ from meta_sim.pipeline.roofcolour import (
     RoofLikelihood,
     checkpoint_extractor,
     ensure_roof_finder,
+    roof_evidence,
 )
 from meta_sim.sim.imageio import linear_to_srgb
 from meta_sim.sim.tiles import write_tile
@@ -96,6 +97,22 @@ def test_histograms_follow_the_likely_roofs(tiles, tmp_path):
     # Black, white and NaN images give finite histograms.
     extremes = torch.stack([torch.zeros(3, 32, 32), torch.ones(3, 32, 32), torch.full((3, 32, 32), float("nan"))])
     assert torch.isfinite(extractor(extremes)).all()
+
+
+def test_roof_evidence_is_the_share_of_pixels_the_finder_counts_as_each_roof(tiles, tmp_path):
+    """What `meta-sim infer` reports beside each design: a scene with both roofs gives each kind its share of
+    the pixels, one without roofs next to nothing, and an extractor without roof colour gives None."""
+    extractor = RoofColourExtractor(ColourTexture(), ensure_roof_finder(tmp_path, tiles, "colour"), power=1.0)
+    rgb, _ = _scene()
+    ground = np.empty_like(rgb)
+    ground[:] = GROUND
+    batch = torch.from_numpy(linear_to_srgb(np.stack([rgb, ground])).astype(np.float32)).permute(0, 3, 1, 2)
+    evidence = roof_evidence(extractor(batch), extractor)
+    assert set(evidence) == {"flat", "sloped"}
+    assert float(evidence["flat"][0]) == pytest.approx(12 * 16 / 32 ** 2, rel=0.1)
+    assert float(evidence["sloped"][0]) == pytest.approx(12 * 20 / 32 ** 2, rel=0.1)
+    assert float(evidence["flat"][1]) < 0.05 and float(evidence["sloped"][1]) < 0.05
+    assert roof_evidence(ColourTexture()(batch), ColourTexture()) is None
 
 
 def test_feature_norm_makes_unit_histograms_with_the_leading_parts_spread():
