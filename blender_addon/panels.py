@@ -130,7 +130,8 @@ class META_SIM_PT_presets(_MetaSimPanel, bpy.types.Panel):
 
 
 def draw_preset_details(box, settings, item):
-    """The selected preset: its textures large, vote shares, target; a population's distribution."""
+    """The selected preset: its textures large, vote shares and roof evidence, target; a population's
+    distribution."""
     if item.error:
         box.label(text="Cannot apply this preset:", icon="ERROR")
         box.label(text=item.error)
@@ -144,6 +145,11 @@ def draw_preset_details(box, settings, item):
             column.template_icon(icon_value=previews.texture_icon(library, texture), scale=4.0)
             column.label(text=texture)
             column.label(text=f"vote share {getattr(item, f'{kind}_share'):.0%}")
+            evidence = getattr(item, f"{kind}_evidence")
+            if evidence >= 0:
+                low = getattr(item, f"{kind}_evidence_low")
+                column.label(text=f"roof pixels {evidence:.1%}" + (": too few, unreliable" if low else ""),
+                             icon="ERROR" if low else "NONE")
     box.label(text=f"Target: {item.target}", icon="IMAGE_DATA")
     if item.distribution:
         box.label(text="Distribution over the target's groups:")

@@ -24,6 +24,7 @@ from ..core.fileio import atomic_dir, writable_dir, write_text_atomic
 from ..core.progress import Bars
 from ..nams.search import SearchOptions
 from ..sim.presets import DesignPreset, population, save_preset
+from .roofcolour import EVIDENCE_QUANTILE, evidence_reference, roof_evidence
 
 METHODS = ("auto", "adjoint", "exhaustive")
 # Groups featurised and searched together: memory stays that of one batch whatever the folder holds.
@@ -160,12 +161,12 @@ class _Run:
         self.presets, self.thumbnails, self.tiles = [], [], 0
         self.seconds = {"features": 0.0, "search": 0.0}
         self.method = settings.method
+        self.evidence_reference = evidence_reference(ckpt.extra)
 
     def search(self, groups: list, out_dir: Path) -> None:
         """Features, search and one preset file per group, for one batch of groups."""
         from ..nams import search
         from .features import features_for_groups
-        from .roofcolour import roof_evidence
 
         started = time.perf_counter()
         feats = features_for_groups([[t for _, t in g] for g in groups], self.extractor, self.views)
@@ -178,6 +179,8 @@ class _Run:
         for k, (group, result) in enumerate(zip(groups, results)):
             index = len(self.presets)
             roof_pixels = {f"roof_pixels_{kind}": round(float(share[k]), 6) for kind, share in evidence.items()}
+            roof_pixels.update({f"roof_pixels_reference_{kind}": low for kind, low in self.evidence_reference.items()
+                                if kind in evidence})
             preset = DesignPreset(kind="group", name=f"{self.stem}-{index:03d}", design_space=self.ckpt.space.name,
                                   design=result.design, vote_shares=result.votes,
                                   search={"method": result.method, "loss": result.best_loss,
@@ -197,6 +200,8 @@ class _Run:
         images = len([p for p in paths if p not in {s for s, _ in skipped}])
         pop = population(presets, ckpt.space, f"{self.stem}-population", ckpt.model_id)
         save_preset(out_dir / "population.json", pop)
+        low = {kind: sum(p.roof_evidence()[kind]["low"] for p in presets)
+               for kind in self.evidence_reference if presets and kind in presets[0].roof_evidence()}
         report = {"target_dir": str(target_dir), "images": images, "tiles": self.tiles,
                   "group_count": len(presets),
                   "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
@@ -205,10 +210,12 @@ class _Run:
                   "seconds": {"read_and_features": self.seconds["features"], "search": self.seconds["search"],
                               "search_per_group": self.seconds["search"] / len(presets)},
                   "population": pop.distribution,
+                  "roof_pixels_reference": self.evidence_reference,
+                  "groups_with_low_roof_pixels": low,
                   "groups": [{"name": p.name, "design": p.design,
                               "confidence": {n: p.confidence(n) for n in ckpt.space.names},
-                              "roof_pixels": {k[len("roof_pixels_"):]: v for k, v in p.search.items()
-                                              if k.startswith("roof_pixels_")},
+                              "roof_pixels": {k: e["share"] for k, e in p.roof_evidence().items()},
+                              "roof_pixels_low": [k for k, e in p.roof_evidence().items() if e["low"]],
                               "sources": p.source_images} for p in presets]}
         _write_report(out_dir, report, self.thumbnails, presets, ckpt.space)
         return report
@@ -229,12 +236,24 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
              "|---|" + "---|" * (len(space.names) + len(kinds))]
     for g in report["groups"]:
         cells = " | ".join(f"{g['design'][n]} ({g['confidence'][n]:.0%})" for n in space.names)
-        evidence = "".join(f" {g['roof_pixels'][k]:.2%} |" for k in kinds)
+        evidence = "".join(f" {g['roof_pixels'][k]:.2%}{' (low)' if k in g['roof_pixels_low'] else ''} |"
+                           for k in kinds)
         lines.append(f"| {g['name']} | {cells} |{evidence}")
     if kinds:
         lines += ["", "Roof pixels: the share of a group's pixels the model's roof finder counts as roofs of each "
                   "kind, which the inferred roof textures rest on. Near 0, the roof textures rest on a few pixels "
                   "and say little: the roof finder learnt roofs from renders and may not see them in this imagery."]
+        reference = report["roof_pixels_reference"]
+        if reference:
+            lines += ["", f"(low): below what all but {EVIDENCE_QUANTILE:.0%} of the model's training cities show ("
+                      + ", ".join(f"{k} {v:.2%}" for k, v in reference.items()) + ")."]
+            for kind, count in report["groups_with_low_roof_pixels"].items():
+                if count:
+                    lines += ["", f"**Warning**: {count} of {report['group_count']} groups have low {kind}-roof "
+                              f"evidence; their inferred {kind} roof textures are unreliable."]
+        else:
+            lines += ["", "This model predates the training reference for roof pixels (retrain it to have low "
+                      "evidence flagged)."]
     if report["skipped"]:
         lines += ["", "Skipped files:", ""] + [f"- {s['path']}: {s['reason']}" for s in report["skipped"]]
     if report["nodata_tiles"]:

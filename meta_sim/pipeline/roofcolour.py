@@ -222,13 +222,55 @@ def roof_evidence(features: torch.Tensor, extractor) -> dict | None:
     compared once they sum to 1, so a share near 0 means the inferred roof colours rest on a few pixels
     (docs/design.md, "On real imagery the roof finder is the weak link"). None for an extractor without
     roof colour."""
-    blocks = getattr(extractor, "hist_blocks", ())
+    return _evidence(features, tuple(getattr(extractor, "hist_blocks", ())))
+
+
+def _evidence(features: torch.Tensor, blocks: tuple) -> dict | None:
+    """Per roof kind, the sum of its histogram block among the features' trailing ``blocks``."""
     if not blocks:
         return None
-    start, out = extractor.base_dim, {}
+    start, out = features.shape[1] - sum(blocks), {}
     for kind, width in zip(KINDS, blocks):
         out[kind] = features[:, start:start + width].sum(dim=1)
         start += width
+    return out
+
+
+# A target group whose roof evidence is below this quantile of the training designs' is called low.
+EVIDENCE_QUANTILE = 0.05
+
+
+def training_evidence(features: torch.Tensor, blocks: tuple) -> dict | None:
+    """What the checkpoint keeps of its training designs' roof evidence (each design's features being
+    the mean over its tiles, as a target group's are): per roof kind the ``EVIDENCE_QUANTILE`` quantile
+    ("low", the reference a target is held against) and the median, and the quantile used. None
+    without roof colour."""
+    shares = _evidence(features, tuple(blocks))
+    if shares is None:
+        return None
+    out = {"quantile": EVIDENCE_QUANTILE}
+    for kind, share in shares.items():
+        share = share.double()
+        out[kind] = {"low": round(float(torch.quantile(share, EVIDENCE_QUANTILE)), 6),
+                     "median": round(float(share.median()), 6)}
+    return out
+
+
+def evidence_reference(extra: Mapping) -> dict:
+    """Roof kind -> the training designs' low roof evidence from a checkpoint's ``extra``
+    (``training_evidence``); empty for a checkpoint from before it was kept. A damaged entry (not a share
+    in [0, 1]) is a MetaSimError: the checkpoint's checksum held, so it was written that way."""
+    kept = extra.get("roof_evidence")
+    if kept is None:
+        return {}
+    out = {}
+    for kind in KINDS:
+        low = kept.get(kind, {}).get("low") if isinstance(kept, Mapping) and isinstance(kept.get(kind), Mapping) \
+            else None
+        if isinstance(low, bool) or not isinstance(low, (int, float)) or not 0 <= low <= 1:
+            raise MetaSimError(f"the model's roof_evidence.{kind}.low must be a share in [0, 1], not {low!r}; "
+                               "retrain it")
+        out[kind] = float(low)
     return out
 
 

@@ -201,7 +201,10 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
                  "extractor_spec": settings.extractor, "seconds": seconds[f"train_{kind}"],
                  "tile_px": dataset.tile_px, "pixel_size_m": dataset.pixel_size_m, "dataset": asdict(dataset)}
         if features.roof_likelihood is not None:
+            from .roofcolour import training_evidence
+
             extra["roof_likelihood"] = features.roof_likelihood
+            extra["roof_evidence"] = training_evidence(features.features, features.hist_blocks)
         save_checkpoint(out_dir / f"{kind}.pt", kind, fit.model, fit.model.config, features.space.to_dict(),
                         fit.norm, features.extractor_id, extra=extra, history=fit.history)
     return seconds

@@ -55,6 +55,25 @@ class DesignPreset:
         shares = self.vote_shares.get(parameter) or self.distribution.get(parameter) or {}
         return float(shares.get(str(self.design.get(parameter)), 1.0 if not shares else 0.0))
 
+    def roof_evidence(self) -> dict:
+        """Roof kind -> ``{"share", "reference", "low"}`` from a group preset's search: the share of the
+        group's pixels the roof finder counted as roofs of that kind (``roof_pixels_<kind>``), the share
+        below which only a few of the model's training cities fall (``roof_pixels_reference_<kind>``;
+        None when the model did not record one) and whether the group is below it. Empty when the
+        preset records no roof evidence. Values that are not shares in [0, 1] are left out."""
+        out = {}
+        for key, value in self.search.items():
+            if not key.startswith("roof_pixels_") or key.startswith("roof_pixels_reference_"):
+                continue
+            kind = key[len("roof_pixels_"):]
+            if not _share(value):
+                continue
+            reference = self.search.get(f"roof_pixels_reference_{kind}")
+            reference = float(reference) if _share(reference) else None
+            out[kind] = {"share": float(value), "reference": reference,
+                         "low": reference is not None and value < reference}
+        return out
+
     def common_folder(self) -> str | None:
         """The folder the preset's images share ('' for bare file names); None when none is recorded or
         absolute and relative paths are mixed."""
@@ -169,6 +188,10 @@ def _plain_mapping(data: Mapping, key: str) -> dict:
                 (isinstance(value, (int, float)) and math.isfinite(value))):
             raise MetaSimError(f"preset field {key}.{name} must be a string, a finite number or null")
     return out
+
+
+def _share(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value <= 1
 
 
 def _source_images(data: Mapping) -> list:

@@ -27,7 +27,9 @@ from meta_sim.pipeline.roofcolour import (
     RoofLikelihood,
     checkpoint_extractor,
     ensure_roof_finder,
+    evidence_reference,
     roof_evidence,
+    training_evidence,
 )
 from meta_sim.sim.imageio import linear_to_srgb
 from meta_sim.sim.tiles import write_tile
@@ -113,6 +115,24 @@ def test_roof_evidence_is_the_share_of_pixels_the_finder_counts_as_each_roof(til
     assert float(evidence["sloped"][0]) == pytest.approx(12 * 20 / 32 ** 2, rel=0.1)
     assert float(evidence["flat"][1]) < 0.05 and float(evidence["sloped"][1]) < 0.05
     assert roof_evidence(ColourTexture()(batch), ColourTexture()) is None
+
+
+def test_the_training_reference_is_a_low_quantile_of_the_designs_roof_evidence():
+    """The checkpoint keeps, per roof kind, the 5% quantile of its training designs' roof evidence (what a
+    target group is held against) and the median; a damaged entry is an error, a missing one none."""
+    lead = torch.zeros(101, 3)
+    flat = torch.linspace(0, 0.2, 101)[:, None].expand(101, 4) / 4  # design k: share 0.002 k in 4 bins
+    sloped = torch.full((101, 2), 0.05)
+    kept = training_evidence(torch.cat([lead, flat, sloped], 1), (4, 2))
+    assert kept["quantile"] == 0.05
+    assert kept["flat"]["low"] == pytest.approx(0.01, abs=1e-6) and kept["flat"]["median"] == pytest.approx(0.1)
+    assert kept["sloped"] == {"low": pytest.approx(0.1), "median": pytest.approx(0.1)}
+    assert training_evidence(lead, ()) is None
+    assert evidence_reference({"roof_evidence": kept}) == {"flat": pytest.approx(0.01), "sloped": pytest.approx(0.1)}
+    assert evidence_reference({}) == {}
+    for damaged in ({"flat": {"low": 2.0}, "sloped": {"low": 0.1}}, {"flat": {"low": True}}, {"flat": 0.1}, "x"):
+        with pytest.raises(MetaSimError, match="roof_evidence"):
+            evidence_reference({"roof_evidence": damaged})
 
 
 def test_feature_norm_makes_unit_histograms_with_the_leading_parts_spread():
