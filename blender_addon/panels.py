@@ -129,6 +129,10 @@ class META_SIM_PT_presets(_MetaSimPanel, bpy.types.Panel):
                 layout.label(text=f"In the Asset Browser as {entry.name!r}", icon="CHECKMARK")
 
 
+# What a group's roof evidence outside its model's training range means (``DesignPreset.roof_evidence``).
+OUTSIDE = {"low": "too few", "high": "roofs everywhere"}
+
+
 def draw_preset_details(box, settings, item):
     """The selected preset: its textures large, vote shares and roof evidence, target; a population's
     distribution."""
@@ -147,9 +151,9 @@ def draw_preset_details(box, settings, item):
             column.label(text=f"vote share {getattr(item, f'{kind}_share'):.0%}")
             evidence = getattr(item, f"{kind}_evidence")
             if evidence >= 0:
-                low = getattr(item, f"{kind}_evidence_low")
-                column.label(text=f"roof pixels {evidence:.1%}" + (": too few, unreliable" if low else ""),
-                             icon="ERROR" if low else "NONE")
+                outside = getattr(item, f"{kind}_evidence_outside")
+                column.label(text=f"roof pixels {evidence:.1%}" + (f": {OUTSIDE[outside]}, unreliable" if outside
+                                                                    else ""), icon="ERROR" if outside else "NONE")
     box.label(text=f"Target: {item.target}", icon="IMAGE_DATA")
     if item.distribution:
         box.label(text="Distribution over the target's groups:")

@@ -62,7 +62,7 @@ def _row(path: Path, library) -> dict:
             row[f"{kind}_share"] = preset.confidence(parameter.name)
     for kind, evidence in preset.roof_evidence().items():
         if kind in names:
-            row[f"{kind}_evidence"], row[f"{kind}_evidence_low"] = evidence["share"], evidence["low"]
+            row[f"{kind}_evidence"], row[f"{kind}_evidence_outside"] = evidence["share"], evidence["outside"] or ""
     if preset.kind == "population":
         top = {name: sorted(((str(c), float(s)) for c, s in shares.items()), key=lambda cs: -cs[1])[:TOP_CHOICES]
                for name, shares in preset.distribution.items()}
@@ -96,8 +96,8 @@ class META_SIM_UL_presets(bpy.types.UIList):
                 row.label(text="", icon_value=previews.texture_icon(library, texture))
         row.label(text=item.name, icon="COMMUNITY" if item.kind == "population" else "NONE")
         shares = [f"{getattr(item, f'{kind}_share'):.0%}" for kind in ("flat", "sloped") if getattr(item, kind)]
-        low = any(getattr(item, f"{kind}_evidence_low") for kind in ("flat", "sloped"))
-        row.label(text=" / ".join(shares), icon="ERROR" if low else "NONE")
+        outside = any(getattr(item, f"{kind}_evidence_outside") for kind in ("flat", "sloped"))
+        row.label(text=" / ".join(shares), icon="ERROR" if outside else "NONE")
         row.label(text=item.target)
 
 

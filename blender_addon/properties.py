@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import bpy
 from bpy.props import (
-    BoolProperty,
     CollectionProperty,
     EnumProperty,
     FloatProperty,
@@ -42,11 +41,12 @@ class MetaSimPresetRow(bpy.types.PropertyGroup):
     flat_share: FloatProperty(name="Flat Vote Share", subtype="FACTOR")
     sloped_share: FloatProperty(name="Sloped Vote Share", subtype="FACTOR")
     # Roof evidence (group presets of `meta-sim infer`): the share of the group's pixels the roof finder saw
-    # as each kind of roof, -1 when the preset records none; "low" when below the model's training cities.
+    # as each kind of roof, -1 when the preset records none; "low" or "high" when outside the range of the
+    # model's training cities, else "".
     flat_evidence: FloatProperty(name="Flat Roof Pixels", default=-1.0)
     sloped_evidence: FloatProperty(name="Sloped Roof Pixels", default=-1.0)
-    flat_evidence_low: BoolProperty(name="Low Flat Roof Evidence")
-    sloped_evidence_low: BoolProperty(name="Low Sloped Roof Evidence")
+    flat_evidence_outside: StringProperty(name="Flat Roof Evidence Outside The Training Range")
+    sloped_evidence_outside: StringProperty(name="Sloped Roof Evidence Outside The Training Range")
     distribution: StringProperty(name="Distribution", description="Population presets: JSON, parameter -> "
                                  "[[choice, share], ...] (top choices)")
     error: StringProperty(name="Error", description="Why this preset cannot be applied")

@@ -188,10 +188,12 @@ def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views
     for s in report["skipped"]:
         click.echo(f"skipped {s['path']}: {s['reason']}", err=True)
     click.echo((out / "report.md").read_text())
-    for kind, count in report["groups_with_low_roof_pixels"].items():
-        if count:
-            click.echo(f"warning: {count} of {report['group_count']} groups have less {kind}-roof evidence than "
-                       f"the model's training cities; their inferred {kind} roofs are unreliable (report.md)", err=True)
+    for kind, ends in report["groups_outside_roof_pixels_range"].items():
+        for end, count in ends.items():
+            if count:
+                click.echo(f"warning: {count} of {report['group_count']} groups have {end} {kind}-roof evidence, "
+                           f"outside the model's training cities; their inferred {kind} roofs are unreliable "
+                           "(report.md)", err=True)
     click.echo(f"{report['group_count']} presets in {out / 'presets'}, population in {out / 'population.json'}")
 
 

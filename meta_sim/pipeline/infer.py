@@ -179,8 +179,9 @@ class _Run:
         for k, (group, result) in enumerate(zip(groups, results)):
             index = len(self.presets)
             roof_pixels = {f"roof_pixels_{kind}": round(float(share[k]), 6) for kind, share in evidence.items()}
-            roof_pixels.update({f"roof_pixels_reference_{kind}": low for kind, low in self.evidence_reference.items()
-                                if kind in evidence})
+            for kind, span in self.evidence_reference.items():
+                if kind in evidence:
+                    roof_pixels.update({f"roof_pixels_low_{kind}": span[0], f"roof_pixels_high_{kind}": span[1]})
             preset = DesignPreset(kind="group", name=f"{self.stem}-{index:03d}", design_space=self.ckpt.space.name,
                                   design=result.design, vote_shares=result.votes,
                                   search={"method": result.method, "loss": result.best_loss,
@@ -200,8 +201,9 @@ class _Run:
         images = len([p for p in paths if p not in {s for s, _ in skipped}])
         pop = population(presets, ckpt.space, f"{self.stem}-population", ckpt.model_id)
         save_preset(out_dir / "population.json", pop)
-        low = {kind: sum(p.roof_evidence()[kind]["low"] for p in presets)
-               for kind in self.evidence_reference if presets and kind in presets[0].roof_evidence()}
+        evidence = [p.roof_evidence() for p in presets]
+        outside = {kind: {end: sum(e[kind]["outside"] == end for e in evidence) for end in ("low", "high")}
+                   for kind in self.evidence_reference if evidence and kind in evidence[0]}
         report = {"target_dir": str(target_dir), "images": images, "tiles": self.tiles,
                   "group_count": len(presets),
                   "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
@@ -210,13 +212,13 @@ class _Run:
                   "seconds": {"read_and_features": self.seconds["features"], "search": self.seconds["search"],
                               "search_per_group": self.seconds["search"] / len(presets)},
                   "population": pop.distribution,
-                  "roof_pixels_reference": self.evidence_reference,
-                  "groups_with_low_roof_pixels": low,
+                  "roof_pixels_range": {k: list(span) for k, span in self.evidence_reference.items()},
+                  "groups_outside_roof_pixels_range": outside,
                   "groups": [{"name": p.name, "design": p.design,
                               "confidence": {n: p.confidence(n) for n in ckpt.space.names},
-                              "roof_pixels": {k: e["share"] for k, e in p.roof_evidence().items()},
-                              "roof_pixels_low": [k for k, e in p.roof_evidence().items() if e["low"]],
-                              "sources": p.source_images} for p in presets]}
+                              "roof_pixels": {k: e["share"] for k, e in ev.items()},
+                              "roof_pixels_outside": {k: e["outside"] for k, e in ev.items() if e["outside"]},
+                              "sources": p.source_images} for p, ev in zip(presets, evidence)]}
         _write_report(out_dir, report, self.thumbnails, presets, ckpt.space)
         return report
 
@@ -236,24 +238,28 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
              "|---|" + "---|" * (len(space.names) + len(kinds))]
     for g in report["groups"]:
         cells = " | ".join(f"{g['design'][n]} ({g['confidence'][n]:.0%})" for n in space.names)
-        evidence = "".join(f" {g['roof_pixels'][k]:.2%}{' (low)' if k in g['roof_pixels_low'] else ''} |"
+        evidence = "".join(f" {g['roof_pixels'][k]:.2%}"
+                           + (f" ({g['roof_pixels_outside'][k]})" if k in g['roof_pixels_outside'] else "") + " |"
                            for k in kinds)
         lines.append(f"| {g['name']} | {cells} |{evidence}")
     if kinds:
         lines += ["", "Roof pixels: the share of a group's pixels the model's roof finder counts as roofs of each "
                   "kind, which the inferred roof textures rest on. Near 0, the roof textures rest on a few pixels "
                   "and say little: the roof finder learnt roofs from renders and may not see them in this imagery."]
-        reference = report["roof_pixels_reference"]
-        if reference:
-            lines += ["", f"(low): below what all but {EVIDENCE_QUANTILE:.0%} of the model's training cities show ("
-                      + ", ".join(f"{k} {v:.2%}" for k, v in reference.items()) + ")."]
-            for kind, count in report["groups_with_low_roof_pixels"].items():
-                if count:
-                    lines += ["", f"**Warning**: {count} of {report['group_count']} groups have low {kind}-roof "
-                              f"evidence; their inferred {kind} roof textures are unreliable."]
+        span = report["roof_pixels_range"]
+        if span:
+            lines += ["", f"(low), (high): outside the range all but {2 * EVIDENCE_QUANTILE:.0%} of the model's "
+                      "training cities span (" + ", ".join(f"{k} {lo:.2%}-{hi:.2%}" for k, (lo, hi) in span.items())
+                      + "). Low: the roof finder sees few roofs of that kind. High: it sees them nearly everywhere, "
+                      "ground included. Either way the inferred roof texture of that kind is unreliable."]
+            for kind, ends in report["groups_outside_roof_pixels_range"].items():
+                for end, count in ends.items():
+                    if count:
+                        lines += ["", f"**Warning**: {count} of {report['group_count']} groups have {end} {kind}-roof "
+                                  f"evidence; their inferred {kind} roof textures are unreliable."]
         else:
-            lines += ["", "This model predates the training reference for roof pixels (retrain it to have low "
-                      "evidence flagged)."]
+            lines += ["", "This model predates the training range of roof pixels (retrain it to have groups outside "
+                      "it flagged)."]
     if report["skipped"]:
         lines += ["", "Skipped files:", ""] + [f"- {s['path']}: {s['reason']}" for s in report["skipped"]]
     if report["nodata_tiles"]:

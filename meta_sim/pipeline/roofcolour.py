@@ -236,14 +236,16 @@ def _evidence(features: torch.Tensor, blocks: tuple) -> dict | None:
     return out
 
 
-# A target group whose roof evidence is below this quantile of the training designs' is called low.
+# A target group whose roof evidence is below this quantile of the training designs', or above the
+# opposite one, is outside what the model saw: its roof finder may be blind to the target's roofs, or see
+# roofs everywhere.
 EVIDENCE_QUANTILE = 0.05
 
 
 def training_evidence(features: torch.Tensor, blocks: tuple) -> dict | None:
     """What the checkpoint keeps of its training designs' roof evidence (each design's features being
-    the mean over its tiles, as a target group's are): per roof kind the ``EVIDENCE_QUANTILE`` quantile
-    ("low", the reference a target is held against) and the median, and the quantile used. None
+    the mean over its tiles, as a target group's are): per roof kind its ``EVIDENCE_QUANTILE`` quantile
+    ("low"), median and ``1 - EVIDENCE_QUANTILE`` quantile ("high"), and the quantile used. None
     without roof colour."""
     shares = _evidence(features, tuple(blocks))
     if shares is None:
@@ -252,25 +254,28 @@ def training_evidence(features: torch.Tensor, blocks: tuple) -> dict | None:
     for kind, share in shares.items():
         share = share.double()
         out[kind] = {"low": round(float(torch.quantile(share, EVIDENCE_QUANTILE)), 6),
-                     "median": round(float(share.median()), 6)}
+                     "median": round(float(share.median()), 6),
+                     "high": round(float(torch.quantile(share, 1.0 - EVIDENCE_QUANTILE)), 6)}
     return out
 
 
 def evidence_reference(extra: Mapping) -> dict:
-    """Roof kind -> the training designs' low roof evidence from a checkpoint's ``extra``
-    (``training_evidence``); empty for a checkpoint from before it was kept. A damaged entry (not a share
-    in [0, 1]) is a MetaSimError: the checkpoint's checksum held, so it was written that way."""
+    """Roof kind -> ``(low, high)``, the training designs' range of roof evidence from a checkpoint's
+    ``extra`` (``training_evidence``); empty for a checkpoint from before it was kept. A damaged entry (not
+    shares in [0, 1] with low <= high) is a MetaSimError: the checkpoint's checksum held, so it was written
+    that way."""
     kept = extra.get("roof_evidence")
     if kept is None:
         return {}
     out = {}
     for kind in KINDS:
-        low = kept.get(kind, {}).get("low") if isinstance(kept, Mapping) and isinstance(kept.get(kind), Mapping) \
-            else None
-        if isinstance(low, bool) or not isinstance(low, (int, float)) or not 0 <= low <= 1:
-            raise MetaSimError(f"the model's roof_evidence.{kind}.low must be a share in [0, 1], not {low!r}; "
-                               "retrain it")
-        out[kind] = float(low)
+        entry = kept.get(kind) if isinstance(kept, Mapping) else None
+        ends = tuple(entry.get(end) if isinstance(entry, Mapping) else None for end in ("low", "high"))
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1 for v in ends) \
+                or ends[0] > ends[1]:
+            raise MetaSimError(f"the model's roof_evidence.{kind} must hold shares low <= high in [0, 1], not "
+                               f"{entry!r}; retrain it")
+        out[kind] = (float(ends[0]), float(ends[1]))
     return out
 
 

@@ -35,6 +35,7 @@ from .design import DesignSpace
 FORMAT = "meta-sim-design-preset"
 VERSION = 1
 KINDS = ("group", "population")
+ROOF_KINDS = ("flat", "sloped")  # the roof evidence a group preset may record
 
 
 @dataclass
@@ -56,22 +57,21 @@ class DesignPreset:
         return float(shares.get(str(self.design.get(parameter)), 1.0 if not shares else 0.0))
 
     def roof_evidence(self) -> dict:
-        """Roof kind -> ``{"share", "reference", "low"}`` from a group preset's search: the share of the
-        group's pixels the roof finder counted as roofs of that kind (``roof_pixels_<kind>``), the share
-        below which only a few of the model's training cities fall (``roof_pixels_reference_<kind>``;
-        None when the model did not record one) and whether the group is below it. Empty when the
-        preset records no roof evidence. Values that are not shares in [0, 1] are left out."""
+        """Roof kind -> ``{"share", "range", "outside"}`` from a group preset's search: the share of the
+        group's pixels the roof finder counted as roofs of that kind (``roof_pixels_<kind>``), the range
+        the model's training cities span but for a few at either end (``roof_pixels_low_<kind>`` and
+        ``roof_pixels_high_<kind>``; None when the model did not record one), and "low" or "high" when
+        the share is outside it (else None). Empty when the preset records no roof evidence; values that
+        are not shares in [0, 1] are left out."""
         out = {}
-        for key, value in self.search.items():
-            if not key.startswith("roof_pixels_") or key.startswith("roof_pixels_reference_"):
+        for kind in ROOF_KINDS:
+            share = self.search.get(f"roof_pixels_{kind}")
+            if not _share(share):
                 continue
-            kind = key[len("roof_pixels_"):]
-            if not _share(value):
-                continue
-            reference = self.search.get(f"roof_pixels_reference_{kind}")
-            reference = float(reference) if _share(reference) else None
-            out[kind] = {"share": float(value), "reference": reference,
-                         "low": reference is not None and value < reference}
+            low, high = (self.search.get(f"roof_pixels_{end}_{kind}") for end in ("low", "high"))
+            span = (float(low), float(high)) if _share(low) and _share(high) and low <= high else None
+            outside = None if span is None else "low" if share < span[0] else "high" if share > span[1] else None
+            out[kind] = {"share": float(share), "range": span, "outside": outside}
         return out
 
     def common_folder(self) -> str | None:

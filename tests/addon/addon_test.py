@@ -245,7 +245,8 @@ def preset_folder(tmp_path, bank):
                            vote_shares={"flat_roof": {flat[k]: 0.62, flat[9]: 0.38}, "sloped_roof": {sloped[2]: 0.5}},
                            source_images=[f"/data/kampala/t{k}{j}.png" for j in range(3)], model_id="abc",
                            search={"roof_pixels_flat": share, "roof_pixels_sloped": 0.2,
-                                   "roof_pixels_reference_flat": 0.03, "roof_pixels_reference_sloped": 0.05})
+                                   "roof_pixels_low_flat": 0.03, "roof_pixels_high_flat": 0.4,
+                                   "roof_pixels_low_sloped": 0.05, "roof_pixels_high_sloped": 0.3})
               for k, share in ((5, 0.12), (6, 0.004))]
     for preset in groups:
         save_preset(tmp_path / f"{preset.name}.json", preset)
@@ -272,8 +273,10 @@ def test_presets_browser_applies_good_presets_and_rejects_bad_ones(addon, settin
     assert not good.error and good.flat == bank.ids("flat")[5] and abs(good.flat_share - 0.62) < 1e-6
     assert good.target == "3 images in /data/kampala"
     # Roof evidence: kampala-006's flat roofs rest on fewer pixels than the model's training cities show.
-    assert abs(good.flat_evidence - 0.12) < 1e-6 and not good.flat_evidence_low and not good.sloped_evidence_low
-    assert rows["kampala-006.json"].flat_evidence_low and not rows["kampala-006.json"].sloped_evidence_low
+    assert abs(good.flat_evidence - 0.12) < 1e-6 and not good.flat_evidence_outside
+    assert not good.sloped_evidence_outside
+    assert rows["kampala-006.json"].flat_evidence_outside == "low"
+    assert not rows["kampala-006.json"].sloped_evidence_outside
     assert rows["population.json"].flat_evidence == -1.0  # a population records none
     shares = json.loads(rows["population.json"].distribution)["flat_roof"]
     assert shares[0][0] == bank.ids("flat")[5] and abs(shares[0][1] - 2 / 3) < 1e-6
@@ -506,7 +509,7 @@ def test_panels_draw_in_every_state(addon, settings, preset_folder, tmp_path):
             assert row.error in labels
         elif row.distribution:
             assert "Distribution over the target's groups:" in labels
-        elif row.flat_evidence_low:  # the group whose flat roof rests on too few pixels says so
+        elif row.flat_evidence_outside:  # the group whose flat roof rests on too few pixels says so
             assert "roof pixels 0.4%: too few, unreliable" in labels
         else:
             assert "roof pixels 12.0%" in labels

@@ -148,9 +148,9 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
         # How much roof the finder saw: the share of the group's pixels, for each roof kind.
         assert 0.0 <= preset.search["roof_pixels_flat"] <= 1.0 and 0.0 <= preset.search["roof_pixels_sloped"] <= 1.0
         assert preset.search["roof_pixels_flat"] + preset.search["roof_pixels_sloped"] > 0.0
-        # Beside it, the share below which only 5% of the model's training cities fall.
+        # Beside it, the range the model's training cities span but for 5% at either end.
         assert set(preset.roof_evidence()) == {"flat", "sloped"}
-        assert all(0.0 <= e["reference"] <= 1.0 for e in preset.roof_evidence().values())
+        assert all(0.0 <= e["range"][0] <= e["range"][1] <= 1.0 for e in preset.roof_evidence().values())
     population = load_preset(tmp_path / "inferred" / "population.json")
     assert population.kind == "population" and sum(d["count"] for d in population.designs) == 2
     report = json.loads((tmp_path / "inferred" / "report.json").read_text())
@@ -159,38 +159,41 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
     assert set(report["groups"][0]["roof_pixels"]) == {"flat", "sloped"}
     assert "| flat roof pixels |" in (tmp_path / "inferred" / "report.md").read_text()
-    assert set(report["roof_pixels_reference"]) == {"flat", "sloped"}
-    assert set(report["groups_with_low_roof_pixels"]) == {"flat", "sloped"}
+    assert set(report["roof_pixels_range"]) == {"flat", "sloped"}
+    assert set(report["groups_outside_roof_pixels_range"]) == {"flat", "sloped"}
     assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
 
 
-def test_infer_warns_when_a_group_shows_less_roof_than_the_training_cities(evaluated, tiny_env, tmp_path):
-    """A model whose training cities all showed more flat roof than any target flags every group, in the
-    presets, the report and on stderr; one whose training cities showed none flags none; the roof evidence
-    itself is the same."""
+def test_infer_warns_when_a_groups_roof_evidence_is_outside_the_training_cities(evaluated, tiny_env, tmp_path):
+    """A model whose training cities all showed more flat roof than any target flags every group low, one
+    whose training cities all showed less sloped roof flags them high, in the presets, the report and on
+    stderr; one whose range holds everything flags none; the roof evidence itself is the same."""
     from meta_sim.nams import load_checkpoint, save_checkpoint
 
     out, _ = evaluated
     ckpt = load_checkpoint(out / "nams.pt", "nams")
-    for name, flat in (("lenient", 0.0), ("strict", 1.0)):
-        extra = dict(ckpt.extra, roof_evidence={"quantile": 0.05, "flat": {"low": flat, "median": flat},
-                                                "sloped": {"low": 0.0, "median": 0.0}})
+    for name, flat, sloped in (("lenient", (0.0, 1.0), (0.0, 1.0)), ("strict", (1.0, 1.0), (0.0, 0.0))):
+        extra = dict(ckpt.extra, roof_evidence={"quantile": 0.05, "flat": {"low": flat[0], "high": flat[1]},
+                                                "sloped": {"low": sloped[0], "high": sloped[1]}})
         save_checkpoint(tmp_path / f"{name}.pt", "nams", ckpt.model, ckpt.model.config, ckpt.space.to_dict(),
                         ckpt.feature_norm, ckpt.extractor_id, extra=extra, history=ckpt.history)
     folder = _target_folder(tmp_path, tiny_env)
     runs = {}
     for name in ("lenient", "strict"):
-        model = tmp_path / f"{name}.pt"
-        runs[name] = _cli("infer", folder, "--model", model, "--out", tmp_path / name, "--group-size", 2)
+        runs[name] = _cli("infer", folder, "--model", tmp_path / f"{name}.pt", "--out", tmp_path / name,
+                          "--group-size", 2)
         assert runs[name].exit_code == 0, runs[name].output
-    assert "warning: 2 of 2 groups have less flat-roof evidence" in runs["strict"].stderr
-    assert "roof evidence" not in runs["lenient"].stderr and "sloped-roof" not in runs["strict"].stderr
+    assert "warning: 2 of 2 groups have low flat-roof evidence" in runs["strict"].stderr
+    assert "warning: 2 of 2 groups have high sloped-roof evidence" in runs["strict"].stderr
+    assert "roof evidence" not in runs["lenient"].stderr
     report = json.loads((tmp_path / "strict" / "report.json").read_text())
-    assert report["groups_with_low_roof_pixels"]["flat"] == 2
-    assert all(g["roof_pixels_low"] == ["flat"] for g in report["groups"])
+    assert report["groups_outside_roof_pixels_range"] == {"flat": {"low": 2, "high": 0},
+                                                          "sloped": {"low": 0, "high": 2}}
+    assert all(g["roof_pixels_outside"] == {"flat": "low", "sloped": "high"} for g in report["groups"])
     assert "(low)" in (tmp_path / "strict" / "report.md").read_text()
     lenient = json.loads((tmp_path / "lenient" / "report.json").read_text())
-    assert lenient["groups_with_low_roof_pixels"] == {"flat": 0, "sloped": 0}
+    assert lenient["groups_outside_roof_pixels_range"] == {"flat": {"low": 0, "high": 0},
+                                                           "sloped": {"low": 0, "high": 0}}
     assert [g["roof_pixels"] for g in lenient["groups"]] == [g["roof_pixels"] for g in report["groups"]]
 
 

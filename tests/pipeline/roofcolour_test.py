@@ -117,20 +117,25 @@ def test_roof_evidence_is_the_share_of_pixels_the_finder_counts_as_each_roof(til
     assert roof_evidence(ColourTexture()(batch), ColourTexture()) is None
 
 
-def test_the_training_reference_is_a_low_quantile_of_the_designs_roof_evidence():
-    """The checkpoint keeps, per roof kind, the 5% quantile of its training designs' roof evidence (what a
-    target group is held against) and the median; a damaged entry is an error, a missing one none."""
+def test_the_training_range_spans_the_designs_roof_evidence_but_for_5_percent_at_either_end():
+    """The checkpoint keeps, per roof kind, the 5% and 95% quantiles of its training designs' roof evidence
+    (the range a target group is held against) and the median; a damaged entry is an error, a missing one
+    none."""
     lead = torch.zeros(101, 3)
     flat = torch.linspace(0, 0.2, 101)[:, None].expand(101, 4) / 4  # design k: share 0.002 k in 4 bins
     sloped = torch.full((101, 2), 0.05)
     kept = training_evidence(torch.cat([lead, flat, sloped], 1), (4, 2))
     assert kept["quantile"] == 0.05
-    assert kept["flat"]["low"] == pytest.approx(0.01, abs=1e-6) and kept["flat"]["median"] == pytest.approx(0.1)
-    assert kept["sloped"] == {"low": pytest.approx(0.1), "median": pytest.approx(0.1)}
+    assert kept["flat"] == {"low": pytest.approx(0.01, abs=1e-6), "median": pytest.approx(0.1),
+                            "high": pytest.approx(0.19, abs=1e-6)}
+    assert kept["sloped"] == {"low": pytest.approx(0.1), "median": pytest.approx(0.1), "high": pytest.approx(0.1)}
     assert training_evidence(lead, ()) is None
-    assert evidence_reference({"roof_evidence": kept}) == {"flat": pytest.approx(0.01), "sloped": pytest.approx(0.1)}
+    assert evidence_reference({"roof_evidence": kept}) == {"flat": pytest.approx((0.01, 0.19)),
+                                                           "sloped": pytest.approx((0.1, 0.1))}
     assert evidence_reference({}) == {}
-    for damaged in ({"flat": {"low": 2.0}, "sloped": {"low": 0.1}}, {"flat": {"low": True}}, {"flat": 0.1}, "x"):
+    good = {"low": 0.1, "high": 0.2}
+    for damaged in ({"flat": {"low": 2.0, "high": 3.0}, "sloped": good}, {"flat": {"low": True, "high": 0.1}},
+                    {"flat": {"low": 0.3, "high": 0.2}, "sloped": good}, {"flat": 0.1}, {"flat": good}, "x"):
         with pytest.raises(MetaSimError, match="roof_evidence"):
             evidence_reference({"roof_evidence": damaged})
 

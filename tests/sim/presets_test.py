@@ -28,6 +28,23 @@ def test_round_trip_and_confidence(space, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["p.json"]  # no temporary left behind
 
 
+def test_roof_evidence_is_read_from_the_search_and_held_against_the_training_range(space, tmp_path):
+    """A group's roof pixels per kind, the training range beside them, and whether they fall below or above
+    it; a preset without them has none, and values that are not shares are left out, never trusted."""
+    preset = _preset(space)
+    assert preset.roof_evidence() == {}
+    preset.search.update(roof_pixels_flat=0.01, roof_pixels_low_flat=0.02, roof_pixels_high_flat=0.3,
+                         roof_pixels_sloped=0.9, roof_pixels_low_sloped=0.0, roof_pixels_high_sloped=0.2)
+    loaded = load_preset(save_preset(tmp_path / "p.json", preset), space)
+    assert loaded.roof_evidence() == {"flat": {"share": 0.01, "range": (0.02, 0.3), "outside": "low"},
+                                      "sloped": {"share": 0.9, "range": (0.0, 0.2), "outside": "high"}}
+    loaded.search.update(roof_pixels_sloped=0.1, roof_pixels_high_flat=True)
+    assert loaded.roof_evidence() == {"flat": {"share": 0.01, "range": None, "outside": None},
+                                      "sloped": {"share": 0.1, "range": (0.0, 0.2), "outside": None}}
+    loaded.search.update(roof_pixels_flat=1.5, roof_pixels_sloped="0.1", roof_pixels_low_sloped=0.3)
+    assert loaded.roof_evidence() == {}
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "something-else"}, "not a meta-sim design preset"),
     ({"version": 2}, "newer than this meta-sim reads"),
