@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -87,6 +87,11 @@ bench-realism: setup
 # (long: the neural-adjoint sweep runs on both splits of both experiments; the validation targets of seed 1 are reused).
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
+
+# Each model's roof finder on the real domains' labelled scenes (rooftops-v1's and overhead-v2's models; trains
+# what the cache lacks): roof pixels it counts against the building masks and the training cities' range.
+bench-roof-finder: setup
+	META_SIM_THREADS=2 $(BIN)/meta-sim bench roof-finder --out benchmarks/roof_finder.json
 
 # What each extreme case (constant, black, white, HDR and NaN targets; one-tile groups; M=1, S=M, k=0, r=0 and 1;
 # a one-choice space; zero-variance features; bfloat16) ends in, on tiny models made in the run (a few minutes).

@@ -389,6 +389,11 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
+        if hasattr(h.methods.extractor, "finder"):  # what the roof colours of the inferred designs rest on
+            from .finder_bench import finder_on_scenes
+
+            rows[domain]["roof_finder"] = {name: finder_on_scenes(h.methods.extractor, scenes, h.dataset.pixel_size_m)
+                                           for name, scenes in (("validation", adapt), ("test", test))}
         for param in space.parameters:  # what the inferred designs set replaces the run's setting
             if getattr(param, "appearance", None) in ("sensor", "roof_jitter", "ground"):
                 rows[domain][param.appearance] = "inferred"
@@ -663,5 +668,22 @@ def realism_markdown(result: dict) -> str:
             lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
                          f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                          + " | ".join(cells) + " |")
+    found = [(domain, row) for domain, row in rows if "roof_finder" in row]
+    if found:
+        lines += ["", "The model's roof finder on real imagery (the pixels whose colours become the inferred roof "
+                  "textures): the share of pixels it counts as flat and as sloped roofs (each by its weight, as the "
+                  "features count them), beside the true building share, and its building map (p(flat) + "
+                  "p(sloped) above 0.5) against the building masks. Validation (`adapt`) / test scenes.", "",
+                  "| domain | space | flat roof pixels % | sloped roof pixels % | building share % | IoU % "
+                  "| precision % | recall % |", "|---|---|---|---|---|---|---|---|"]
+        for domain, row in found:
+            v, t = row["roof_finder"]["validation"], row["roof_finder"]["test"]
+
+            def pair(key, v=v, t=t):
+                return f"{100 * v[key]:.1f} / {100 * t[key]:.1f}"
+            lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | "
+                         f"{100 * v['roof_pixels']['flat']:.1f} / {100 * t['roof_pixels']['flat']:.1f} | "
+                         f"{100 * v['roof_pixels']['sloped']:.1f} / {100 * t['roof_pixels']['sloped']:.1f} | "
+                         + " | ".join(pair(k) for k in ("building_share", "iou", "precision", "recall")) + " |")
     lines += ["", f"Renders: the `{result['render_preset']}` preset; {result['seconds'] / 60:.0f} min of wall time."]
     return "\n".join(lines) + "\n"

@@ -279,6 +279,30 @@ def evidence_reference(extra: Mapping) -> dict:
     return out
 
 
+def finder_agreement(extractor, images, masks) -> dict:
+    """How ``extractor``'s roof finder reads labelled imagery: display-sRGB (H, W, 3) images with bool
+    building masks, at the pixel size of the training tiles. Per roof kind the share of the pixels it
+    counts as that kind (each by its probability to the weight power, as the features count them:
+    ``roof_evidence``), beside the true building share; and the IoU, precision and recall of its building
+    map (p(flat) + p(sloped) above 0.5, on 2x2-pixel means) against the masks (majority of each 2x2 block)."""
+    counted = {kind: 0.0 for kind in KINDS}
+    pixels = hits = found = truth = 0
+    for image, mask in zip(images, masks):
+        batch = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1)[None]
+        level1 = _level1(torch.nan_to_num(batch, nan=0.0).clamp(0.0, 1.0))
+        weights = extractor.finder.weights(level1)[0]
+        for k, kind in enumerate(KINDS):
+            counted[kind] += float((weights[k] ** extractor.power).sum())
+        seen = weights.sum(0) > 0.5
+        real = _level1(torch.from_numpy(np.asarray(mask, dtype=np.float32))[None, None])[0, 0] > 0.5
+        pixels, hits = pixels + seen.numel(), hits + int((seen & real).sum())
+        found, truth = found + int(seen.sum()), truth + int(real.sum())
+    union = found + truth - hits
+    return {"roof_pixels": {kind: counted[kind] / max(pixels, 1) for kind in KINDS},
+            "building_share": truth / max(pixels, 1), "iou": hits / union if union else 1.0,
+            "precision": hits / found if found else 0.0, "recall": hits / truth if truth else 1.0}
+
+
 def checkpoint_extractor(ckpt, weights: Path | None = None):
     """The extractor a checkpoint's features came from: its base extractor, with the roof colour
     part when the checkpoint has one. ``weights``: a backbone's weights file, when it needs one."""

@@ -204,6 +204,13 @@ def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_meas
     checked = [line for line in lines if line.startswith("| banepa")][1]  # the validation table's row
     assert "| 12.5 +- 0.0 | 50.0 +- 10.0 | 75.0 +- 0.0 | 20.0 |" in checked
     assert len([line for line in lines if line.startswith("| kampala")]) == 1  # measured before validation
+    assert not any("roof finder" in line for line in lines)  # rows measured before it: no table
+    found = {"roof_pixels": {"flat": 0.9, "sloped": 0.0}, "building_share": 0.3, "iou": 0.25, "precision": 0.3,
+             "recall": 0.95}
+    result["runs"]["a"]["banepa"]["roof_finder"] = {"validation": found, "test": {**found, "iou": 0.2}}
+    finder = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    assert finder == ("| banepa | rooftops-v1 | 90.0 / 90.0 | 0.0 / 0.0 | 30.0 / 30.0 | 25.0 / 20.0 | 30.0 / 30.0 "
+                      "| 95.0 / 95.0 |")
 
 
 def test_the_realism_picture_shows_real_scenes_and_renders_on_the_same_ground():

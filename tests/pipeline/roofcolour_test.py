@@ -28,6 +28,7 @@ from meta_sim.pipeline.roofcolour import (
     checkpoint_extractor,
     ensure_roof_finder,
     evidence_reference,
+    finder_agreement,
     roof_evidence,
     training_evidence,
 )
@@ -115,6 +116,22 @@ def test_roof_evidence_is_the_share_of_pixels_the_finder_counts_as_each_roof(til
     assert float(evidence["sloped"][0]) == pytest.approx(12 * 20 / 32 ** 2, rel=0.1)
     assert float(evidence["flat"][1]) < 0.05 and float(evidence["sloped"][1]) < 0.05
     assert roof_evidence(ColourTexture()(batch), ColourTexture()) is None
+
+
+def test_finder_agreement_scores_the_roof_finder_against_building_masks(tiles, tmp_path):
+    """bench-realism's roof-finder table: on a scene whose roofs the finder knows, its building map matches
+    the mask and its roof pixels the roofs' share; against a mask of other ground, it matches nothing."""
+    extractor = RoofColourExtractor(ColourTexture(), ensure_roof_finder(tmp_path, tiles, "colour"), power=1.0)
+    rgb, roof = _scene()
+    image = linear_to_srgb(rgb).astype(np.float32)
+    scored = finder_agreement(extractor, [image, image], [roof > 0, roof > 0])
+    assert scored["building_share"] == pytest.approx((12 * 16 + 12 * 20) / 32 ** 2)
+    assert scored["iou"] > 0.9 and scored["precision"] > 0.9 and scored["recall"] > 0.9
+    assert scored["roof_pixels"]["flat"] == pytest.approx(12 * 16 / 32 ** 2, rel=0.15)
+    assert scored["roof_pixels"]["sloped"] == pytest.approx(12 * 20 / 32 ** 2, rel=0.15)
+    elsewhere = np.zeros((32, 32), bool)
+    elsewhere[28:, :] = True  # ground only
+    assert finder_agreement(extractor, [image], [elsewhere])["iou"] == 0.0
 
 
 def test_the_training_range_spans_the_designs_roof_evidence_but_for_5_percent_at_either_end():

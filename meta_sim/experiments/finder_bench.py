@@ -1,0 +1,88 @@
+"""`meta-sim bench roof-finder`: how each model's roof finder reads real imagery.
+
+On a real target the inferred roof textures are the colours of the pixels the
+model's roof finder (learnt on renders) counts as roofs. This benchmark puts
+that finder on every shared real domain's labelled scenes, the ``adapt`` ones
+(validation: a finder setting may be chosen here) and the ``test`` ones (report
+only), and compares what it counts with the building masks
+(``pipeline.roofcolour.finder_agreement``), beside the range of roof pixels
+the model's training cities span, which `meta-sim infer` holds each target
+group against. One model per design space: the default space's model as
+`meta-sim infer` uses it, and the realism spaces' models as bench-realism
+trains them (twice the designs).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from ..core.progress import Bars
+from . import realdomains
+
+DEFAULT_SPACES = ("rooftops-v1", "overhead-v2")
+
+
+def finder_on_scenes(extractor, scenes: list, pixel_size_m: float) -> dict:
+    """``roofcolour.finder_agreement`` on real scenes brought to the training tiles' ``pixel_size_m``."""
+    from ..pipeline.roofcolour import finder_agreement
+
+    pairs = [realdomains.at_pixel_size(scene, pixel_size_m) for scene in scenes]
+    return finder_agreement(extractor, [i for i, _ in pairs], [m for _, m in pairs])
+
+
+def bench_roof_finder(spaces=DEFAULT_SPACES, root: Path | None = None, realdata: Path | None = None,
+                      bars: Bars | None = None) -> dict:
+    """Per design space of ``spaces``: its model's id, the training cities' roof-pixel range
+    (``roofcolour.training_evidence``) and, per real domain, the finder on its validation and test scenes.
+    Trains what the cache lacks. MetaSimError for an unknown space or missing real data."""
+    from ..nams import load_checkpoint
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.roofcolour import checkpoint_extractor, training_evidence
+    from ..pipeline.workflow import ModelSettings, ensure_models
+
+    started = time.perf_counter()
+    realdata = realdomains.require(Path(realdata or realdomains.REALDATA))
+    default, settings = DatasetConfig(), ModelSettings()
+    result = {"spaces": {}}
+    for space in spaces:
+        dataset = replace(default, space=space)
+        if space != default.space:  # as bench-realism trains the other spaces' models
+            dataset = replace(dataset, designs=2 * default.designs)
+        models = ensure_models(dataset, settings, root, bars)
+        ckpt = load_checkpoint(models.nams_path, "nams")
+        extractor = checkpoint_extractor(ckpt)
+        domains = {}
+        for domain in realdomains.DOMAINS:
+            adapt, test = realdomains.split(realdomains.scenes(domain, realdata))
+            domains[domain] = {"validation": finder_on_scenes(extractor, adapt, dataset.pixel_size_m),
+                               "test": finder_on_scenes(extractor, test, dataset.pixel_size_m)}
+        result["spaces"][space] = {
+            "model_id": ckpt.model_id, "designs": dataset.designs, "roof_finder": settings.roof_finder,
+            "training": training_evidence(models.features.features, models.features.hist_blocks),
+            "domains": domains}
+    result["seconds"] = round(time.perf_counter() - started, 1)
+    return result
+
+
+def format_roof_finder_table(result: dict) -> str:
+    """``bench_roof_finder``'s result as Markdown."""
+    lines = ["Each model's roof finder on the real domains' labelled scenes, validation (`adapt`) / test: the "
+             "share of pixels it counts as flat and as sloped roofs (each by its weight, as the features count "
+             "them; in brackets the range all but 10% of the model's training cities span), the true building "
+             "share, and its building map (p(flat) + p(sloped) above 0.5) against the building masks, %.", "",
+             "| space | model | domain | flat roof pixels | sloped roof pixels | building share | IoU | precision "
+             "| recall |", "|---|---|---|---|---|---|---|---|---|"]
+    for space, row in result["spaces"].items():
+        training = row["training"] or {}
+        spans = {kind: f" [{100 * training[kind]['low']:.1f}-{100 * training[kind]['high']:.1f}]"
+                 if kind in training else "" for kind in ("flat", "sloped")}
+        for domain, split in row["domains"].items():
+            v, t = split["validation"], split["test"]
+            cells = [f"{100 * v['roof_pixels'][k]:.1f} / {100 * t['roof_pixels'][k]:.1f}{spans[k]}"
+                     for k in ("flat", "sloped")]
+            cells += [f"{100 * v[k]:.1f} / {100 * t[k]:.1f}" for k in ("building_share", "iou", "precision", "recall")]
+            lines.append(f"| {space} | `{row['model_id']}` | {domain} | " + " | ".join(cells) + " |")
+    lines += ["", f"{result['seconds'] / 60:.0f} min of wall time (models trained in the run included)."]
+    return "\n".join(lines) + "\n"
