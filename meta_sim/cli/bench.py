@@ -255,18 +255,21 @@ def bench_task_command(out, docs, pictures, quick, realdata, cache):
 @_docs_option
 @click.option("--spaces", default=",".join(("rooftops-v1", "overhead-v2")), show_default=True,
               help="comma-separated design spaces whose models' roof finders to measure")
+@click.option("--finders", default="segmenter", show_default=True,
+              help="comma-separated roof finders (segmenter, segmenter-jitter, colour): a model per space and finder")
 @click.option("--realdata", type=click.Path(path_type=Path), default=None,
               help="the shared real domains (default: ../shared/realdata beside the repository)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
-def bench_roof_finder_command(out, docs, spaces, realdata, cache):
+def bench_roof_finder_command(out, docs, spaces, finders, realdata, cache):
     """How each model's roof finder reads real imagery: roof pixels it counts against the true building share
     and the training cities' range, and its building map against the masks, per real domain."""
     from ..experiments.finder_bench import bench_roof_finder, format_roof_finder_table
 
     bars = _Bars()
     try:
-        result = bench_roof_finder([s.strip() for s in spaces.split(",") if s.strip()], cache, realdata, bars)
+        result = bench_roof_finder([s.strip() for s in spaces.split(",") if s.strip()],
+                                   [f.strip() for f in finders.split(",") if f.strip()], cache, realdata, bars)
     finally:
         bars.close()
     _publish(result, out, format_roof_finder_table(result), "roof-finder", docs)

@@ -45,10 +45,11 @@ def _dataset_options(command):
         click.option("--roof-colour/--no-roof-colour", default=True, show_default=True,
                      help="add colour histograms of the likely roof pixels to the features (counted on the "
                           "training tiles' labels; see `make bench-nams` for what they change)"),
-        click.option("--roof-finder", type=click.Choice(["segmenter", "colour"]), default="segmenter",
-                     show_default=True,
+        click.option("--roof-finder", type=click.Choice(["segmenter", "segmenter-jitter", "colour"]),
+                     default="segmenter", show_default=True,
                      help="what finds the roofs whose colours are counted: a small net learnt on the training "
-                          "tiles' labels (segmenter) or a pixel's colour alone (colour)"),
+                          "tiles' labels (segmenter; segmenter-jitter: trained with the whole scene's colours, "
+                          "exposure, blur and noise jittered, for real imagery) or a pixel's colour alone (colour)"),
         click.option("--roof-weight-power", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
                      show_default=True,
                      help="a pixel counts p(roof kind) to this power in its kind's colour histogram: higher "

@@ -173,13 +173,14 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
     result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, tiles, 8), 4)
     if not time_training:
         return result
-    if settings.roof_colour and settings.roof_finder == "segmenter":
+    if settings.roof_colour and settings.roof_finder.startswith("segmenter"):
         from ..pipeline.dataset import training_tiles
         from ..pipeline.roofsegment import RoofSegmenter
         from ..pipeline.workflow import dataset_dir
 
         started = time.perf_counter()
-        RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed)
+        RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed,
+                          augment="scene" if settings.roof_finder == "segmenter-jitter" else "roofs")
         result["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
     with tempfile.TemporaryDirectory() as out:
         from ..pipeline.workflow import prepare_features, train_nre_checkpoint

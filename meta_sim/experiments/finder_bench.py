@@ -22,6 +22,7 @@ from ..core.progress import Bars
 from . import realdomains
 
 DEFAULT_SPACES = ("rooftops-v1", "overhead-v2")
+DEFAULT_FINDERS = ("segmenter",)
 
 
 def finder_on_scenes(extractor, scenes: list, pixel_size_m: float) -> dict:
@@ -32,11 +33,12 @@ def finder_on_scenes(extractor, scenes: list, pixel_size_m: float) -> dict:
     return finder_agreement(extractor, [i for i, _ in pairs], [m for _, m in pairs])
 
 
-def bench_roof_finder(spaces=DEFAULT_SPACES, root: Path | None = None, realdata: Path | None = None,
-                      bars: Bars | None = None) -> dict:
-    """Per design space of ``spaces``: its model's id, the training cities' roof-pixel range
-    (``roofcolour.training_evidence``) and, per real domain, the finder on its validation and test scenes.
-    Trains what the cache lacks. MetaSimError for an unknown space or missing real data."""
+def bench_roof_finder(spaces=DEFAULT_SPACES, finders=DEFAULT_FINDERS, root: Path | None = None,
+                      realdata: Path | None = None, bars: Bars | None = None) -> dict:
+    """Per design space of ``spaces`` and roof finder of ``finders`` (``roofcolour.ROOF_FINDERS``), the
+    row "space" (the default finder) or "space finder": the model's id, the training cities' roof-pixel
+    range (``roofcolour.training_evidence``) and, per real domain, the finder on its validation and test
+    scenes. Trains what the cache lacks. MetaSimError for an unknown space or finder, or missing real data."""
     from ..nams import load_checkpoint
     from ..pipeline.dataset import DatasetConfig
     from ..pipeline.roofcolour import checkpoint_extractor, training_evidence
@@ -44,9 +46,10 @@ def bench_roof_finder(spaces=DEFAULT_SPACES, root: Path | None = None, realdata:
 
     started = time.perf_counter()
     realdata = realdomains.require(Path(realdata or realdomains.REALDATA))
-    default, settings = DatasetConfig(), ModelSettings()
+    default = DatasetConfig()
     result = {"spaces": {}}
-    for space in spaces:
+    for space, finder in [(space, finder) for space in spaces for finder in finders]:
+        settings = replace(ModelSettings(), roof_finder=finder).check()
         dataset = replace(default, space=space)
         if space != default.space:  # as bench-realism trains the other spaces' models
             dataset = replace(dataset, designs=2 * default.designs)
@@ -58,8 +61,9 @@ def bench_roof_finder(spaces=DEFAULT_SPACES, root: Path | None = None, realdata:
             adapt, test = realdomains.split(realdomains.scenes(domain, realdata))
             domains[domain] = {"validation": finder_on_scenes(extractor, adapt, dataset.pixel_size_m),
                                "test": finder_on_scenes(extractor, test, dataset.pixel_size_m)}
-        result["spaces"][space] = {
-            "model_id": ckpt.model_id, "designs": dataset.designs, "roof_finder": settings.roof_finder,
+        name = space if finder == ModelSettings().roof_finder else f"{space} {finder}"
+        result["spaces"][name] = {
+            "model_id": ckpt.model_id, "designs": dataset.designs, "roof_finder": finder,
             "training": training_evidence(models.features.features, models.features.hist_blocks),
             "domains": domains}
     result["seconds"] = round(time.perf_counter() - started, 1)

@@ -18,6 +18,14 @@ roof colours alone and looks at shape and shading; the ground, roads and trees k
 their colours, which the city draws from a fixed palette. Crops also get a
 random dihedral view. Deterministic for a seed: the crops and augmentations
 come from one ``torch.Generator``.
+
+That palette is also a shortcut: a net that knows every ground colour of the
+renders may call any colour it has not seen a roof, and real ground has colours
+no render has. With ``augment="scene"`` (the finder ``segmenter-jitter``) most
+crops also get the ground's colours jittered on their own (per-channel gain and
+offset) and then the whole crop's exposure, contrast, gamma, blur and noise, so
+that only shape and shading are left to tell roofs by. `make bench-roof-finder`
+measures both finders on real imagery.
 """
 
 from __future__ import annotations
@@ -41,14 +49,19 @@ LR = 3e-3
 MAX_TILES = 1200  # tiles kept in memory for training (evenly spaced over the training set)
 CLASSES = 3  # other, flat roof, sloped roof
 RECOLOUR = 0.5  # share of the training crops whose roofs are recoloured
+AUGMENTS = ("roofs", "scene")  # what is recoloured while training: the roofs only, or the whole scene too
+SCENE_JITTER = 0.8  # with "scene": share of the training crops whose ground and whole image are jittered
 # Convolutions in channels-last layout: the same net, learnt and run faster on CPUs (oneDNN's fastest
 # layout); a layout gives slightly different rounding, so it is part of ``config_id``.
 MEMORY_FORMAT = torch.channels_last
 
 
-def config_id() -> str:
-    """Names what a fit depends on besides the tiles and the seed (for caches)."""
+def config_id(augment: str = "roofs") -> str:
+    """Names what a fit depends on besides the tiles and the seed (for caches); the default augmentation
+    keeps the names it had before the choice existed."""
     settings = (VERSION, WIDTH, DILATIONS, STEPS, BATCH, CROP, LR, MAX_TILES, RECOLOUR, str(MEMORY_FORMAT))
+    if augment != "roofs":
+        settings += (augment, SCENE_JITTER)
     return hashlib.sha256(repr(settings).encode()).hexdigest()[:8]
 
 
@@ -94,6 +107,39 @@ def _recolour_roofs(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Ge
     return out
 
 
+def _jitter_scene(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """(B, 3, H, W) crops, ``SCENE_JITTER`` of them changed: the non-roof pixels (1 - ``shares`` summed) get
+    their own per-channel gain in [0.6, 1.4] and offset in [-0.15, 0.15]; then the whole crop an exposure
+    gain in [0.6, 1.5], a contrast in [0.6, 1.4] about its mean, a gamma in [0.7, 1.4], a Gaussian blur of
+    up to 1.2 pixels (half of them) and noise of up to 0.04."""
+    b = rgb.shape[0]
+    chosen = (torch.rand(b, 1, 1, 1, generator=generator) < SCENE_JITTER).float()
+
+    def uniform(low, high, *shape):
+        return low + (high - low) * torch.rand(b, *shape, generator=generator)
+
+    ground = (1.0 - shares.sum(1, keepdim=True)).clamp(0.0, 1.0)
+    jittered = (rgb * uniform(0.6, 1.4, 3, 1, 1) + uniform(-0.15, 0.15, 3, 1, 1)).clamp(0.0, 1.0)
+    x = rgb * (1 - ground) + jittered * ground
+    x = (x * uniform(0.6, 1.5, 1, 1, 1)).clamp(0.0, 1.0)
+    mean = x.mean(dim=(1, 2, 3), keepdim=True)
+    x = ((x - mean) * uniform(0.6, 1.4, 1, 1, 1) + mean).clamp(0.0, 1.0)
+    x = x ** uniform(0.7, 1.4, 1, 1, 1)
+    sigma = uniform(0.0, 1.2, 1, 1, 1) * (torch.rand(b, 1, 1, 1, generator=generator) < 0.5)
+    taps = torch.arange(-3, 4, dtype=x.dtype)
+    kernel = torch.exp(-taps[None] ** 2 / (2 * sigma.view(b, 1).clamp_min(1e-3) ** 2))
+    kernel = kernel / kernel.sum(1, keepdim=True)  # (B, 7); sigma near 0: a delta
+    channels = x.reshape(1, b * 3, *x.shape[-2:])
+    weights = kernel.repeat_interleave(3, dim=0)[:, None]
+    channels = nn.functional.conv2d(nn.functional.pad(channels, (3, 3, 0, 0), mode="replicate"),
+                                    weights[:, :, None, :], groups=b * 3)
+    channels = nn.functional.conv2d(nn.functional.pad(channels, (0, 0, 3, 3), mode="replicate"),
+                                    weights[:, :, :, None], groups=b * 3)
+    x = channels.reshape(x.shape)
+    x = (x + uniform(0.0, 0.04, 1, 1, 1) * torch.randn(x.shape, generator=generator)).clamp(0.0, 1.0)
+    return rgb * (1 - chosen) + x * chosen
+
+
 class RoofSegmenter:
     """p(flat roof) and p(sloped roof) per 2x2-pixel mean of a tile, from a trained ``_net``."""
 
@@ -111,10 +157,13 @@ class RoofSegmenter:
 
     @classmethod
     def fit(cls, paths, seed: int = 0, steps: int | None = None,
-            progress: Callable[[int], None] | None = None) -> "RoofSegmenter":
+            progress: Callable[[int], None] | None = None, augment: str = "roofs") -> "RoofSegmenter":
         """Trained on meta-sim EXR tiles (their RGB as ``read_image`` gives it, and their roof labels)
-        for ``steps`` steps (default ``STEPS``), ``progress(1)`` after each. Deterministic for ``seed``.
-        Raises MetaSimError when there are no tiles, they differ in size, or training diverges."""
+        for ``steps`` steps (default ``STEPS``), ``progress(1)`` after each, with the augmentation
+        ``augment`` (``AUGMENTS``). Deterministic for ``seed``. Raises MetaSimError when there are no
+        tiles, they differ in size, or training diverges."""
+        if augment not in AUGMENTS:
+            raise MetaSimError(f"unknown roof segmenter augmentation {augment!r}; choose one of {', '.join(AUGMENTS)}")
         steps = steps or STEPS
         rgb, shares = _training_pixels(paths)
         generator = torch.Generator().manual_seed(int(seed))
@@ -138,7 +187,10 @@ class RoofSegmenter:
                 ys.append(_dihedral(shares[pick[i]][window], k, flip))
             x = torch.stack(xs).float() / 255.0
             y = torch.stack(ys).float() / 4.0
-            x = _recolour_roofs(x, y, generator).contiguous(memory_format=MEMORY_FORMAT)
+            x = _recolour_roofs(x, y, generator)
+            if augment == "scene":
+                x = _jitter_scene(x, y, generator)
+            x = x.contiguous(memory_format=MEMORY_FORMAT)
             target = torch.cat([(1.0 - y.sum(1, keepdim=True)).clamp_min(0.0), y], dim=1)
             loss = -(target * torch.log_softmax(net(x * 2.0 - 1.0), dim=1)).sum(1).mean()
             optimiser.zero_grad()

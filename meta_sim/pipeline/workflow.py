@@ -154,7 +154,7 @@ def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettin
         from .roofcolour import RoofColourExtractor, ensure_roof_finder
 
         paths = training_tiles(folder, config)
-        if settings.roof_finder == "segmenter":
+        if settings.roof_finder.startswith("segmenter"):
             from .roofsegment import STEPS
 
             progress = bars("roof segmenter", STEPS) if bars else None

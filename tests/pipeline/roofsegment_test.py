@@ -63,6 +63,31 @@ def test_it_finds_roofs_in_colours_it_was_not_trained_on(segmenter):
     assert float(sloped[inside_flat].mean()) < 0.3 and float(flat[inside_sloped].mean()) < 0.3
 
 
+def _found(segmenter, ground, gain):
+    """Mean p(flat) on the flat roof and p(any roof) on the ground of a scene with unseen roof colours,
+    its ground painted ``ground`` and the whole image scaled by ``gain`` (exposure)."""
+    rgb, roof = _scene((0.1, 0.5, 0.5), (0.5, 0.3, 0.5), shift=2)
+    rgb[roof == 0] = ground
+    weights = _weights(segmenter, rgb * gain)
+    labels = _half(torch.from_numpy(np.stack([roof == 1, roof == 2]).astype(np.float32)))
+    return float(weights[0][labels[0] == 1].mean()), float(weights.sum(0)[labels.sum(0) == 0].mean())
+
+
+def test_jittering_the_scene_keeps_roofs_found_on_ground_and_exposure_it_never_saw(tiles, segmenter):
+    """Trained on one ground colour, the roofs-only segmenter loses the roofs when the ground or the exposure
+    changes (real imagery has ground colours no render has); trained with the scene jittered, it keeps them
+    and still leaves the ground alone."""
+    jittered = RoofSegmenter.fit(tiles, seed=0, steps=1000, augment="scene")
+    conditions = [(ground, gain) for ground in (GROUND, (0.35, 0.25, 0.12), (0.5, 0.5, 0.5), (0.15, 0.15, 0.15))
+                  for gain in (1.0, 0.6)]
+    plain = [_found(segmenter, *c) for c in conditions]
+    scene = [_found(jittered, *c) for c in conditions]
+    assert min(flat for flat, _ in plain) < 0.2  # lost somewhere
+    assert min(flat for flat, _ in scene) > 0.4 and max(ground for _, ground in scene) < 0.25
+    with pytest.raises(MetaSimError, match="augmentation"):
+        RoofSegmenter.fit(tiles, steps=1, augment="everything")
+
+
 def test_fit_is_deterministic_and_cached(tiles, tmp_path, monkeypatch):
     fitted = RoofSegmenter.fit(tiles, seed=0, steps=50)
     assert RoofSegmenter.fit(tiles, seed=0, steps=50).id == fitted.id
@@ -71,6 +96,8 @@ def test_fit_is_deterministic_and_cached(tiles, tmp_path, monkeypatch):
     first = ensure_roof_finder(tmp_path, tiles, "segmenter", seed=0)
     again = ensure_roof_finder(tmp_path, [tmp_path / "missing.exr"] * len(tiles), "segmenter", seed=0)
     assert again.id == first.id  # read from the cache: the tiles may be gone
+    jittered = ensure_roof_finder(tmp_path, tiles, "segmenter-jitter", seed=0)  # cached under its own name
+    assert jittered.id != first.id and len(list(tmp_path.glob("roof-segmenter-*.pt"))) == 2
     with pytest.raises(MetaSimError, match="unknown roof finder"):
         ensure_roof_finder(tmp_path, tiles, "labels")
     with pytest.raises(MetaSimError, match="no training tiles"):
