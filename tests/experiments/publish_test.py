@@ -31,5 +31,6 @@ def test_the_docs_page_has_one_section_per_benchmark():
     from pathlib import Path
 
     text = (Path(__file__).resolve().parents[2] / "docs" / "benchmarks.md").read_text()
-    for name in ("render", "nams", "reference", "tradeoff", "farm", "infer"):
+    for name in ("render", "nams", "reference", "tradeoff", "farm", "infer", "task", "realism", "roof-finder",
+                 "stability", "appearance"):
         assert text.count(f"<!-- bench:{name} -->") == 1 and text.count(f"<!-- /bench:{name} -->") == 1
