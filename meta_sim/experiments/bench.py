@@ -257,7 +257,8 @@ def format_nams_table(result: dict) -> str:
     from .evaluate import with_interval
 
     lines = ["| experiment | method | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | "
-             "s per target | targets | top-1 flat / sloped, unseen designs |", "|---" * 10 + "|"]
+             "closeness flat / sloped | s per target | targets | top-1 flat / sloped, unseen designs |",
+             "|---" * 11 + "|"]
     splits = result["splits"]
     order = [name for name in ("test", "validation") if name in splits]
     for experiment in splits[order[0]]["experiments"]:
@@ -270,8 +271,10 @@ def format_nams_table(result: dict) -> str:
                           f"({m['unseen_targets']})" if m.get("unseen") else "-")
                 cells = " | ".join(with_interval(m, k) for k in ("flat_top1", "flat_top10", "sloped_top1",
                                                                   "sloped_top10"))
-                lines.append(f"| {experiment.upper()} | {name} | {split} | {cells} | {m['seconds_per_target']:.4f} "
-                             f"| {m['targets']} | {unseen} |")
+                closeness = (f"{m['flat_closeness']:.3f} / {m['sloped_closeness']:.3f}" if "flat_closeness" in m
+                             else "-")  # rows measured before it lack it
+                lines.append(f"| {experiment.upper()} | {name} | {split} | {cells} | {closeness} "
+                             f"| {m['seconds_per_target']:.4f} | {m['targets']} | {unseen} |")
     f = result["fastest_adjoint_keeping_e1"]
     described = "; ".join(f"{split}: E1 seeds {', '.join(map(str, s['settings']['e1']['seeds']))}, E2 seeds "
                           f"{', '.join(map(str, s['settings']['e2']['seeds']))} with {s['settings']['e2']['heldout']}"

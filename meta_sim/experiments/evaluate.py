@@ -78,7 +78,9 @@ def target_jobs(experiment: str, space: DesignSpace, heldout, n: int, seed: int)
 
 
 def score(predicted: dict, truth: dict, ranks: dict, space: DesignSpace | None = None) -> dict:
-    """top-1 / top-10 hits (tie-aware, see ``ranking.Ranking.credit``) for each roof parameter the space has.
+    """top-1 / top-10 hits (tie-aware, see ``ranking.Ranking.credit``) and the closeness (the predicted
+    texture's similarity to the truth as a share of the nearest bank texture's, ``ranking.Ranking.closeness``)
+    for each roof parameter the space has.
 
     With ``space``, its other parameters too: ``{name}_hit`` (1 for the true choice) for a categorical
     one, ``{name}_error`` (the absolute error as a fraction of the parameter's range) for a continuous one.
@@ -90,6 +92,7 @@ def score(predicted: dict, truth: dict, ranks: dict, space: DesignSpace | None =
         ranking = ranks[kind][truth[param]]
         out[f"{kind}_top1"] = ranking.credit(predicted[param], 1)
         out[f"{kind}_top10"] = ranking.credit(predicted[param], 10)
+        out[f"{kind}_closeness"] = ranking.closeness(predicted[param])
     for param in (space.parameters if space else ()):
         if param.name in KIND_OF:
             continue

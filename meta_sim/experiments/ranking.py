@@ -36,6 +36,17 @@ class Ranking:
         tied = sum(1 for v in self.similarity if v == edge)
         return (n - better) / tied
 
+    def closeness(self, predicted: str) -> float:
+        """``predicted``'s similarity to the truth as a share of the nearest bank texture's (1: nothing in
+        the bank is nearer; 0 for a texture outside the ranking). Unlike top-n, it still means something
+        for a true texture nothing in the bank resembles: there every place of the top 10 is near 0 in
+        similarity, and the share says how much of the little the bank offers the choice got. When even the
+        nearest texture has similarity 0, every choice is as good: 1."""
+        if predicted not in self.ids:
+            return 0.0
+        best = self.similarity[0]
+        return 1.0 if best <= 0 else float(self.similarity[self.ids.index(predicted)]) / float(best)
+
     def place(self, texture: str) -> int:
         """1 + the number of textures strictly nearer than ``texture`` (ties share the best place)."""
         mine = self.similarity[self.ids.index(texture)]

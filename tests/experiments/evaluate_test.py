@@ -34,7 +34,18 @@ def test_e1_truth_is_its_own_nearest_texture_and_e2_ties_are_fair():
             assert list(ranking.similarity) == sorted(ranking.similarity, reverse=True)
             assert sum(ranking.credit(t, 10) for t in ranking.ids) == pytest.approx(10.0)
     truth = {"flat_roof": bank.ids("flat")[0], "sloped_roof": bank.ids("sloped")[0]}
-    assert score(truth, truth, e1) == {"flat_top1": 1.0, "flat_top10": 1.0, "sloped_top1": 1.0, "sloped_top10": 1.0}
+    assert score(truth, truth, e1) == {"flat_top1": 1.0, "flat_top10": 1.0, "flat_closeness": 1.0,
+                                       "sloped_top1": 1.0, "sloped_top10": 1.0, "sloped_closeness": 1.0}
+    # Closeness: the pick's similarity as a share of the nearest bank texture's, in [0, 1], falling with the
+    # place; 1 for every pick when nothing in the bank resembles the truth at all.
+    for ranking in e2["flat"].values():
+        shares = [ranking.closeness(t) for t in ranking.ids]
+        assert shares[0] == 1.0 and shares == sorted(shares, reverse=True) and min(shares) >= 0.0
+    assert next(iter(e2["flat"].values())).closeness("sloped-no-such") == 0.0
+    from meta_sim.experiments.ranking import Ranking
+
+    assert Ranking(("a", "b"), (0.0, 0.0)).closeness("b") == 1.0
+    assert Ranking(("a", "b", "c"), (0.4, 0.1, 0.0)).closeness("b") == pytest.approx(0.25)
 
 
 def test_e1_targets_are_not_the_training_sets_designs():
@@ -158,3 +169,11 @@ def test_tables_give_the_sbi_baselines_training_time():
               "train_seconds": {"train_nams": 221.0, "train_dr": 52.0, "train_sbi_nre": 30.4}}
     table = format_nams_table(result)
     assert "Training: NAMS 221 s, DR 52 s, sbi_nre 30 s" in table and "| E1 | sbi_nre | validation |" in table
+    # The closeness column: a row measured with it shows it, one measured before it a dash.
+    rows["e1"]["sbi_nre"].update(flat_closeness=0.75, sloped_closeness=0.5)
+    table = format_nams_table(result).splitlines()
+    column = table[0].split(" | ").index("closeness flat / sloped")
+    def cell(prefix):
+        return next(line for line in table if line.startswith(prefix)).split(" | ")[column]
+
+    assert cell("| E1 | sbi_nre | test |") == "0.750 / 0.500" and cell("| E1 | nams_exhaustive | test |") == "-"
