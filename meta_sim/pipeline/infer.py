@@ -244,8 +244,9 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
         lines.append(f"| {g['name']} | {cells} |{evidence}")
     if kinds:
         lines += ["", "Roof pixels: the share of a group's pixels the model's roof finder counts as roofs of each "
-                  "kind, which the inferred roof textures rest on. Near 0, the roof textures rest on a few pixels "
-                  "and say little: the roof finder learnt roofs from renders and may not see them in this imagery."]
+                  "kind, which the inferred roof textures rest on. The roof finder learnt roofs from renders: near 0 "
+                  "it sees few roofs here and the roof textures rest on a few pixels; near 100% it takes the ground "
+                  "for roofs too and the roof textures are the colours of the whole image."]
         span = report["roof_pixels_range"]
         if span:
             lines += ["", f"(low), (high): outside the range all but {2 * EVIDENCE_QUANTILE:.0%} of the model's "

@@ -47,12 +47,13 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
     assert results["methods"]["sbi_nre"]["train_seconds"] > 0
     assert "train_sbi_nre" in results["training"]["seconds"]  # trained by this run, cached for the next
     for metrics in results["methods"].values():
-        for key in ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10"):
+        scores = {f"{kind}_{m}" for kind in ("flat", "sloped") for m in ("top1", "top10", "closeness")}
+        for key in scores:
             assert 0.0 <= metrics[key] <= 1.0
         assert metrics["flat_top1"] <= metrics["flat_top10"] and metrics["seconds_per_target"] >= 0
+        assert metrics["flat_top1"] <= metrics["flat_closeness"]  # a top-1 hit has closeness 1
         assert 0 <= metrics["unseen_targets"] <= 3
-        assert set(metrics["unseen"]) == ({"flat_top1", "flat_top10", "sloped_top1", "sloped_top10"}
-                                          if metrics["unseen_targets"] else set())
+        assert set(metrics["unseen"]) == (scores if metrics["unseen_targets"] else set())
     assert "| nams_adjoint |" in (out / "results.md").read_text()
     assert "| sbi_nre |" in (out / "results.md").read_text() and "Training (when" in (out / "results.md").read_text()
     assert (out / "sheet.png").stat().st_size > 1000
@@ -110,8 +111,8 @@ def test_bench_nams_reports_the_test_split_beside_validation(evaluated, tiny_env
         assert settings_of["e2"]["heldout"] == ("heldout-v1" if split == "validation" else "heldout-v2")
         for rows in result["splits"][split]["experiments"].values():
             assert rows["nams_exhaustive"]["targets"] == 3 and rows["nams_adjoint_M16_it5"]["targets"] == 2
-            assert set(rows["nams_exhaustive"]["intervals"]) == {"flat_top1", "flat_top10", "sloped_top1",
-                                                                 "sloped_top10"}
+            assert set(rows["nams_exhaustive"]["intervals"]) == {
+                f"{kind}_{m}" for kind in ("flat", "sloped") for m in ("top1", "top10", "closeness")}
     assert result["fastest_adjoint_keeping_e1"]["M"] in (16, 4)
     table = format_nams_table(result)
     assert "| E2 | nams_exhaustive | test |" in table and "| E2 | nams_exhaustive | validation |" in table
