@@ -175,12 +175,13 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
         return result
     if settings.roof_colour and settings.roof_finder.startswith("segmenter"):
         from ..pipeline.dataset import training_tiles
+        from ..pipeline.roofcolour import SEGMENTER_AUGMENT
         from ..pipeline.roofsegment import RoofSegmenter
         from ..pipeline.workflow import dataset_dir
 
         started = time.perf_counter()
         RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed,
-                          augment="scene" if settings.roof_finder == "segmenter-jitter" else "roofs")
+                          augment=SEGMENTER_AUGMENT[settings.roof_finder])
         result["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
     with tempfile.TemporaryDirectory() as out:
         from ..pipeline.workflow import prepare_features, train_nre_checkpoint

@@ -138,7 +138,7 @@ class RoofLikelihood:
 # The segmenter (its training recolours the roofs), the segmenter whose training jitters the whole scene's
 # colours too (``roofsegment._jitter_scene``), and the colour likelihood.
 ROOF_FINDERS = ("segmenter", "colour", "segmenter-jitter")
-_AUGMENT = {"segmenter": "roofs", "segmenter-jitter": "scene"}
+SEGMENTER_AUGMENT = {"segmenter": "roofs", "segmenter-jitter": "scene"}
 
 
 def roof_finder_from_dict(data: Mapping):
@@ -158,8 +158,8 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
         raise MetaSimError(f"unknown roof finder {finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
     from .roofsegment import RoofSegmenter, config_id
 
-    segmenter = finder in _AUGMENT
-    path = Path(folder) / (f"roof-segmenter-{config_id(_AUGMENT[finder])}-seed{seed}.pt" if segmenter
+    segmenter = finder in SEGMENTER_AUGMENT
+    path = Path(folder) / (f"roof-segmenter-{config_id(SEGMENTER_AUGMENT[finder])}-seed{seed}.pt" if segmenter
                            else LIKELIHOOD_FILE)
     if path.is_file():
         try:
@@ -169,7 +169,7 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
         except Exception:  # a damaged or outdated cache is learnt again, never trusted
             pass
     if segmenter:
-        found = RoofSegmenter.fit(tile_paths, seed, progress=progress, augment=_AUGMENT[finder])
+        found = RoofSegmenter.fit(tile_paths, seed, progress=progress, augment=SEGMENTER_AUGMENT[finder])
     else:
         found = RoofLikelihood.fit(tile_paths, progress)
     with atomic_path(path) as tmp:
