@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 256
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -102,6 +102,12 @@ bench-stability: setup
 # scores E1/E2: a reference for bench-nams' accuracy, on the same training set and targets.
 bench-reference: setup
 	$(BIN)/meta-sim bench reference --out benchmarks/reference.json
+
+# How the search compares the roof-colour histograms (exponent, blur over neighbouring colours): a grid on the
+# validation split of E1 and E2, the best chosen there, the default and the chosen one on test (minutes once
+# bench-nams' model and targets are cached).
+bench-objective: setup
+	$(BIN)/meta-sim bench objective --out benchmarks/objective.json
 
 clean:
 	rm -rf out build dist *.egg-info

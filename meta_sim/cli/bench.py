@@ -122,6 +122,25 @@ def bench_reference_command(out, docs, targets, cache):
     _publish(result, out, format_reference_table(result), "reference", docs)
 
 
+@bench.command("objective")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/objective.json"), show_default=True)
+@click.option("--targets", type=int, default=100, show_default=True,
+              help="target groups per target seed of each split (as bench-nams)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+def bench_objective_command(out, docs, targets, cache):
+    """How the search compares the roof-colour histograms (exponent, blur): a grid scored on the validation
+    split of E1 and E2, the best chosen there, and the default and the chosen one scored on test."""
+    from ..experiments.objective import bench_objective, format_objective_table
+
+    bars = _Bars()
+    try:
+        result = bench_objective(targets=targets, root=cache, bars=bars)
+    finally:
+        bars.close()
+    _publish(result, out, format_objective_table(result), "objective", docs)
+
+
 @bench.command("tradeoff")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/tradeoff.json"), show_default=True)

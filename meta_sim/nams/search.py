@@ -24,6 +24,9 @@ The loss is the mean squared error of the predicted features in units of
 the model's ``feature_scale``; a model whose features end in roof-colour
 histograms (``NAMSConfig.colour_dims``, see ``meta_sim.pipeline.roofcolour``) takes
 the geometric mean of the error over those and over the rest (``_combined``).
+``ColourComparison`` weighs the two differently and can also compare the
+histograms blurred over neighbouring colours; its default is the plain
+geometric mean.
 
 Targets must be normalised with the checkpoint's ``FeatureNorm``. Every
 result is finite, or the call raises MetaSimError.
@@ -152,15 +155,75 @@ def _check_common(S: int, r: float) -> None:
 GEOMETRIC_MEAN_FLOOR = 1e-30
 
 
-def _block_mse(squares: torch.Tensor, colour_dims: int) -> tuple[torch.Tensor, ...]:
-    """Mean squared error over the features before the colour histograms, and over those (if any)."""
+@dataclass(frozen=True, eq=False)
+class ColourComparison:
+    """How the search compares a model's roof-colour histograms (the features' last ``colour_dims``).
+
+    The loss is ``rest ** (1 - exponent) * colour ** exponent``, with ``rest`` the error over the other
+    features and ``colour`` the error over the histograms plus ``blur_weight`` times the error over the
+    histograms blurred: each block of ``blur``'s width (``blur`` maps a block's bins to themselves,
+    each column summing to 1) is squared back into a histogram, blurred and square-rooted. Blurred,
+    a colour the bank lacks still overlaps the colours near it, where the plain histograms of two
+    different colours share nothing and every bank texture is as far as the next. The default
+    (exponent 0.5, no blur) is the plain geometric mean of ``_combined``; a blur that fits the
+    histograms' bins comes from the features (``pipeline.roofcolour.colour_comparison``).
+    """
+
+    exponent: float = 0.5
+    blur: torch.Tensor | None = None
+    blur_weight: float = 0.0
+
+    def __post_init__(self):
+        if not (isinstance(self.exponent, (int, float)) and 0.0 < self.exponent < 1.0):
+            raise MetaSimError(f"the colour exponent must be between 0 and 1, not {self.exponent!r}")
+        if not (isinstance(self.blur_weight, (int, float)) and math.isfinite(self.blur_weight)
+                and self.blur_weight >= 0):
+            raise MetaSimError(f"the colour blur weight must be finite and at least 0, not {self.blur_weight!r}")
+        if self.blur is not None:
+            b = self.blur
+            if (b.ndim != 2 or b.shape[0] != b.shape[1] or not torch.isfinite(b).all() or (b < 0).any()
+                    or not torch.allclose(b.double().sum(dim=0), torch.ones(b.shape[1], dtype=torch.float64),
+                                          atol=1e-6)):
+                raise MetaSimError("the colour blur must be a square, non-negative matrix whose columns sum to 1")
+
+    def check(self, colour_dims: int) -> None:
+        """MetaSimError when the blur does not fit a model's ``colour_dims`` histogram values."""
+        if self.blur is not None and self.blur_weight > 0 and (
+                not colour_dims or colour_dims % self.blur.shape[0]):
+            raise MetaSimError(f"the colour blur has {self.blur.shape[0]} bins per histogram; the model's "
+                               f"{colour_dims} histogram values are not whole histograms of that size")
+
+    def blurred(self, values: torch.Tensor) -> torch.Tensor:
+        """(..., colour_dims) square-rooted histograms -> the same, blurred block by block. A negative
+        value (a prediction) counts as 0; the square root's floor keeps gradients finite."""
+        width = self.blur.shape[0]
+        hists = values.clamp_min(0.0).square().unflatten(-1, (-1, width))
+        return (hists @ self.blur.T.to(values.dtype) + BLUR_FLOOR).sqrt().flatten(-2)
+
+
+PLAIN_COLOUR = ColourComparison()
+BLUR_FLOOR = 1e-12  # in the blurred histograms' square root (see ColourComparison.blurred)
+
+
+def _block_mse(diff: torch.Tensor, colour_dims: int, pred: torch.Tensor | None = None,
+               target: torch.Tensor | None = None,
+               colour: ColourComparison = PLAIN_COLOUR) -> tuple[torch.Tensor, ...]:
+    """Mean squared error over the features before the colour histograms, and over those (if any), from
+    the differences ``diff``; with ``colour``'s blur also over the blurred histograms of ``pred`` and
+    ``target`` (the colour error is then the sum, the blurred one weighed by ``blur_weight``)."""
+    squares = diff.square()
     if not colour_dims:
         return (squares.mean(dim=-1),)
-    return squares[..., :-colour_dims].mean(dim=-1), squares[..., -colour_dims:].mean(dim=-1)
+    rest, plain = squares[..., :-colour_dims].mean(dim=-1), squares[..., -colour_dims:].mean(dim=-1)
+    if colour.blur is None or colour.blur_weight == 0:
+        return rest, plain
+    blurred = (colour.blurred(pred[..., -colour_dims:]) - colour.blurred(target[..., -colour_dims:]))
+    return rest, plain + colour.blur_weight * blurred.square().mean(dim=-1)
 
 
-def _combined(*mses: torch.Tensor) -> torch.Tensor:
-    """The search's loss from the blocks' errors: the one error, or the geometric mean of two.
+def _combined(*mses: torch.Tensor, exponent: float = 0.5) -> torch.Tensor:
+    """The search's loss from the blocks' errors: the one error, or the weighted geometric mean of two
+    (``rest ** (1 - exponent) * colour ** exponent``; by default the plain geometric mean).
 
     A product does not depend on either block's units, so it needs no
     weight between them, and a far-off target (a texture the bank lacks),
@@ -170,7 +233,9 @@ def _combined(*mses: torch.Tensor) -> torch.Tensor:
     """
     if len(mses) == 1:
         return mses[0]
-    return (mses[0] * mses[1] + GEOMETRIC_MEAN_FLOOR).sqrt()
+    if exponent == 0.5:
+        return (mses[0] * mses[1] + GEOMETRIC_MEAN_FLOOR).sqrt()
+    return (mses[0] + GEOMETRIC_MEAN_FLOOR) ** (1 - exponent) * (mses[1] + GEOMETRIC_MEAN_FLOOR) ** exponent
 
 
 # --- voting --------------------------------------------------------------------------------------
@@ -230,7 +295,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
                    iterations: int = 200, lr: float = 0.01, r: float = 0.0,
                    generator: torch.Generator | None = None, dtype: torch.dtype = torch.float32,
                    boundary_weight: float = 0.1, bars: Bars | None = None,
-                   max_rows: int = 16384) -> list[SearchResult]:
+                   max_rows: int = 16384, colour: ColourComparison = PLAIN_COLOUR) -> list[SearchResult]:
     """Neural-adjoint search for every target row; one SearchResult per row.
 
     The per-start objective is MSE(P(z), target), measured in units of the
@@ -240,12 +305,14 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     recomputed at the final z. ``dtype`` (e.g. torch.bfloat16) is the dtype
     of the networks' forward passes; z, Adam's state and the losses stay
     float32. Targets are processed in groups of at most ``max_rows`` starts
-    to bound memory; the answer does not depend on the grouping.
+    to bound memory; the answer does not depend on the grouping. ``colour`` says how the roof-colour
+    histograms are compared (``ColourComparison``).
     """
     _check_nams(model)
     _check_space(model, space)
     _check_common(S, r)
     _check_adjoint(M, k, S, iterations, lr, boundary_weight)
+    colour.check(model.config.colour_dims)
     targets = _targets(targets, model.config.feature_dim)
 
     # Frozen copies in the search dtype; the caller's model is left as it is.
@@ -274,7 +341,8 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
         def objective(z: torch.Tensor, inv_scale=inv_scale,
                       target_scaled=target_scaled) -> tuple[torch.Tensor, torch.Tensor]:
             pred = predictor(z.to(dtype)).float() / feature_scale * inv_scale[:, :, None]
-            mse_scaled = _combined(*_block_mse((pred - target_scaled).square(), colour_dims))
+            mse_scaled = _combined(*_block_mse(pred - target_scaled, colour_dims, pred, target_scaled, colour),
+                                   exponent=colour.exponent)
             boundary = torch.relu((z - mean).abs() - half_width).sum(dim=-1)
             return mse_scaled, boundary
 
@@ -375,30 +443,41 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
 
 
 def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top: int = 10, r: float = 0.0,
-                      generator: torch.Generator | None = None, batch: int = 16384) -> list[SearchResult]:
+                      generator: torch.Generator | None = None, batch: int = 16384,
+                      colour: ColourComparison = PLAIN_COLOUR) -> list[SearchResult]:
     """The design whose predicted features are nearest (MSE in units of ``feature_scale``) to each target.
 
     ``ranked`` lists the ``top`` best designs with their losses; the vote
     shares are the distribution of each parameter among the ``S`` best
     designs (at most the number of designs). Distances are computed in
-    float64, ``batch`` designs at a time, for all targets at once.
+    float64, ``batch`` designs at a time, for all targets at once. ``colour``
+    says how the roof-colour histograms are compared (``ColourComparison``).
     """
     _check_common(S, r)
     if top < 1:
         raise MetaSimError(f"top must be at least 1, not {top}")
+    colour.check(model.config.colour_dims)
     table = design_table(model, space)
     targets = _targets(targets, model.config.feature_dim).double() / model.feature_scale.double()
     n = len(table.designs)
     lead = model.config.feature_dim - model.config.colour_dims
     blocks = [slice(0, lead)] + ([slice(lead, None)] if model.config.colour_dims else [])
     sq_targets = [targets[:, b].square().sum(dim=1, keepdim=True) for b in blocks]
+    blur = colour.blur is not None and colour.blur_weight > 0 and len(blocks) == 2
+    if blur:  # the blurred histograms, compared like the plain ones
+        blurred_table = colour.blurred(table.features[:, lead:].double())
+        blurred_targets = colour.blurred(targets[:, lead:])
 
     def block_mses(rows: slice) -> list[torch.Tensor]:
         features = table.features[rows].double()
-        return [(sq - 2 * targets[:, b] @ features[:, b].T + table.sq_norms[rows, j]).clamp_min(0.0)
+        mses = [(sq - 2 * targets[:, b] @ features[:, b].T + table.sq_norms[rows, j]).clamp_min(0.0)
                 / features[:, b].shape[1] for j, (b, sq) in enumerate(zip(blocks, sq_targets))]
+        if blur:
+            mses[1] = mses[1] + colour.blur_weight * _pairwise_mse(blurred_targets, blurred_table[rows])
+        return mses
 
-    losses = torch.cat([_combined(*block_mses(slice(i, i + batch))) for i in range(0, n, batch)], dim=1)
+    losses = torch.cat([_combined(*block_mses(slice(i, i + batch)), exponent=colour.exponent)
+                        for i in range(0, n, batch)], dim=1)
     keep = min(max(S, top), n)
     kept_loss, kept = torch.topk(losses, keep, dim=1, largest=False, sorted=True)
     s = min(S, n)
@@ -414,6 +493,12 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
 
 
 # --- entry points --------------------------------------------------------------------------------
+def _pairwise_mse(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """(T, F) and (N, F) -> (T, N) mean squared differences."""
+    return ((a.square().sum(dim=1, keepdim=True) - 2 * a @ b.T + b.square().sum(dim=1)).clamp_min(0.0)
+            / a.shape[1])
+
+
 def resolve_method(space: DesignSpace, method: str) -> str:
     """"auto" becomes "exhaustive" for a discrete space of at most MAX_EXHAUSTIVE_DESIGNS, else "adjoint".
 
@@ -429,14 +514,16 @@ def resolve_method(space: DesignSpace, method: str) -> str:
 def search(model: NAMS, targets, space: DesignSpace, method: str = "auto", *, S: int = 50, r: float = 0.0,
            generator: torch.Generator | None = None, top: int = 10, M: int = 1000, k: float = 3.0,
            iterations: int = 200, lr: float = 0.01, dtype: torch.dtype = torch.float32,
-           boundary_weight: float = 0.1, bars: Bars | None = None) -> list[SearchResult]:
+           boundary_weight: float = 0.1, bars: Bars | None = None,
+           colour: ColourComparison = PLAIN_COLOUR) -> list[SearchResult]:
     """Search designs for the target rows with ``method`` ("auto", "adjoint" or "exhaustive", see
     ``resolve_method``); adjoint-only options are ignored by exhaustive. One SearchResult per row;
     MetaSimError for an unknown method, bad options, or targets that do not fit the model."""
     if resolve_method(space, method) == "exhaustive":
-        return exhaustive_search(model, targets, space, S=S, top=top, r=r, generator=generator)
+        return exhaustive_search(model, targets, space, S=S, top=top, r=r, generator=generator, colour=colour)
     return adjoint_search(model, targets, space, M=M, k=k, S=S, iterations=iterations, lr=lr, r=r,
-                          generator=generator, dtype=dtype, boundary_weight=boundary_weight, bars=bars)
+                          generator=generator, dtype=dtype, boundary_weight=boundary_weight, bars=bars,
+                          colour=colour)
 
 
 @torch.no_grad()

@@ -219,6 +219,30 @@ class RoofColourExtractor:
         return torch.cat(parts)
 
 
+def colour_blur(sigma: float) -> torch.Tensor:
+    """(488, 488) float64: a Gaussian blur of ``sigma`` bins over the roof-colour histograms' bins (their
+    positions on the 8 x 8 x 8 grid of the stretched cone, distances counted in bins on each axis), each
+    column summing to 1 so that a histogram keeps its mass. For ``nams.ColourComparison``."""
+    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
+        raise MetaSimError(f"the colour blur's sigma must be a positive number of bins, not {sigma!r}")
+    bins = ColourTexture.COLOUR_BINS
+    keep = _reachable_cone_bins(bins, ColourTexture.CHROMA_POWER).numpy()
+    grid = np.stack(np.meshgrid(*(np.arange(bins),) * 3, indexing="ij"), axis=-1).reshape(-1, 3)[keep]
+    weights = np.exp(-((grid[:, None, :] - grid[None, :, :]) ** 2).sum(axis=-1) / (2.0 * sigma ** 2))
+    return torch.from_numpy(weights / weights.sum(axis=0, keepdims=True))
+
+
+def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weight: float = 0.0):
+    """A ``nams.ColourComparison`` for models with these roof-colour histograms: the colour error's
+    exponent, and with ``blur_sigma`` > 0 and ``blur_weight`` > 0 the histograms also compared blurred by
+    ``colour_blur(blur_sigma)``. The defaults are the plain geometric mean."""
+    from ..nams import ColourComparison
+
+    blurred = blur_sigma > 0 and blur_weight > 0
+    return ColourComparison(exponent, colour_blur(blur_sigma) if blurred else None,
+                            blur_weight if blurred else 0.0)
+
+
 def roof_evidence(features: torch.Tensor, extractor) -> dict | None:
     """Per roof kind, (N,) the share of each group's pixels that ``extractor``'s roof finder counts as
     roofs of that kind (each pixel by its probability to the weight power): the sum of the kind's raw

@@ -10,6 +10,7 @@ from toys import toy_space
 
 from meta_sim.core.errors import MetaSimError
 from meta_sim.nams import (
+    ColourComparison,
     FeatureNorm,
     NAMSConfig,
     TrainConfig,
@@ -26,6 +27,8 @@ from meta_sim.pipeline.roofcolour import (
     RoofColourExtractor,
     RoofLikelihood,
     checkpoint_extractor,
+    colour_blur,
+    colour_comparison,
     ensure_roof_finder,
     evidence_reference,
     finder_agreement,
@@ -253,6 +256,99 @@ def test_search_is_finite_at_the_extremes_with_colour(coloured):
         for result in exhaustive_search(fit.model, targets, space) + adjoint_search(
                 fit.model, targets, space, M=16, S=4, iterations=10, generator=torch.Generator().manual_seed(0)):
             assert math.isfinite(result.best_loss) and result.best_loss >= 0
+
+
+def _line_blur(bins: int = 8, sigma: float = 1.0) -> torch.Tensor:
+    """A Gaussian blur over bins in a line, each column summing to 1 (the toy histograms' neighbours)."""
+    i = torch.arange(bins, dtype=torch.float64)
+    weights = torch.exp(-(i[:, None] - i[None, :]).square() / (2 * sigma ** 2))
+    return weights / weights.sum(dim=0, keepdim=True)
+
+
+def test_the_colour_comparison_weighs_the_colour_error_by_its_exponent(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    model, targets = fit.model, fit.norm.apply(coloured["targets"])
+    plain = exhaustive_search(model, targets, space)
+    assert [r.ranked for r in exhaustive_search(model, targets, space, colour=colour_comparison())] == \
+        [r.ranked for r in plain]
+    table = design_table(model, space)
+    errors = (targets[:, None].double() / model.feature_scale.double() - table.features[None].double()).square()
+    rest, colour = errors[..., :12].mean(-1), errors[..., 12:].mean(-1)
+    found = exhaustive_search(model, targets, space, colour=ColourComparison(exponent=0.3))
+    expected = (rest ** 0.7 * colour ** 0.3).min(dim=1).values
+    assert torch.allclose(torch.tensor([r.best_loss for r in found], dtype=torch.float64), expected, rtol=1e-6)
+    assert _accuracy(found, coloured["truth"], "p0") >= 0.9
+
+
+def test_a_blurred_comparison_names_the_nearest_colour_for_one_the_bank_lacks(coloured):
+    # p0's six choices peak in bins 0-5 of its histogram; the targets' p0 roofs peak in bin 7, a colour no
+    # choice has, and their other features are far off. Plain, every choice shares nothing with bin 7 and the
+    # answer is whichever the other features favour; blurred, bin 7 overlaps bin 6's neighbour 5: choice 5.
+    space, fit = coloured["space"], coloured["fit"]
+    lacking = coloured["targets"].clone()
+    lacking[:, :12] += 40.0 * torch.randn(12, generator=torch.Generator().manual_seed(5))
+    lacking[:, 12:20] = torch.full((8,), 0.02)
+    lacking[:, 19] = 1.0
+    targets = fit.norm.apply(lacking)
+    nearest = space.parameters[0].choices[5]
+    blurred = ColourComparison(exponent=0.5, blur=_line_blur(), blur_weight=30.0)
+
+    def share(results):
+        return np.mean([r.design["p0"] == nearest for r in results])
+
+    assert share(exhaustive_search(fit.model, targets, space, colour=blurred)) == 1.0
+    assert share(exhaustive_search(fit.model, targets, space)) <= 0.5
+    adjoint = adjoint_search(fit.model, targets[:8], space, M=64, S=8, iterations=60, colour=blurred,
+                             generator=torch.Generator().manual_seed(0))
+    assert share(adjoint) >= 0.75
+    # p1's answers still follow the targets' own p1 histograms.
+    assert _accuracy(exhaustive_search(fit.model, targets, space, colour=blurred), coloured["truth"], "p1") >= 0.9
+
+
+def test_a_blurred_search_is_finite_at_the_extremes(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    blurred = ColourComparison(exponent=0.3, blur=_line_blur(), blur_weight=30.0)
+    exact = design_table(fit.model, space).features[:2] * fit.model.feature_scale
+    for targets in (torch.zeros(2, 28), torch.full((2, 28), 1e30), exact):
+        for dtype in (torch.float32, torch.bfloat16):
+            results = exhaustive_search(fit.model, targets, space, colour=blurred) + adjoint_search(
+                fit.model, targets, space, M=16, S=4, iterations=10, dtype=dtype, colour=blurred,
+                generator=torch.Generator().manual_seed(0))
+            assert all(math.isfinite(r.best_loss) and r.best_loss >= 0 for r in results)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"exponent": 0.0}, "between 0 and 1"), ({"exponent": 1.0}, "between 0 and 1"),
+    ({"blur_weight": -1.0}, "at least 0"), ({"blur_weight": math.inf}, "finite"),
+    ({"blur": torch.ones(8, 8)}, "columns sum to 1"), ({"blur": -_line_blur()}, "non-negative"),
+    ({"blur": torch.ones(1, 8) / 8}, "square"),
+])
+def test_bad_colour_comparisons_are_refused(kwargs, message):
+    with pytest.raises(MetaSimError, match=message):
+        ColourComparison(**kwargs)
+
+
+def test_a_blur_must_fit_the_models_histograms(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    targets = fit.norm.apply(coloured["targets"][:2])
+    wrong = ColourComparison(blur=_line_blur(bins=5), blur_weight=1.0)
+    for search in (exhaustive_search, lambda *a, **k: adjoint_search(*a, M=8, S=2, iterations=1, **k)):
+        with pytest.raises(MetaSimError, match="5 bins per histogram"):
+            search(fit.model, targets, space, colour=wrong)
+
+
+def test_the_colour_blur_spreads_each_bin_over_its_neighbours_in_the_cone():
+    blur = colour_blur(1.5)
+    assert blur.shape == (488, 488) and blur.dtype == torch.float64
+    assert (blur >= 0).all() and torch.allclose(blur.sum(dim=0), torch.ones(488, dtype=torch.float64))
+    assert bool((blur.diagonal() >= blur.max(dim=0).values - 1e-12).all())  # a bin keeps most of itself
+    wider = colour_blur(3.0)
+    assert float(wider.diagonal().mean()) < float(blur.diagonal().mean())  # a wider blur keeps less
+    for sigma in (0.0, -1.0, math.nan):
+        with pytest.raises(MetaSimError, match="sigma"):
+            colour_blur(sigma)
+    assert colour_comparison(0.3).blur is None and colour_comparison(0.3, 1.5, 0.0).blur is None
+    assert colour_comparison(0.3, 1.5, 30.0).blur.shape == (488, 488)
 
 
 def test_pixels_count_their_roof_probability_to_a_power(tiles, tmp_path):

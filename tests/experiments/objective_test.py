@@ -1,0 +1,42 @@
+"""bench-objective's protocol: the grid, the choice on validation (the default wins ties) and its table."""
+
+from meta_sim.experiments.objective import DEFAULT, Setting, choose, criterion, format_objective_table, grid
+
+
+def _metrics(e1: float, e2: float) -> dict:
+    keys = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top10", "sloped_closeness")
+    return {"e1": {k: e1 for k in keys}, "e2": {k: e2 for k in keys}}
+
+
+def test_the_grid_starts_with_the_default_and_names_each_setting_once():
+    settings = grid()
+    assert settings[0] == DEFAULT and DEFAULT.comparison().blur is None
+    assert len({s.name for s in settings}) == len(settings)
+    assert Setting(0.3, 1.5, 30.0).name == "exponent 0.3, blur 1.5 bins x 30"
+    assert Setting(0.3, 1.5, 30.0).comparison().blur.shape == (488, 488)
+
+
+def test_the_choice_is_the_best_mean_of_the_four_targets_and_the_default_wins_ties():
+    assert criterion(_metrics(1.0, 0.5)) == 0.75
+    rows = [{"name": "default", "criterion": 0.75}, {"name": "a", "criterion": 0.75}, {"name": "b", "criterion": 0.7}]
+    assert choose(rows)["name"] == "default"
+    rows.append({"name": "c", "criterion": 0.76})
+    assert choose(rows)["name"] == "c"
+
+
+def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_validation():
+    default, chosen = Setting(), Setting(0.3, 1.5, 30.0)
+    validation = [{"setting": vars(s), "name": s.name, "metrics": _metrics(*m), "criterion": criterion(_metrics(*m))}
+                  for s, m in ((default, (0.9, 0.5)), (chosen, (0.9, 0.7)))]
+    test = {label: {"setting": vars(s), "name": s.name, "metrics": _metrics(*m), "criterion": criterion(_metrics(*m))}
+            for label, s, m in (("default", default, (0.8, 0.4)), ("chosen", chosen, (0.85, 0.45)))}
+    test["chosen"]["metrics"]["e2"]["intervals"] = {"flat_top10": [0.4, 0.5]}
+    split = {"e1": {"seeds": [1, 2, 7]}, "e2": {"seeds": [1, 2, 7], "heldout": "heldout-v1"}}
+    result = {"validation": validation, "test": test, "targets_per_seed": 100,
+              "splits": {"validation": split, "test": {"e1": {"seeds": [21]}, "e2": {"seeds": [21], "heldout": "v2"}}}}
+    table = format_objective_table(result)
+    lines = table.splitlines()
+    assert lines[2].startswith("| default: exponent 0.5, no blur | test | 0.800")
+    assert "| chosen: exponent 0.3, blur 1.5 bins x 30 | test |" in table and "0.450 [0.400, 0.500]" in table
+    assert lines[5].endswith("| 0.800 |")  # the chosen setting's validation row: mean of 0.9, 0.9, 0.7, 0.7
+    assert "validation #1: exponent 0.3, blur 1.5 bins x 30" in table and "`v2`" in table
