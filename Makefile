@@ -88,10 +88,10 @@ bench-realism: setup
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
 
-# Each model's roof finder on the real domains' labelled scenes (rooftops-v1's and overhead-v2's models; trains
+# Each training set's roof finder on the real domains' labelled scenes (rooftops-v1's and overhead-v2's; learns
 # what the cache lacks): roof pixels it counts against the building masks and the training cities' range.
 bench-roof-finder: setup
-	META_SIM_THREADS=2 $(BIN)/meta-sim bench roof-finder --out benchmarks/roof_finder.json
+	META_SIM_THREADS=2 $(BIN)/meta-sim bench roof-finder --finders segmenter,segmenter-jitter --out benchmarks/roof_finder.json
 
 # What each extreme case (constant, black, white, HDR and NaN targets; one-tile groups; M=1, S=M, k=0, r=0 and 1;
 # a one-choice space; zero-variance features; bfloat16) ends in, on tiny models made in the run (a few minutes).

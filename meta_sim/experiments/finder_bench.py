@@ -7,9 +7,10 @@ that finder on every shared real domain's labelled scenes, the ``adapt`` ones
 only), and compares what it counts with the building masks
 (``pipeline.roofcolour.finder_agreement``), beside the range of roof pixels
 the model's training cities span, which `meta-sim infer` holds each target
-group against. One model per design space: the default space's model as
-`meta-sim infer` uses it, and the realism spaces' models as bench-realism
-trains them (twice the designs).
+group against. One training set per design space: the default space's as
+`meta-sim infer`'s default model is trained on, and the realism spaces' as
+bench-realism trains them (twice the designs). The finder and the training
+features are all it needs: no model is trained.
 """
 
 from __future__ import annotations
@@ -38,11 +39,11 @@ def bench_roof_finder(spaces=DEFAULT_SPACES, finders=DEFAULT_FINDERS, root: Path
     """Per design space of ``spaces`` and roof finder of ``finders`` (``roofcolour.ROOF_FINDERS``), the
     row "space" (the default finder) or "space finder": the model's id, the training cities' roof-pixel
     range (``roofcolour.training_evidence``) and, per real domain, the finder on its validation and test
-    scenes. Trains what the cache lacks. MetaSimError for an unknown space or finder, or missing real data."""
-    from ..nams import load_checkpoint
+    scenes. Renders the training set and learns the finder when the cache lacks them. MetaSimError for an
+    unknown space or finder, or missing real data."""
     from ..pipeline.dataset import DatasetConfig
-    from ..pipeline.roofcolour import checkpoint_extractor, training_evidence
-    from ..pipeline.workflow import ModelSettings, ensure_models
+    from ..pipeline.roofcolour import stored_extractor, training_evidence
+    from ..pipeline.workflow import ModelSettings, dataset_dir, prepare_features
 
     started = time.perf_counter()
     realdata = realdomains.require(Path(realdata or realdomains.REALDATA))
@@ -53,9 +54,8 @@ def bench_roof_finder(spaces=DEFAULT_SPACES, finders=DEFAULT_FINDERS, root: Path
         dataset = replace(default, space=space)
         if space != default.space:  # as bench-realism trains the other spaces' models
             dataset = replace(dataset, designs=2 * default.designs)
-        models = ensure_models(dataset, settings, root, bars)
-        ckpt = load_checkpoint(models.nams_path, "nams")
-        extractor = checkpoint_extractor(ckpt)
+        features = prepare_features(dataset, settings, root, bars).features
+        extractor = stored_extractor(settings.extractor, features.roof_likelihood)
         domains = {}
         for domain in realdomains.DOMAINS:
             adapt, test = realdomains.split(realdomains.scenes(domain, realdata))
@@ -63,21 +63,21 @@ def bench_roof_finder(spaces=DEFAULT_SPACES, finders=DEFAULT_FINDERS, root: Path
                                "test": finder_on_scenes(extractor, test, dataset.pixel_size_m)}
         name = space if finder == ModelSettings().roof_finder else f"{space} {finder}"
         result["spaces"][name] = {
-            "model_id": ckpt.model_id, "designs": dataset.designs, "roof_finder": finder,
-            "training": training_evidence(models.features.features, models.features.hist_blocks),
-            "domains": domains}
+            "training_set": dataset_dir(dataset, root).name, "designs": dataset.designs, "roof_finder": finder,
+            "extractor": features.extractor_id,
+            "training": training_evidence(features.features, features.hist_blocks), "domains": domains}
     result["seconds"] = round(time.perf_counter() - started, 1)
     return result
 
 
 def format_roof_finder_table(result: dict) -> str:
     """``bench_roof_finder``'s result as Markdown."""
-    lines = ["Each model's roof finder on the real domains' labelled scenes, validation (`adapt`) / test: the "
+    lines = ["Each training set's roof finder on the real domains' labelled scenes, validation (`adapt`) / test: the "
              "share of pixels it counts as flat and as sloped roofs (each by its weight, as the features count "
              "them; in brackets the range all but 10% of the model's training cities span), the true building "
              "share, and its building map (p(flat) + p(sloped) above 0.5) against the building masks, %.", "",
-             "| space | model | domain | flat roof pixels | sloped roof pixels | building share | IoU | precision "
-             "| recall |", "|---|---|---|---|---|---|---|---|---|"]
+             "| space | training set | domain | flat roof pixels | sloped roof pixels | building share | IoU "
+             "| precision | recall |", "|---|---|---|---|---|---|---|---|---|"]
     for space, row in result["spaces"].items():
         training = row["training"] or {}
         spans = {kind: f" [{100 * training[kind]['low']:.1f}-{100 * training[kind]['high']:.1f}]"
@@ -87,6 +87,6 @@ def format_roof_finder_table(result: dict) -> str:
             cells = [f"{100 * v['roof_pixels'][k]:.1f} / {100 * t['roof_pixels'][k]:.1f}{spans[k]}"
                      for k in ("flat", "sloped")]
             cells += [f"{100 * v[k]:.1f} / {100 * t[k]:.1f}" for k in ("building_share", "iou", "precision", "recall")]
-            lines.append(f"| {space} | `{row['model_id']}` | {domain} | " + " | ".join(cells) + " |")
-    lines += ["", f"{result['seconds'] / 60:.0f} min of wall time (models trained in the run included)."]
+            lines.append(f"| {space} | `{row['training_set']}` | {domain} | " + " | ".join(cells) + " |")
+    lines += ["", f"{result['seconds'] / 60:.0f} min of wall time (finders learnt in the run included)."]
     return "\n".join(lines) + "\n"

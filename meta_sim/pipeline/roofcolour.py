@@ -331,15 +331,22 @@ def finder_agreement(extractor, images, masks) -> dict:
             "precision": hits / found if found else 0.0, "recall": hits / truth if truth else 1.0}
 
 
+def stored_extractor(spec: str, roof: Mapping | None, weights: Path | None = None):
+    """The extractor ``spec`` (``features.make_extractor``), with the roof colour part ``roof`` (a
+    ``RoofColourExtractor.to_dict()``, as a checkpoint or a ``FeatureSet`` keeps it) when there is one."""
+    from .features import make_extractor
+
+    extractor = make_extractor(spec, weights)
+    if roof is not None:  # no power before it was kept: 1
+        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(roof), roof.get("weight_power", 1.0))
+    return extractor
+
+
 def checkpoint_extractor(ckpt, weights: Path | None = None):
     """The extractor a checkpoint's features came from: its base extractor, with the roof colour
     part when the checkpoint has one. ``weights``: a backbone's weights file, when it needs one."""
-    from .features import make_extractor
-
-    extractor = make_extractor(ckpt.extra.get("extractor_spec", "colour-texture"), weights)
-    if "roof_likelihood" in ckpt.extra:
-        roof = ckpt.extra["roof_likelihood"]  # RoofColourExtractor.to_dict(); no power before it was kept: 1
-        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(roof), roof.get("weight_power", 1.0))
+    extractor = stored_extractor(ckpt.extra.get("extractor_spec", "colour-texture"), ckpt.extra.get("roof_likelihood"),
+                                 weights)
     if extractor.id != ckpt.extractor_id:
         raise MetaSimError(f"the model was trained on features {ckpt.extractor_id!r} but its extractor now gives "
                            f"{extractor.id!r}; pass the same backbone weights (--weights)")

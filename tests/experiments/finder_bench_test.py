@@ -1,4 +1,4 @@
-"""bench roof-finder's table: each model's finder per real domain, with its training cities' range."""
+"""bench roof-finder's table: each training set's finder per real domain, with its training cities' range."""
 
 from click.testing import CliRunner
 
@@ -13,10 +13,10 @@ def _scored(flat, iou):
 
 def test_the_table_shows_validation_and_test_beside_the_training_range():
     result = {"seconds": 120.0, "spaces": {
-        "rooftops-v1": {"model_id": "abc", "training": {"quantile": 0.05, "flat": {"low": 0.006, "high": 0.25},
+        "rooftops-v1": {"training_set": "abc", "training": {"quantile": 0.05, "flat": {"low": 0.006, "high": 0.25},
                                                         "sloped": {"low": 0.02, "high": 0.1}},
                         "domains": {"rio": {"validation": _scored(0.9, 0.2), "test": _scored(0.8, 0.1)}}},
-        "plain": {"model_id": "def", "training": None,
+        "plain": {"training_set": "def", "training": None,
                   "domains": {"kampala": {"validation": _scored(0.5, 0.5), "test": _scored(0.5, 0.4)}}}}}
     lines = format_roof_finder_table(result).splitlines()
     assert ("| rooftops-v1 | `abc` | rio | 90.0 / 80.0 [0.6-25.0] | 0.0 / 0.0 [2.0-10.0] | 30.0 / 30.0 | 20.0 / 10.0 "
