@@ -105,12 +105,21 @@ def bench_stability_command(out, docs, scratch):
     check(result)
 
 
+def _on_bench_nams_targets(out: str):
+    """The options of a bench scored on bench-nams' targets: --docs, --out (default ``out``), --targets, --cache."""
+    def decorate(command):
+        for option in (click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder"),
+                       click.option("--targets", type=int, default=100, show_default=True,
+                                    help="target groups per target seed of each split (as bench-nams)"),
+                       click.option("--out", type=click.Path(path_type=Path), default=Path(out), show_default=True),
+                       _docs_option):
+            command = option(command)
+        return command
+    return decorate
+
+
 @bench.command("reference")
-@_docs_option
-@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/reference.json"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True,
-              help="target groups per target seed of each split (as bench-nams)")
-@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_on_bench_nams_targets("benchmarks/reference.json")
 def bench_reference_command(out, docs, targets, cache):
     """E1/E2 of the roof-colour reference on the test and validation splits: how far the renders' roof colours
     (found with the roof labels) agree with the swatch similarity that scores every method."""
@@ -123,11 +132,7 @@ def bench_reference_command(out, docs, targets, cache):
 
 
 @bench.command("objective")
-@_docs_option
-@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/objective.json"), show_default=True)
-@click.option("--targets", type=int, default=100, show_default=True,
-              help="target groups per target seed of each split (as bench-nams)")
-@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+@_on_bench_nams_targets("benchmarks/objective.json")
 def bench_objective_command(out, docs, targets, cache):
     """How the search compares the roof-colour histograms (exponent, blur): a grid scored on the validation
     split of E1 and E2, the best chosen there, and the default and the chosen one scored on test."""

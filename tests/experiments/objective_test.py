@@ -40,3 +40,13 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
     assert "| chosen: exponent 0.3, blur 1.5 bins x 30 | test |" in table and "0.450 [0.400, 0.500]" in table
     assert lines[5].endswith("| 0.800 |")  # the chosen setting's validation row: mean of 0.9, 0.9, 0.7, 0.7
     assert "validation #1: exponent 0.3, blur 1.5 bins x 30" in table and "`v2`" in table
+
+
+def test_the_command_is_there_with_the_options_of_a_bench_on_bench_nams_targets():
+    from click.testing import CliRunner
+
+    from meta_sim.cli import main
+
+    out = CliRunner().invoke(main, ["bench", "objective", "--help"])
+    assert out.exit_code == 0
+    assert all(option in out.output for option in ("--docs", "--targets", "--cache", "benchmarks/objective.json"))
