@@ -846,3 +846,25 @@ def test_the_scene_of_a_styled_clutter_city_builds_only_what_the_tiles_see():
             assert 0 < scene.n_details[name] < len(getattr(layout, name)) / 2, name
     finally:
         scene.close()
+
+
+def test_overhead_v3_renders_a_few_houses_among_trees_at_its_low_building_density(bank, tmp_path):
+    # The sparse end overhead-v2 cannot reach (its building density starts at 0.4): a suburban town at
+    # density 0.08 has a fraction of the buildings of one at 0.9, and more of it is green.
+    v3 = DesignSpace.load("overhead-v3")
+    base = {"flat_roof": "flat-concrete-slab", "sloped_roof": "sloped-clay-red", "style": "suburban",
+            "ground": "suburban", "ground_albedo": 0.7, "greenness": 1.0, "tree_density": 1.0, "sun_elevation": 60.0,
+            "brightness": 0.7, "roof_jitter": 0.5, "sensor": "satellite"}
+    settings = RenderSettings(space=v3, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path, n_tiles=4,
+                              **SMALL)
+    jobs = [single_job(v3, v3.validate({**base, "building_density": d}), SEED) for d in (0.08, 0.9)]
+    assert render_jobs(jobs, settings).written == 8
+    sparse, built = ([tiles.read_tile(tmp_path / f"{job.name}_t{j:02d}.exr") for j in range(4)] for job in jobs)
+
+    def share(tile_list, of):
+        return float(np.mean([of(t).mean() for t in tile_list]))
+
+    buildings = [share(t, lambda t: t.building > 0) for t in (sparse, built)]
+    green = [share(t, lambda t: (t.building == 0) & (t.rgb[..., 1] > 1.1 * t.rgb[..., 0])) for t in (sparse, built)]
+    assert buildings[0] < 0.08 and buildings[0] < buildings[1] / 3, buildings
+    assert green[0] > green[1], green

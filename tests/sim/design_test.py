@@ -198,6 +198,17 @@ def test_overhead_v2_is_overhead_v1_plus_the_ground_albedo():
         assert "ground_albedo" not in Appearance().with_design(v1, design).header()
 
 
+def test_overhead_v3_is_overhead_v2_with_sparse_towns():
+    v2, v3 = DesignSpace.load("overhead-v2"), DesignSpace.load("overhead-v3")
+    density = v3.parameter("building_density")
+    assert (density.low, density.high) == (0.05, 1.0) and v2.parameter("building_density").low == 0.4
+    assert tuple(p for p in v3.parameters if p.name != "building_density") == tuple(
+        p for p in v2.parameters if p.name != "building_density")
+    assert v3.layout == v2.layout and v3.dim == v2.dim and v3.names == v2.names
+    values = np.array([d["building_density"] for d in v3.sample(np.random.default_rng(4), 200)])
+    assert values.min() >= 0.05 and values.min() < 0.2
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),
@@ -214,7 +225,7 @@ def test_bad_space_files_raise(patch, message):
 
 
 def test_unknown_space_name_lists_the_built_in_ones():
-    with pytest.raises(MetaSimError, match="overhead-v1, overhead-v2, rooftops-flat-v1, rooftops-v1"):
+    with pytest.raises(MetaSimError, match="overhead-v1, overhead-v2, overhead-v3, rooftops-flat-v1, rooftops-v1"):
         DesignSpace.load("no-such-space")
 
 
