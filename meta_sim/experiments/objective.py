@@ -88,9 +88,9 @@ def _score(setting: Setting, data: dict, intervals: bool = False) -> dict:
     """Per experiment: the mean scores of the exhaustive search with ``setting`` (with 95% intervals)."""
     from ..nams import exhaustive_search
 
-    out = {}
+    out, comparison = {}, setting.comparison()
     for experiment, (ckpt, normed, truth, ranks) in data.items():
-        found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=setting.comparison())
+        found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=comparison)
         rows = [score(r.design, t, ranks, ckpt.space) for r, t in zip(found, truth)]
         out[experiment] = {k: round(v, 4) for k, v in mean_scores(rows).items()}
         if intervals:

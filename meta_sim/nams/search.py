@@ -186,10 +186,14 @@ class ColourComparison:
                                           atol=1e-6)):
                 raise MetaSimError("the colour blur must be a square, non-negative matrix whose columns sum to 1")
 
+    @property
+    def blurs(self) -> bool:
+        """Whether the blurred histograms count at all."""
+        return self.blur is not None and self.blur_weight > 0
+
     def check(self, colour_dims: int) -> None:
         """MetaSimError when the blur does not fit a model's ``colour_dims`` histogram values."""
-        if self.blur is not None and self.blur_weight > 0 and (
-                not colour_dims or colour_dims % self.blur.shape[0]):
+        if self.blurs and (not colour_dims or colour_dims % self.blur.shape[0]):
             raise MetaSimError(f"the colour blur has {self.blur.shape[0]} bins per histogram; the model's "
                                f"{colour_dims} histogram values are not whole histograms of that size")
 
@@ -215,7 +219,7 @@ def _block_mse(diff: torch.Tensor, colour_dims: int, pred: torch.Tensor | None =
     if not colour_dims:
         return (squares.mean(dim=-1),)
     rest, plain = squares[..., :-colour_dims].mean(dim=-1), squares[..., -colour_dims:].mean(dim=-1)
-    if colour.blur is None or colour.blur_weight == 0:
+    if not colour.blurs:
         return rest, plain
     blurred = (colour.blurred(pred[..., -colour_dims:]) - colour.blurred(target[..., -colour_dims:]))
     return rest, plain + colour.blur_weight * blurred.square().mean(dim=-1)
@@ -236,6 +240,15 @@ def _combined(*mses: torch.Tensor, exponent: float = 0.5) -> torch.Tensor:
     if exponent == 0.5:
         return (mses[0] * mses[1] + GEOMETRIC_MEAN_FLOOR).sqrt()
     return (mses[0] + GEOMETRIC_MEAN_FLOOR) ** (1 - exponent) * (mses[1] + GEOMETRIC_MEAN_FLOOR) ** exponent
+
+
+def _pairwise_mse(a: torch.Tensor, b: torch.Tensor, a_sq: torch.Tensor | None = None,
+                  b_sq: torch.Tensor | None = None) -> torch.Tensor:
+    """(T, F) and (N, F) -> (T, N) mean squared differences, from the rows' squared norms (``a_sq`` (T, 1)
+    and ``b_sq`` (N,), computed when not given)."""
+    a_sq = a.square().sum(dim=1, keepdim=True) if a_sq is None else a_sq
+    b_sq = b.square().sum(dim=1) if b_sq is None else b_sq
+    return (a_sq - 2 * a @ b.T + b_sq).clamp_min(0.0) / a.shape[1]
 
 
 # --- voting --------------------------------------------------------------------------------------
@@ -463,15 +476,15 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     lead = model.config.feature_dim - model.config.colour_dims
     blocks = [slice(0, lead)] + ([slice(lead, None)] if model.config.colour_dims else [])
     sq_targets = [targets[:, b].square().sum(dim=1, keepdim=True) for b in blocks]
-    blur = colour.blur is not None and colour.blur_weight > 0 and len(blocks) == 2
+    blur = colour.blurs and len(blocks) == 2
     if blur:  # the blurred histograms, compared like the plain ones
         blurred_table = colour.blurred(table.features[:, lead:].double())
         blurred_targets = colour.blurred(targets[:, lead:])
 
     def block_mses(rows: slice) -> list[torch.Tensor]:
         features = table.features[rows].double()
-        mses = [(sq - 2 * targets[:, b] @ features[:, b].T + table.sq_norms[rows, j]).clamp_min(0.0)
-                / features[:, b].shape[1] for j, (b, sq) in enumerate(zip(blocks, sq_targets))]
+        mses = [_pairwise_mse(targets[:, b], features[:, b], sq, table.sq_norms[rows, j])
+                for j, (b, sq) in enumerate(zip(blocks, sq_targets))]
         if blur:
             mses[1] = mses[1] + colour.blur_weight * _pairwise_mse(blurred_targets, blurred_table[rows])
         return mses
@@ -493,12 +506,6 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
 
 
 # --- entry points --------------------------------------------------------------------------------
-def _pairwise_mse(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """(T, F) and (N, F) -> (T, N) mean squared differences."""
-    return ((a.square().sum(dim=1, keepdim=True) - 2 * a @ b.T + b.square().sum(dim=1)).clamp_min(0.0)
-            / a.shape[1])
-
-
 def resolve_method(space: DesignSpace, method: str) -> str:
     """"auto" becomes "exhaustive" for a discrete space of at most MAX_EXHAUSTIVE_DESIGNS, else "adjoint".
 
