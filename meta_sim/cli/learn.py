@@ -55,6 +55,9 @@ def _dataset_options(command):
                      show_default=True,
                      help="a pixel counts p(roof kind) to this power in its kind's colour histogram: higher "
                           "keeps only the pixels the roof finder is sure of (see `make bench-nams`)"),
+        click.option("--roof-score-cone/--no-roof-score-cone", default=True, show_default=True,
+                     help="also count the roof colours in the E1/E2 score's own colour cone, at full "
+                          "resolution (see `make bench-nams`, row nams_exhaustive_no_score_cone)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):
@@ -88,7 +91,7 @@ def _configs(o):
     settings = ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
                              views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
                              roof_colour=o["roof_colour"], roof_finder=o["roof_finder"],
-                             roof_weight_power=o["roof_weight_power"])
+                             roof_weight_power=o["roof_weight_power"], roof_score_cone=o["roof_score_cone"])
     return dataset.check(), settings.check()
 
 

@@ -144,6 +144,10 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
         # The default without the roof-colour histograms: its features are the default's leading part.
         others["no_roof_colour"] = load_checkpoint(
             ensure_models(dataset, dataclasses.replace(settings, roof_colour=False), root, bars).nams_path, "nams")
+        # The default without the histograms in the score's colour cone (its leading part too).
+        if settings.roof_colour and settings.roof_score_cone:
+            others["no_score_cone"] = load_checkpoint(ensure_models(
+                dataset, dataclasses.replace(settings, roof_score_cone=False), root, bars).nams_path, "nams")
         # The roof colours counted on the pixels a colour-only likelihood finds, instead of the segmenter's:
         # its features differ, so it is scored on targets featurised by its own extractor.
         # Likewise each pixel weighted by the plain probability of its roof kind, not by its power.
@@ -288,7 +292,8 @@ def format_nams_table(result: dict) -> str:
              f"({result['dataset']['preset']}). NAMS architecture {result['architecture']}"]
     if result["train_seconds_other_architectures"]:
         notes[-1] += (" (rows nams_exhaustive_NAME: the other architectures; nams_exhaustive_no_roof_colour: the "
-                      "default without the roof-colour histograms; nams_exhaustive_colour_roof_finder: roofs for "
+                      "default without the roof-colour histograms; nams_exhaustive_no_score_cone: without those in "
+                      "the score's own colour cone; nams_exhaustive_colour_roof_finder: roofs for "
                       f"those histograms found by colour alone, not by the {result['roof_finder']} roof finder; "
                       "nams_exhaustive_roof_weight_power_1: each pixel counted with its plain roof probability, not "
                       f"to the power {result['roof_weight_power']:g})")

@@ -29,7 +29,9 @@ truth itself. The published scores are in docs/benchmarks.md
 
 from __future__ import annotations
 
+import hashlib
 import json
+import pickle
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -332,6 +334,44 @@ def group_features(groups: list[list[np.ndarray]], extractor, views: int, label:
     return torch.stack([f.mean(dim=0) for f in per_group]), per_group
 
 
+def target_features_path(root: Path, extractor_id: str, views: int, folders: list, tiles: int) -> Path:
+    """Where the features of the first ``tiles`` tiles of each target folder by ``extractor_id`` over
+    ``views`` views are kept: the extractor's id names its roof finder's weights, so a retrained finder
+    never reads another's."""
+    key = json.dumps([extractor_id, views, tiles, [Path(f).name for f in folders]])
+    return Path(root) / "targets" / "features" / f"{hashlib.sha256(key.encode()).hexdigest()[:16]}.pt"
+
+
+def stored_target_features(root: Path, extractor_id: str, views: int, folders: list, tiles: int) -> dict | None:
+    """What ``store_target_features`` kept for these targets ("features" (groups, tiles, dim), "seconds"),
+    or None: none kept, or a file that is unreadable or does not fit (computed again, never trusted)."""
+    import torch
+
+    try:
+        stored = torch.load(target_features_path(root, extractor_id, views, folders, tiles), weights_only=True)
+    except (OSError, RuntimeError, ValueError, EOFError, pickle.UnpicklingError):
+        return None
+    features = stored.get("features") if isinstance(stored, dict) else None
+    ok = (stored is not None and stored.get("extractor") == extractor_id and isinstance(features, torch.Tensor)
+          and features.ndim == 3 and tuple(features.shape[:2]) == (len(folders), tiles)
+          and bool(torch.isfinite(features).all()) and isinstance(stored.get("seconds"), float))
+    return stored if ok else None
+
+
+def store_target_features(root: Path, extractor_id: str, views: int, folders: list, tiles: int, features,
+                          seconds: float) -> dict:
+    """Keep the target features (groups, tiles, dim) and the seconds they took (for the cost figures), so
+    that the benches and evaluations after the first, interrupted or not, read them instead of the tiles."""
+    import torch
+
+    from ..core.fileio import atomic_path
+
+    stored = {"extractor": extractor_id, "features": features.contiguous(), "seconds": float(seconds)}
+    with atomic_path(target_features_path(root, extractor_id, views, folders, tiles)) as tmp:
+        torch.save(stored, tmp)
+    return stored
+
+
 def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettings, root: Path,
                  bars: Bars | None = None, test_tiles: int = 0) -> EvalContext:
     """Build or reuse the training set and models; render the targets and compute their features.
@@ -348,6 +388,8 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     """
     import time
 
+    import torch
+
     from ..pipeline.dataset import job_tiles
     from ..render.jobs import sample_designs
     from ..sim.imageio import read_image
@@ -360,17 +402,21 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     jobs, folders = render_split_targets(split, settings.targets, tiles + test_tiles,
                                          settings.preset or dataset.preset, root, dataset.tile_px,
                                          dataset.pixel_size_m, bars, dataset.space)
-    started = time.perf_counter()
-    groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job, folder in zip(jobs, folders)]
-    features, per_tile = group_features(groups, methods.extractor, models_settings.views,
-                                        f"{experiment} target features", bars)
-    feature_seconds = (time.perf_counter() - started) / len(jobs)
+    views = models_settings.views
+    stored = stored_target_features(root, methods.extractor.id, views, folders, tiles)
+    if stored is None:
+        started = time.perf_counter()
+        groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job, folder in zip(jobs, folders)]
+        _, per_group = group_features(groups, methods.extractor, views, f"{experiment} target features", bars)
+        stored = store_target_features(root, methods.extractor.id, views, folders, tiles, torch.stack(per_group),
+                                       time.perf_counter() - started)
+    per_tile = stored["features"]
+    features = per_tile.mean(dim=1)  # every tile x view weighs the same in a group's mean
+    feature_seconds = stored["seconds"] / len(jobs)
     ranks = rankings(experiment, ensure_default_bank(), ensure_heldout_bank(name=split.heldout or FIRST_HELDOUT))
     training_designs = sample_designs(methods.nams.space, dataset.designs, dataset.seed) if experiment == "e1" else []
-    import torch
-
     return EvalContext(experiment, methods.models, methods.nams, methods.dr, jobs, folders, tiles, features,
-                       torch.stack(per_tile), feature_seconds, ranks, methods.pool, training_designs, split,
+                       per_tile, feature_seconds, ranks, methods.pool, training_designs, split,
                        methods.sbi)
 
 

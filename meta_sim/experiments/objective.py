@@ -2,13 +2,17 @@
 
 The exhaustive search ranks designs by ``rest ** (1 - exponent) * colour ** exponent``, where ``colour`` is the
 error over the roof-colour histograms plus ``weight`` times the error over the histograms blurred by a
-Gaussian of ``sigma`` bins (``nams.ColourComparison``, ``pipeline.roofcolour.colour_comparison``). This bench
-scores a grid of those settings on the default model (the one bench-nams scores) and its targets:
+Gaussian of ``sigma`` bins (``nams.ColourComparison``, ``pipeline.roofcolour.colour_comparison``). Which
+histograms there are is the other half of the choice: the default model's (with the histograms in the score's
+own colour cone, ``ModelSettings.roof_score_cone``) and the same model without those (the stretched cone's
+alone). This bench scores a grid of both on the default training set (the one bench-nams scores) and its
+targets:
 
 * on the validation split of E1 and E2, every setting of the grid;
 * the setting with the best mean of the four figures issue 20 sets targets on (E1 top-1 and E2 top-10, flat
   and sloped) is chosen, the default (the plain geometric mean) winning ties;
-* on the test split only the default and the chosen setting are scored, for the report.
+* on the test split only the default, the chosen setting and the default comparison without the score cone
+  (the default before it) are scored, for the report.
 
 ``make bench-objective`` writes ``benchmarks/objective.json`` and its table in docs/benchmarks.md.
 """
@@ -31,30 +35,38 @@ SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top
 
 @dataclass(frozen=True)
 class Setting:
-    """One colour comparison: the colour error's exponent, and the blur's sigma (bins) and weight (0: none)."""
+    """One colour comparison: the colour error's exponent, and the blur's sigma (bins) and weight (0: none);
+    and the model's histograms: with the score's cone or without."""
 
     exponent: float = 0.5
     sigma: float = 0.0
     weight: float = 0.0
+    score_cone: bool = True
 
     @property
     def name(self) -> str:
         blur = f", blur {self.sigma:g} bins x {self.weight:g}" if self.weight else ", no blur"
-        return f"exponent {self.exponent:g}{blur}"
+        return f"exponent {self.exponent:g}{blur}" + ("" if self.score_cone else ", no score cone")
 
-    def comparison(self):
+    def comparison(self, blocks: tuple[int, ...] = (488,)):
+        """The ``nams.ColourComparison`` for a model with the roof-colour histograms ``blocks``."""
         from ..pipeline.roofcolour import colour_comparison
 
-        return colour_comparison(self.exponent, self.sigma, self.weight)
+        return colour_comparison(self.exponent, self.sigma, self.weight, blocks)
 
 
 DEFAULT = Setting()
+WITHOUT_SCORE_CONE = Setting(score_cone=False)  # the default before the score cone
 
 
 def grid(exponents=EXPONENTS, sigmas=SIGMAS, weights=WEIGHTS) -> list[Setting]:
-    """The default first, then every exponent without blur and with every blur."""
-    settings = [DEFAULT] + [Setting(e) for e in exponents if e != DEFAULT.exponent]
-    return settings + [Setting(e, s, w) for e in exponents for s in sigmas for w in weights]
+    """The default first, then for each model (with the score cone, then without) every exponent without
+    blur and with every blur."""
+    settings = [DEFAULT]
+    for cone in (True, False):
+        settings += [Setting(e, score_cone=cone) for e in exponents if Setting(e, score_cone=cone) != DEFAULT]
+        settings += [Setting(e, s, w, cone) for e in exponents for s in sigmas for w in weights]
+    return settings
 
 
 def criterion(metrics: dict) -> float:
@@ -68,19 +80,24 @@ def choose(rows: list[dict]) -> dict:
     return next(r for r in rows if r["criterion"] == best)
 
 
-def _targets(split_name: str, targets: int, root: Path, bars: Bars | None) -> dict:
-    """Per experiment of ``split_name``: the default model's checkpoint, normalised target features, the
-    targets' true designs and the rankings that score them."""
+def _targets(split_name: str, targets: int, root: Path, bars: Bars | None, cones=(True, False)) -> dict:
+    """Per model (with the score cone or without, ``cones``), per experiment of ``split_name``: the model's
+    checkpoint, normalised target features, the targets' true designs and the rankings that score them."""
+    from dataclasses import replace
+
     from ..pipeline.dataset import DatasetConfig
     from ..pipeline.workflow import ModelSettings
     from .evaluate import EvalSettings, prepare_eval
 
     out = {}
-    for experiment in ("e1", "e2"):
-        settings = EvalSettings(targets=targets, ms2=False, sbi=False, split=get_split(experiment, split_name))
-        ctx = prepare_eval(experiment, DatasetConfig(), ModelSettings(), settings, root, bars)
-        out[experiment] = (ctx.nams, ctx.nams.feature_norm.apply(ctx.features), [j.design for j in ctx.jobs],
-                           ctx.ranks)
+    for cone in cones:
+        models = replace(ModelSettings(), roof_score_cone=cone)
+        out[cone] = {}
+        for experiment in ("e1", "e2"):
+            settings = EvalSettings(targets=targets, ms2=False, sbi=False, split=get_split(experiment, split_name))
+            ctx = prepare_eval(experiment, DatasetConfig(), models, settings, root, bars)
+            out[cone][experiment] = (ctx.nams, ctx.nams.feature_norm.apply(ctx.features),
+                                     [j.design for j in ctx.jobs], ctx.ranks)
     return out
 
 
@@ -88,9 +105,12 @@ def _score(setting: Setting, data: dict, intervals: bool = False) -> dict:
     """Per experiment: the mean scores of the exhaustive search with ``setting`` (with 95% intervals)."""
     from ..nams import exhaustive_search
 
-    out, comparison = {}, setting.comparison()
-    for experiment, (ckpt, normed, truth, ranks) in data.items():
-        found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=comparison)
+    out, comparisons = {}, {}  # one blur per histogram layout (the experiments share the default model's)
+    for experiment, (ckpt, normed, truth, ranks) in data[setting.score_cone].items():
+        blocks = ckpt.feature_norm.hist_blocks
+        if blocks not in comparisons:
+            comparisons[blocks] = setting.comparison(blocks)
+        found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=comparisons[blocks])
         rows = [score(r.design, t, ranks, ckpt.space) for r, t in zip(found, truth)]
         out[experiment] = {k: round(v, 4) for k, v in mean_scores(rows).items()}
         if intervals:
@@ -120,7 +140,8 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
     chosen = choose(rows)
     test = _targets("test", targets, root, bars)
     reported = {}
-    for label, row in (("default", rows[0]), ("chosen", chosen)):
+    without = next(r for r in rows if r["name"] == WITHOUT_SCORE_CONE.name)
+    for label, row in (("default", rows[0]), ("chosen", chosen), ("without score cone", without)):
         setting = Setting(**row["setting"])
         metrics = _score(setting, test, intervals=True)
         reported[label] = {"setting": row["setting"], "name": setting.name, "metrics": metrics,
@@ -150,8 +171,10 @@ def format_objective_table(result: dict, best: int = 5) -> str:
         return " | ".join(out)
 
     by_name = {r["name"]: r for r in result["validation"]}
-    for label in ("default", "chosen"):
-        row = result["test"][label]
+    for label in ("default", "chosen", "without score cone"):
+        row = result["test"].get(label)  # a result from before the score cone lacks the last
+        if row is None:
+            continue
         lines.append(f"| {label}: {row['name']} | test | {cells(row['metrics'], True)} | {row['criterion']:.3f} |")
         valid = by_name[row["name"]]
         lines.append(f"| {label}: {row['name']} | validation | {cells(valid['metrics'], False)} | "
@@ -166,6 +189,6 @@ def format_objective_table(result: dict, best: int = 5) -> str:
               f"`{seeds['validation']['e2']['heldout']}`; test seeds "
               f"{', '.join(map(str, seeds['test']['e1']['seeds']))} "
               f"and E2 on `{seeds['test']['e2']['heldout']}` (95% intervals over the groups). "
-              f"{len(result['validation'])} settings scored on validation; the test split scores the default and "
-              f"the chosen one only."]
+              f"{len(result['validation'])} settings scored on validation; the test split scores the default, "
+              f"the chosen one and the default comparison on the model without the score cone only."]
     return "\n".join(lines)

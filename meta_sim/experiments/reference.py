@@ -13,6 +13,12 @@ score, with information no method has -- the tiles' roof labels:
   kind over its tiles; the "inferred" texture is the bank texture with the
   highest histogram intersection, scored like the methods.
 
+A second row finds the roof pixels without labels, as the default features
+do: each pixel counts the default model's roof finder's probability of the
+kind (to the weight power), histogrammed the same way. The gap between the
+two rows is what finding roofs without labels costs; the gap between the
+finder's row and NAMS's is what the model and its features cost.
+
 A low figure means the renders' roof colours rank the bank differently from
 the swatches, whatever the features and the model; ``make bench-reference``
 writes ``benchmarks/reference.json``. Like ``make bench-nams`` it measures
@@ -29,26 +35,54 @@ import numpy as np
 from ..core.progress import Bars
 from ..sim.imageio import linear_to_srgb
 from ..sim.meshes import FLAT_ROOF, SLOPED_ROOF
-from ..sim.textures import hsv_cone_histogram
+from ..sim.textures import hsv_cone_bins
 from .evaluate import KIND_OF, mean_scores, rankings, render_split_targets, score
 from .splits import SPLIT_NAMES, get_split
 
 ROOF_CLASS_OF = {"flat": FLAT_ROOF, "sloped": SLOPED_ROOF}
+# How the roof pixels are found: by the tiles' labels, or by the default model's roof finder (no labels).
+WAYS = ("labels", "finder")
+ROW_OF = {"labels": "roof_colour_reference", "finder": "roof_finder_reference"}
 
 
-def roof_histograms(paths) -> dict[str, np.ndarray]:
-    """Per roof kind, the HSV-cone pixel counts (512,) of that kind's roof pixels over the tiles at ``paths``."""
+def roof_histograms(paths, finder=None) -> dict[str, dict[str, np.ndarray]]:
+    """Per way of finding the roofs, per roof kind, the HSV-cone pixel counts (512,) of that kind's roof
+    pixels over the tiles at ``paths``: "labels", the tiles' roof labels; with ``finder`` (a
+    ``(finder, power)`` pair, as a model's ``RoofColourExtractor`` holds them) also "finder", every pixel
+    counting the finder's probability of that kind for its 2x2 block to the power, as the default
+    features count it."""
     from ..sim.tiles import read_tile
 
-    counts = {kind: np.zeros(512) for kind in ROOF_CLASS_OF}
+    counts = {way: {kind: np.zeros(512) for kind in ROOF_CLASS_OF} for way in ("labels", "finder")[:1 + bool(finder)]}
     for path in paths:
         tile = read_tile(path)
         rgb8 = np.round(linear_to_srgb(tile.rgb) * 255.0).astype(np.uint8)
+        bins = hsv_cone_bins(rgb8)
         for kind, roof_class in ROOF_CLASS_OF.items():
-            pixels = rgb8[tile.roof_class == roof_class]
-            if len(pixels):
-                counts[kind] += hsv_cone_histogram(pixels[:, None, :]) * len(pixels)
+            counts["labels"][kind] += np.bincount(bins, weights=(tile.roof_class == roof_class).ravel(), minlength=512)
+        if finder:
+            for kind, weights in zip(ROOF_CLASS_OF, _finder_weights(rgb8, *finder)):
+                counts["finder"][kind] += np.bincount(bins, weights=weights.ravel(), minlength=512)
     return counts
+
+
+def _finder_weights(rgb8: np.ndarray, finder, power: float) -> list[np.ndarray]:
+    """Per roof kind, (H, W) float64: ``finder``'s probability of that kind for each pixel's 2x2 block
+    (a last odd row or column gets 0), to ``power``."""
+    import torch
+
+    from ..pipeline.roofcolour import _level1
+
+    h, w = rgb8.shape[0] // 2 * 2, rgb8.shape[1] // 2 * 2
+    batch = torch.from_numpy(rgb8[:h, :w].astype(np.float32) / 255.0).permute(2, 0, 1)[None]
+    with torch.no_grad():
+        blocks = finder.weights(_level1(batch))[0].double() ** power
+    out = []
+    for kind_blocks in blocks:
+        full = np.zeros(rgb8.shape[:2])
+        full[:h, :w] = kind_blocks.repeat_interleave(2, dim=0).repeat_interleave(2, dim=1).numpy()
+        out.append(full)
+    return out
 
 
 def nearest(histogram: np.ndarray, references: dict[str, np.ndarray]) -> str | None:
@@ -65,8 +99,9 @@ def bench_reference(targets: int = 100, tiles: int = 9, root: Path | None = None
     ``targets`` groups per seed of each split (``dataset``: another training set, a ``DatasetConfig``;
     its tile size and pixel size are the targets')."""
     from ..core.cache import cache_root
-    from ..pipeline.dataset import DatasetConfig, render_training_set
-    from ..pipeline.workflow import dataset_dir
+    from ..pipeline.dataset import DatasetConfig, render_training_set, training_tiles
+    from ..pipeline.roofcolour import ensure_roof_finder
+    from ..pipeline.workflow import ModelSettings, dataset_dir
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
     root = Path(root or cache_root())
@@ -74,22 +109,28 @@ def bench_reference(targets: int = 100, tiles: int = 9, root: Path | None = None
     folder = dataset_dir(dataset, root)
     jobs, _ = render_training_set(folder, dataset, bars("render training set", dataset.designs * dataset.tiles)
                                if bars else None)
+    settings = ModelSettings()
+    paths = training_tiles(folder, dataset)
+    finder = (ensure_roof_finder(folder, paths, settings.roof_finder, settings.seed,
+                                 bars("roof finder", len(paths)) if bars else None), settings.roof_weight_power)
     update = bars("training roofs", len(jobs)) if bars else None
-    sums = {kind: {} for kind in ROOF_CLASS_OF}
+    sums = {way: {kind: {} for kind in ROOF_CLASS_OF} for way in WAYS}
     for job in jobs:
-        counts = roof_histograms(folder / "tiles" / f"{job.name}_t{j:02d}.exr" for j in range(dataset.tiles))
-        for param, kind in KIND_OF.items():
+        counts = roof_histograms((folder / "tiles" / f"{job.name}_t{j:02d}.exr" for j in range(dataset.tiles)),
+                                 finder)
+        for way, param, kind in ((w, p, k) for w in WAYS for p, k in KIND_OF.items()):
             if param in job.design:
                 texture = job.design[param]
-                sums[kind][texture] = sums[kind].get(texture, 0.0) + counts[kind]
+                sums[way][kind][texture] = sums[way][kind].get(texture, 0.0) + counts[way][kind]
         if update:
             update(1)
-    references = {kind: {t: c / c.sum() for t, c in by_texture.items() if c.sum() > 0}
-                  for kind, by_texture in sums.items()}
+    references = {way: {kind: {t: c / c.sum() for t, c in by_texture.items() if c.sum() > 0}
+                        for kind, by_texture in by_kind.items()} for way, by_kind in sums.items()}
     bank = ensure_default_bank()
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
               "targets_per_seed": targets, "tiles_per_target": tiles,
-              "bank_textures_seen": {kind: len(refs) for kind, refs in references.items()},
+              "bank_textures_seen": {kind: len(refs) for kind, refs in references["labels"].items()},
+              "roof_finder": {"finder": settings.roof_finder, "weight_power": settings.roof_weight_power},
               "machine": {"cpus": os.cpu_count()}, "splits": {name: {"experiments": {}} for name in SPLIT_NAMES}}
     for split_name, experiment in ((s, e) for s in SPLIT_NAMES for e in ("e1", "e2")):
         split = get_split(experiment, split_name)
@@ -97,33 +138,41 @@ def bench_reference(targets: int = 100, tiles: int = 9, root: Path | None = None
                                                     dataset.pixel_size_m, bars)
         ranks = rankings(experiment, bank, ensure_heldout_bank(name=split.heldout or "heldout-v1"))
         update = bars(f"{experiment} {split_name} target roofs", len(target_jobs)) if bars else None
-        rows, missing = [], {kind: 0 for kind in ROOF_CLASS_OF}
+        rows = {way: [] for way in WAYS}
+        missing = {way: {kind: 0 for kind in ROOF_CLASS_OF} for way in WAYS}
         for job, target_folder in zip(target_jobs, folders):
-            counts = roof_histograms(target_folder / f"{job.name}_t{j:02d}.exr" for j in range(tiles))
-            predicted = {}
-            for param, kind in KIND_OF.items():
-                choice = nearest(counts[kind], references[kind])
-                if choice is None:  # no roof of this kind in the group: the reference cannot guess
-                    missing[kind] += 1
-                    choice = ""
-                predicted[param] = choice
-            rows.append(score(predicted, job.design, ranks))
+            counts = roof_histograms((target_folder / f"{job.name}_t{j:02d}.exr" for j in range(tiles)), finder)
+            for way in WAYS:
+                predicted = {}
+                for param, kind in KIND_OF.items():
+                    choice = nearest(counts[way][kind], references[way][kind])
+                    if choice is None:  # no roof of this kind in the group: the reference cannot guess
+                        missing[way][kind] += 1
+                        choice = ""
+                    predicted[param] = choice
+                rows[way].append(score(predicted, job.design, ranks))
             if update:
                 update(1)
-        result["splits"][split_name]["experiments"][experiment] = {"roof_colour_reference": {
-            **{key: round(value, 3) for key, value in mean_scores(rows).items()},
-            "targets": len(rows), "seeds": list(split.seeds), "heldout": split.heldout,
-            "groups_without_roofs": missing}}
+        result["splits"][split_name]["experiments"][experiment] = {
+            ROW_OF[way]: {**{key: round(value, 3) for key, value in mean_scores(rows[way]).items()},
+                          "targets": len(rows[way]), "seeds": list(split.seeds), "heldout": split.heldout,
+                          "groups_without_roofs": missing[way]} for way in WAYS}
     return result
 
 
 def format_reference_table(result: dict) -> str:
-    """The reference's result as the Markdown table of docs/benchmarks.md."""
-    lines = ["| experiment | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | targets |",
-             "|---|---|---|---|---|---|---|"]
+    """The reference's result as the Markdown table of docs/benchmarks.md: per experiment and split, the
+    roofs found by their labels, then (a result from before it was measured lacks it) by the roof finder."""
+    lines = ["| experiment | split | roofs found by | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 "
+             "| targets |",
+             "|---|---|---|---|---|---|---|---|"]
     for experiment in ("e1", "e2"):
         for split in ("test", "validation"):
-            r = result["splits"][split]["experiments"][experiment]["roof_colour_reference"]
-            lines.append(f"| {experiment.upper()} | {split} | {r['flat_top1']:.2f} | {r['flat_top10']:.2f} | "
-                         f"{r['sloped_top1']:.2f} | {r['sloped_top10']:.2f} | {r['targets']} |")
+            rows = result["splits"][split]["experiments"][experiment]
+            for way in WAYS:
+                r = rows.get(ROW_OF[way])
+                if r is not None:
+                    lines.append(f"| {experiment.upper()} | {split} | {way} | {r['flat_top1']:.2f} | "
+                                 f"{r['flat_top10']:.2f} | {r['sloped_top1']:.2f} | {r['sloped_top10']:.2f} | "
+                                 f"{r['targets']} |")
     return "\n".join(lines)

@@ -31,11 +31,9 @@ paper-faithful -- and the bench measures each end to end.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import math
-import pickle
 import re
 import time
 from dataclasses import asdict, dataclass, field
@@ -98,7 +96,7 @@ class _Experiment:
         from ..sim.design import DesignSpace
         from ..sim.imageio import read_image
         from ..sim.textures import ensure_default_bank, ensure_heldout_bank
-        from .evaluate import rankings, render_split_targets
+        from .evaluate import rankings, render_split_targets, store_target_features, stored_target_features
 
         self.dataset = dataset
         # E1 targets whose design the training set lacks are also scored alone ("unseen").
@@ -112,7 +110,7 @@ class _Experiment:
         for split in SPLITS:
             jobs, folders = render_split_targets(split, targets, tiles, dataset.preset, root, dataset.tile_px,
                                                  dataset.pixel_size_m, bars)
-            stored = _stored_features(root, extractor.id, folders, tiles)
+            stored = stored_target_features(root, extractor.id, 1, folders, tiles)
             if stored is None:
                 features, split_seconds = [], 0.0
                 for start in range(0, len(jobs), targets):  # a seed's tiles at a time: a split's would fill memory
@@ -122,9 +120,10 @@ class _Experiment:
                     started = time.perf_counter()
                     features.append(features_for_groups(groups, extractor, 1))
                     split_seconds += time.perf_counter() - started
-                stored = _store_features(root, extractor.id, folders, tiles, torch.cat(features), split_seconds)
-            seconds, featurised = seconds + stored["seconds"], featurised + len(stored["features"])
-            self.targets[split.name] = (split, jobs, stored["features"].reshape(len(jobs), tiles, -1))
+                stored = store_target_features(root, extractor.id, 1, folders, tiles,
+                                               torch.cat(features).reshape(len(jobs), tiles, -1), split_seconds)
+            seconds, featurised = seconds + stored["seconds"], featurised + len(jobs) * tiles
+            self.targets[split.name] = (split, jobs, stored["features"])
         self.feature_seconds_per_tile = seconds / featurised
         self.ranks = rankings("e1", ensure_default_bank(), ensure_heldout_bank())
         feature_total = self.feature_seconds_per_tile * dataset.designs * dataset.tiles
@@ -168,41 +167,6 @@ class _Experiment:
                       "feature_seconds_per_tile": round(self.feature_seconds_per_tile, 5),
                       "train_seconds": round(self.train_seconds, 1),
                       "dataset": asdict(self.dataset)})
-
-
-def _features_path(root: Path, extractor_id: str, folders: list, tiles: int) -> Path:
-    """Where the features of ``tiles`` tiles of each target folder by ``extractor_id`` are kept: the
-    extractor's id names its roof finder's weights, so a retrained finder never reads another's."""
-    key = json.dumps([extractor_id, tiles, [Path(f).name for f in folders]])
-    return root / "targets" / "features" / f"tradeoff-{hashlib.sha256(key.encode()).hexdigest()[:16]}.pt"
-
-
-def _stored_features(root: Path, extractor_id: str, folders: list, tiles: int) -> dict | None:
-    """The features ``_store_features`` kept for these targets, or None (none kept, or unreadable)."""
-    import torch
-
-    path = _features_path(root, extractor_id, folders, tiles)
-    try:
-        stored = torch.load(path, weights_only=True)
-    except (OSError, RuntimeError, ValueError, EOFError, pickle.UnpicklingError):
-        return None
-    ok = (isinstance(stored, dict) and stored.get("extractor") == extractor_id
-          and isinstance(stored.get("features"), torch.Tensor) and len(stored["features"]) == len(folders) * tiles
-          and isinstance(stored.get("seconds"), float))
-    return stored if ok else None
-
-
-def _store_features(root: Path, extractor_id: str, folders: list, tiles: int, features, seconds: float) -> dict:
-    """Keep the target features (and the seconds they took, for the cost figures) so that a rerun of the
-    bench, interrupted or not, featurises each training set's targets once."""
-    import torch
-
-    from ..core.fileio import atomic_path
-
-    stored = {"extractor": extractor_id, "features": features.contiguous(), "seconds": float(seconds)}
-    with atomic_path(_features_path(root, extractor_id, folders, tiles)) as tmp:
-        torch.save(stored, tmp)
-    return stored
 
 
 def _views_check() -> dict:
@@ -267,7 +231,8 @@ def read_nams_rows(nams_bench: Path, per_seed: int) -> dict:
 
 
 # bench-nams's variants of the default model (rows nams_exhaustive_NAME), each a knob of its own.
-_VARIANTS = {"no_roof_colour": ("roof colour", "none"), "colour_roof_finder": ("roof finder", "colour"),
+_VARIANTS = {"no_roof_colour": ("roof colour", "none"), "no_score_cone": ("roof colour", "no score cone"),
+             "colour_roof_finder": ("roof finder", "colour"),
              "roof_weight_power_1": ("roof weight power", "1")}
 
 

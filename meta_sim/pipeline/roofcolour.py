@@ -31,6 +31,17 @@ histograms by their plain distance, not whitened by the noise (see
   finder is sure of and all but drops the doubtful ones (roof edges, the
   other roof kind, roof-like ground): histograms compared once they sum to
   1 gain more from a purer sample than from a larger one.
+* With ``score_cone`` (the default of ``workflow.ModelSettings``), two more
+  histograms per roof kind, in the HSV cone of the E1/E2 score itself
+  (``sim.textures.similarity``: 8 x 8 x 8 hard bins, chroma not stretched;
+  its 220 reachable bins), of the tile's full-resolution pixels, each
+  weighted by the finder's probability of its 2x2 block to the same power.
+  The stretched, soft histograms of 2x2 means tell close bank textures
+  apart (E1); these rank a texture the bank lacks as the score ranks it
+  (E2): a 2x2 mean mixes a pattern's colours into colours the texture does
+  not have, and the stretched cone spreads the greys the score lumps
+  together. ``make bench-nams`` (row ``nams_exhaustive_no_score_cone``)
+  measures what they add.
 
 The finder belongs to the training set it was learnt on; the checkpoint
 stores it, so inference needs no labels. The reasoning is in docs/design.md
@@ -49,6 +60,7 @@ import torch
 
 from ..core.errors import MetaSimError
 from ..core.fileio import atomic_path
+from ..sim.textures.similarity import BINS as SCORE_BINS
 from .features import ColourTexture, _cone_axes, _half, _reachable_cone_bins, _soft_histogram
 
 VERSION = 1
@@ -177,69 +189,123 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
     return found
 
 
+def score_cone_bins() -> torch.Tensor:
+    """Mask of the E1/E2 score's HSV-cone bins (``sim.textures.similarity``: 8 x 8 x 8, (x, y) the chroma
+    on the hue circle, z the value) that some colour reaches: chroma never exceeds value, so a bin is
+    reachable when its (x, y) box comes nearer the axis than the top of its value range."""
+    lo = -1.0 + np.arange(SCORE_BINS) * (2.0 / SCORE_BINS)
+    hi = lo + 2.0 / SCORE_BINS
+    axis_gap = np.where((lo <= 0) & (hi >= 0), 0.0, np.minimum(np.abs(lo), np.abs(hi)))
+    top = (np.arange(SCORE_BINS) + 1.0) / SCORE_BINS
+    radius = np.hypot(axis_gap[:, None], axis_gap[None, :])
+    return torch.from_numpy((radius[:, :, None] < top[None, None, :]).reshape(-1))
+
+
+def _score_histograms(rgb: torch.Tensor, weights: torch.Tensor, keep: torch.Tensor) -> torch.Tensor:
+    """(N, kinds x kept bins): per kind of ``weights`` (N, kinds, H, W), the hard histogram of the
+    pixels of ``rgb`` (N, 3, H, W) in the score's HSV cone, each pixel counting its weight, divided by
+    the pixel count."""
+    n, kinds = weights.shape[:2]
+    total = SCORE_BINS ** 3
+    index = torch.zeros(n, rgb.shape[-2] * rgb.shape[-1], dtype=torch.long)
+    for values, lo, hi, bins in _cone_axes(rgb, SCORE_BINS, 1.0):
+        step = ((values.reshape(n, -1) - lo) * (bins / (hi - lo))).floor().clamp_(0, bins - 1).long()
+        index = index * bins + step
+    index = index + (torch.arange(n) * total).unsqueeze(1)
+    parts = [torch.bincount(index.flatten(), weights[:, k].reshape(n, -1).flatten().double(),
+                            minlength=n * total).view(n, total)[:, keep] for k in range(kinds)]
+    return (torch.cat(parts, dim=1) / index.shape[1]).float()
+
+
 class RoofColourExtractor:
     """``base``'s features, then per roof kind the colour histogram (488 bins) of the pixels weighted by
     ``finder``'s probability of that roof kind (a ``RoofLikelihood`` or a ``roofsegment.RoofSegmenter``)
-    raised to ``power``."""
+    raised to ``power``; with ``score_cone`` then per roof kind the histogram (220 bins) of the
+    full-resolution pixels in the score's HSV cone, weighted alike (see the module's docstring)."""
 
-    def __init__(self, base, finder, power: float = WEIGHT_POWER):
+    def __init__(self, base, finder, power: float = WEIGHT_POWER, score_cone: bool = False):
         if not (math.isfinite(power) and power > 0):
             raise MetaSimError(f"the roof weight power must be a positive number, got {power!r}")
-        self.base, self.finder, self.power = base, finder, float(power)
+        self.base, self.finder, self.power, self.score_cone = base, finder, float(power), bool(score_cone)
         self._keep = _reachable_cone_bins(ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
+        self._score_keep = score_cone_bins()
         self.hist_blocks = (int(self._keep.sum()),) * len(KINDS)
+        if self.score_cone:
+            self.hist_blocks += (int(self._score_keep.sum()),) * len(KINDS)
         self.base_dim = base.dim
         self.dim = base.dim + sum(self.hist_blocks)
-        self.id = f"{base.id}+{finder.id}" + (f"^{self.power:g}" if self.power != 1.0 else "")
+        self.id = (f"{base.id}+{finder.id}" + (f"^{self.power:g}" if self.power != 1.0 else "")
+                   + (f"+score-cone{SCORE_BINS}" if self.score_cone else ""))
         # The histograms do not change under the dihedral views either.
         self.dihedral_invariant = getattr(base, "dihedral_invariant", False)
 
     def to_dict(self) -> dict:
         """What a checkpoint keeps of the roof-colour part (``checkpoint_extractor`` reads it back):
-        the finder's ``to_dict()`` and the weight power."""
-        return {**self.finder.to_dict(), "weight_power": self.power}
+        the finder's ``to_dict()``, the weight power and whether the score-cone histograms follow."""
+        return {**self.finder.to_dict(), "weight_power": self.power, "score_cone": self.score_cone}
 
     @torch.no_grad()
     def __call__(self, batch: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.base(batch), self.roof_histograms(batch)], dim=1)
 
     def roof_histograms(self, batch: torch.Tensor) -> torch.Tensor:
-        """(N, sum(hist_blocks)): the flat-roof then the sloped-roof histogram of each image of an
-        (N, 3, H, W) sRGB batch, each bin divided by the image's pixel count (not made to sum to 1:
-        ``FeatureNorm`` does that after the group mean, so that a group pools its tiles' pixels)."""
+        """(N, sum(hist_blocks)): the flat-roof then the sloped-roof histogram (then, with
+        ``score_cone``, the same two in the score's cone) of each image of an (N, 3, H, W) sRGB batch,
+        each bin divided by the image's pixel count (not made to sum to 1: ``FeatureNorm`` does that
+        after the group mean, so that a group pools its tiles' pixels)."""
         parts = []
         for chunk in batch.split(ColourTexture.CHUNK):
-            level1 = _level1(torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0))
+            clean = torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0)
+            level1 = _level1(clean)
             axes = _cone_axes(level1, ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
             weights = self.finder.weights(level1)
             if self.power != 1.0:
                 weights = weights ** self.power
-            parts.append(torch.cat([_soft_histogram(axes, weights[:, k])[:, self._keep]
-                                    for k in range(len(KINDS))], dim=1))
+            hists = [_soft_histogram(axes, weights[:, k])[:, self._keep] for k in range(len(KINDS))]
+            if self.score_cone:  # each pixel weighted as its 2x2 block (a last odd row or column is left out)
+                h, w = level1.shape[-2:]
+                full = weights.repeat_interleave(2, dim=-2).repeat_interleave(2, dim=-1)
+                hists.append(_score_histograms(clean[..., :2 * h, :2 * w], full, self._score_keep))
+            parts.append(torch.cat(hists, dim=1))
         return torch.cat(parts)
 
 
-def colour_blur(sigma: float) -> torch.Tensor:
-    """(488, 488) float64: a Gaussian blur of ``sigma`` bins over the roof-colour histograms' bins (their
-    positions on the 8 x 8 x 8 grid of the stretched cone, distances counted in bins on each axis), each
-    column summing to 1 so that a histogram keeps its mass. For ``nams.ColourComparison``."""
+def colour_blur(sigma: float, blocks: tuple[int, ...] = (488,)) -> torch.Tensor:
+    """A Gaussian blur of ``sigma`` bins over histograms of the widths ``blocks`` (a model's histogram
+    blocks, ``FeatureNorm.hist_blocks``), each over its own cone: 488 bins, the stretched cone of 8 x 8 x 8
+    (the first histograms); 220, the score's (``score_cone_bins``). Distances are counted in bins on each
+    axis; each column sums to 1 so that a histogram keeps its mass. Float64, square, block-diagonal over
+    ``blocks``; for ``nams.ColourComparison``. MetaSimError for a sigma or a width it cannot blur."""
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
         raise MetaSimError(f"the colour blur's sigma must be a positive number of bins, not {sigma!r}")
     bins = ColourTexture.COLOUR_BINS
-    keep = _reachable_cone_bins(bins, ColourTexture.CHROMA_POWER).numpy()
-    grid = np.stack(np.meshgrid(*(np.arange(bins),) * 3, indexing="ij"), axis=-1).reshape(-1, 3)[keep]
-    weights = np.exp(-((grid[:, None, :] - grid[None, :, :]) ** 2).sum(axis=-1) / (2.0 * sigma ** 2))
-    return torch.from_numpy(weights / weights.sum(axis=0, keepdims=True))
+    cones = {int(mask.sum()): mask.numpy() for mask in
+             (_reachable_cone_bins(bins, ColourTexture.CHROMA_POWER), score_cone_bins())}
+    grid = np.stack(np.meshgrid(*(np.arange(bins),) * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    out = torch.zeros(sum(blocks), sum(blocks), dtype=torch.float64)
+    start = 0
+    for width in blocks:
+        if width not in cones:
+            raise MetaSimError(f"no colour cone has {width} bins; the roof-colour histograms have "
+                               f"{' or '.join(map(str, sorted(cones)))}")
+        cells = grid[cones[width]]
+        weights = np.exp(-((cells[:, None, :] - cells[None, :, :]) ** 2).sum(axis=-1) / (2.0 * sigma ** 2))
+        weights /= weights.sum(axis=0, keepdims=True)
+        out[start:start + width, start:start + width] = torch.from_numpy(weights)
+        start += width
+    return out
 
 
-def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weight: float = 0.0):
-    """A ``nams.ColourComparison`` for models with these roof-colour histograms: the colour error's
-    exponent, and with ``blur_sigma`` > 0 and ``blur_weight`` > 0 the histograms also compared blurred by
-    ``colour_blur(blur_sigma)``. The defaults are the plain geometric mean."""
+def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weight: float = 0.0,
+                      blocks: tuple[int, ...] = (488,)):
+    """A ``nams.ColourComparison`` for models with the roof-colour histograms ``blocks``
+    (``FeatureNorm.hist_blocks``): the colour error's exponent, and with ``blur_sigma`` > 0 and
+    ``blur_weight`` > 0 the histograms also compared blurred by ``colour_blur(blur_sigma, blocks)``. The
+    defaults are the plain geometric mean."""
     from ..nams import ColourComparison
 
     blurred = blur_sigma > 0 and blur_weight > 0
-    return ColourComparison(exponent, colour_blur(blur_sigma) if blurred else None,
+    return ColourComparison(exponent, colour_blur(blur_sigma, tuple(blocks)) if blurred else None,
                             blur_weight if blurred else 0.0)
 
 
@@ -337,8 +403,12 @@ def stored_extractor(spec: str, roof: Mapping | None, weights: Path | None = Non
     from .features import make_extractor
 
     extractor = make_extractor(spec, weights)
-    if roof is not None:  # no power before it was kept: 1
-        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(roof), roof.get("weight_power", 1.0))
+    if roof is not None:  # no power before it was kept: 1; no score cone before it existed
+        score_cone = roof.get("score_cone", False)
+        if not isinstance(score_cone, bool):
+            raise MetaSimError(f"the roof colour's score_cone must be true or false, not {score_cone!r}")
+        extractor = RoofColourExtractor(extractor, roof_finder_from_dict(roof), roof.get("weight_power", 1.0),
+                                        score_cone)
     return extractor
 
 

@@ -43,7 +43,7 @@ class ModelSettings:
     nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
     train: dict = field(default_factory=dict)  # TrainConfig overrides
     seed: int = 0
-    # The next three were chosen on E1/E2's validation split (bench-nams's ablation rows; docs/design.md,
+    # The next four were chosen on E1/E2's validation split (bench-nams's ablation rows; docs/design.md,
     # "Splits"). Add the roof-colour histograms to the features (meta_sim.pipeline.roofcolour); needs the
     # tiles' labels.
     roof_colour: bool = True
@@ -51,6 +51,8 @@ class ModelSettings:
     roof_finder: str = "segmenter"
     # A pixel counts p(roof kind) ** roof_weight_power in that kind's histogram (1: the plain probability).
     roof_weight_power: float = 4.0
+    # Also the roof pixels' histograms in the E1/E2 score's own colour cone (roofcolour.RoofColourExtractor).
+    roof_score_cone: bool = True
 
     def check(self) -> "ModelSettings":
         """These settings, or MetaSimError for any that training would refuse (checked before any work)."""
@@ -162,7 +164,7 @@ def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettin
             progress = bars("roof colours", len(paths)) if bars else None
         extractor = RoofColourExtractor(extractor, ensure_roof_finder(folder, paths, settings.roof_finder,
                                                                       settings.seed, progress),
-                                        settings.roof_weight_power)
+                                        settings.roof_weight_power, settings.roof_score_cone)
     features = build_features(folder, config, extractor, settings.views,
                               bars("features", config.designs) if bars else None)
     seconds["features"] = time.perf_counter() - started

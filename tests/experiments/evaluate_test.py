@@ -1,8 +1,15 @@
 """E1/E2 scoring: ranks by the HSV similarity, ties shared fairly."""
 
 import pytest
+import torch
 
-from meta_sim.experiments.evaluate import rankings, score
+from meta_sim.experiments.evaluate import (
+    rankings,
+    score,
+    store_target_features,
+    stored_target_features,
+    target_features_path,
+)
 from meta_sim.experiments.ranking import Ranking
 from meta_sim.sim.textures import ensure_default_bank, ensure_heldout_bank
 
@@ -177,3 +184,24 @@ def test_tables_give_the_sbi_baselines_training_time():
         return next(line for line in table if line.startswith(prefix)).split(" | ")[column]
 
     assert cell("| E1 | sbi_nre | test |") == "0.750 / 0.500" and cell("| E1 | nams_exhaustive | test |") == "-"
+
+
+def test_kept_target_features_are_read_back_only_for_the_same_extractor_and_targets(tmp_path):
+    folders = [tmp_path / "e1-seed21" / f"g{i}" for i in range(3)]
+    features = torch.arange(3 * 2 * 4, dtype=torch.float32).reshape(3, 2, 4)
+    store_target_features(tmp_path, "colour+finder-abc", 8, folders, 2, features, 1.5)
+    back = stored_target_features(tmp_path, "colour+finder-abc", 8, folders, 2)
+    assert torch.equal(back["features"], features) and back["seconds"] == 1.5
+    assert stored_target_features(tmp_path, "colour+finder-def", 8, folders, 2) is None  # a retrained finder
+    assert stored_target_features(tmp_path, "colour+finder-abc", 8, folders[:2], 2) is None  # other targets
+    assert stored_target_features(tmp_path, "colour+finder-abc", 8, folders, 1) is None  # fewer tiles per group
+    assert stored_target_features(tmp_path, "colour+finder-abc", 1, folders, 2) is None  # other views
+    path = target_features_path(tmp_path, "colour+finder-abc", 8, folders, 2)
+    path.write_bytes(b"not a torch file")  # torn or tampered: featurised again, never trusted
+    assert stored_target_features(tmp_path, "colour+finder-abc", 8, folders, 2) is None
+    torch.save({"extractor": "colour+finder-abc", "features": features[:2], "seconds": 1.5}, path)
+    assert stored_target_features(tmp_path, "colour+finder-abc", 8, folders, 2) is None  # wrong count
+    nan = features.clone()
+    nan[0, 0, 0] = float("nan")
+    torch.save({"extractor": "colour+finder-abc", "features": nan, "seconds": 1.5}, path)
+    assert stored_target_features(tmp_path, "colour+finder-abc", 8, folders, 2) is None  # not finite

@@ -1,6 +1,14 @@
 """bench-objective's protocol: the grid, the choice on validation (the default wins ties) and its table."""
 
-from meta_sim.experiments.objective import DEFAULT, Setting, choose, criterion, format_objective_table, grid
+from meta_sim.experiments.objective import (
+    DEFAULT,
+    WITHOUT_SCORE_CONE,
+    Setting,
+    choose,
+    criterion,
+    format_objective_table,
+    grid,
+)
 
 
 def _metrics(e1: float, e2: float) -> dict:
@@ -14,6 +22,11 @@ def test_the_grid_starts_with_the_default_and_names_each_setting_once():
     assert len({s.name for s in settings}) == len(settings)
     assert Setting(0.3, 1.5, 30.0).name == "exponent 0.3, blur 1.5 bins x 30"
     assert Setting(0.3, 1.5, 30.0).comparison().blur.shape == (488, 488)
+    assert Setting(0.3, 1.5, 30.0).comparison((488, 488, 220, 220)).blur.shape == (1416, 1416)
+    # Both models: with the score cone (the default) and without, each with every comparison.
+    assert DEFAULT.score_cone and WITHOUT_SCORE_CONE in settings
+    assert sum(s.score_cone for s in settings) == sum(not s.score_cone for s in settings) == len(settings) // 2
+    assert WITHOUT_SCORE_CONE.name == "exponent 0.5, no blur, no score cone"
 
 
 def test_the_choice_is_the_best_mean_of_the_four_targets_and_the_default_wins_ties():
@@ -29,7 +42,10 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
     validation = [{"setting": vars(s), "name": s.name, "metrics": _metrics(*m), "criterion": criterion(_metrics(*m))}
                   for s, m in ((default, (0.9, 0.5)), (chosen, (0.9, 0.7)))]
     test = {label: {"setting": vars(s), "name": s.name, "metrics": _metrics(*m), "criterion": criterion(_metrics(*m))}
-            for label, s, m in (("default", default, (0.8, 0.4)), ("chosen", chosen, (0.85, 0.45)))}
+            for label, s, m in (("default", default, (0.8, 0.4)), ("chosen", chosen, (0.85, 0.45)),
+                                ("without score cone", WITHOUT_SCORE_CONE, (0.8, 0.3)))}
+    validation.append({"setting": vars(WITHOUT_SCORE_CONE), "name": WITHOUT_SCORE_CONE.name,
+                       "metrics": _metrics(0.9, 0.4), "criterion": criterion(_metrics(0.9, 0.4))})
     test["chosen"]["metrics"]["e2"]["intervals"] = {"flat_top10": [0.4, 0.5]}
     split = {"e1": {"seeds": [1, 2, 7]}, "e2": {"seeds": [1, 2, 7], "heldout": "heldout-v1"}}
     result = {"validation": validation, "test": test, "targets_per_seed": 100,
@@ -40,6 +56,9 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
     assert "| chosen: exponent 0.3, blur 1.5 bins x 30 | test |" in table and "0.450 [0.400, 0.500]" in table
     assert lines[5].endswith("| 0.800 |")  # the chosen setting's validation row: mean of 0.9, 0.9, 0.7, 0.7
     assert "validation #1: exponent 0.3, blur 1.5 bins x 30" in table and "`v2`" in table
+    assert "| without score cone: exponent 0.5, no blur, no score cone | test | 0.800" in table
+    del result["test"]["without score cone"]  # a result from before the score cone
+    assert "without score cone" not in format_objective_table(result).split("validation #1")[0]
 
 
 def test_the_command_is_there_with_the_options_of_a_bench_on_bench_nams_targets():

@@ -241,24 +241,6 @@ def test_a_tiny_experiment_measures_every_point_on_both_splits(tmp_path):
     assert all(torch.equal(again.targets[name][2], features) for name, (_, _, features) in experiment.targets.items())
 
 
-def test_kept_target_features_are_read_back_only_for_the_same_extractor_and_targets(tmp_path):
-    from meta_sim.experiments.tradeoff import _features_path, _store_features, _stored_features
-
-    folders = [tmp_path / "e1-seed21" / f"g{i}" for i in range(3)]
-    features = torch.arange(3 * 2 * 4, dtype=torch.float32).reshape(6, 4)
-    _store_features(tmp_path, "colour+finder-abc", folders, 2, features, 1.5)
-    back = _stored_features(tmp_path, "colour+finder-abc", folders, 2)
-    assert torch.equal(back["features"], features) and back["seconds"] == 1.5
-    assert _stored_features(tmp_path, "colour+finder-def", folders, 2) is None  # a retrained finder
-    assert _stored_features(tmp_path, "colour+finder-abc", folders[:2], 2) is None  # other targets
-    assert _stored_features(tmp_path, "colour+finder-abc", folders, 1) is None  # fewer tiles per group
-    path = _features_path(tmp_path, "colour+finder-abc", folders, 2)
-    path.write_bytes(b"not a torch file")  # torn or tampered: featurised again, never trusted
-    assert _stored_features(tmp_path, "colour+finder-abc", folders, 2) is None
-    torch.save({"extractor": "colour+finder-abc", "features": features[:5], "seconds": 1.5}, path)
-    assert _stored_features(tmp_path, "colour+finder-abc", folders, 2) is None  # wrong count
-
-
 def test_torch_side_commands_take_their_thread_count_from_meta_sim_threads(tmp_path, monkeypatch):
     import torch
     from click.testing import CliRunner

@@ -12,6 +12,8 @@ import pytest
 from click.testing import CliRunner
 
 from meta_sim.cli import main as cli
+from meta_sim.nams import load_checkpoint
+from meta_sim.pipeline.roofcolour import checkpoint_extractor
 from meta_sim.sim.presets import load_preset
 
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
@@ -58,6 +60,9 @@ def test_eval_writes_results_sheet_and_checkpoint(evaluated):
     assert "| sbi_nre |" in (out / "results.md").read_text() and "Training (when" in (out / "results.md").read_text()
     assert (out / "sheet.png").stat().st_size > 1000
     assert (out / "nams.pt").is_file() and (out / "dr.pt").is_file()
+    # The default features: the roof colours in the stretched cone and in the score's own cone.
+    ckpt = load_checkpoint(out / "nams.pt", "nams")
+    assert ckpt.feature_norm.hist_blocks == (488, 488, 220, 220) and checkpoint_extractor(ckpt).score_cone
 
 
 def test_eval_reuses_its_cached_training_set_and_model(evaluated, tiny_env, tmp_path):

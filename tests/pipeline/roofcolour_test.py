@@ -399,3 +399,87 @@ def test_checkpoint_extractor_needs_the_same_likelihood(tiles, tmp_path):
         checkpoint_extractor(Ckpt())
     with pytest.raises(MetaSimError, match="version"):
         RoofLikelihood.from_dict({"version": 99})
+
+
+class _Stub:
+    """A roof finder that calls the given 2x2 blocks (None: all) flat roofs (probability 1), nothing sloped."""
+
+    id = "stub"
+
+    def __init__(self, flat_blocks):
+        self.flat_blocks = flat_blocks
+
+    def weights(self, level1):
+        out = torch.zeros(level1.shape[0], 2, *level1.shape[-2:])
+        out[:, 0] = 1.0 if self.flat_blocks is None else self.flat_blocks
+        return out
+
+    def to_dict(self):
+        return {"kind": "stub"}
+
+
+def test_score_cone_histograms_count_full_resolution_roof_pixels_as_the_score_does():
+    from meta_sim.pipeline.roofcolour import score_cone_bins
+    from meta_sim.sim.textures import hsv_cone_histogram
+
+    # A flat roof of a one-pixel checkerboard of two colours on grey ground: its 2x2 means are one third colour.
+    size = 16
+    srgb = np.full((size, size, 3), 0.5, np.float32)
+    checker = (np.add.outer(np.arange(8), np.arange(8)) % 2).astype(bool)
+    roof = np.where(checker[..., None], np.float32([0.85, 0.2, 0.15]), np.float32([0.2, 0.3, 0.8]))
+    srgb[4:12, 4:12] = roof
+    blocks = torch.zeros(size // 2, size // 2)
+    blocks[2:6, 2:6] = 1.0
+    batch = torch.from_numpy(srgb).permute(2, 0, 1)[None]
+    extractor = RoofColourExtractor(ColourTexture(), _Stub(blocks), power=1.0, score_cone=True)
+    keep = score_cone_bins()
+    assert extractor.hist_blocks == (488, 488, 220, 220) and int(keep.sum()) == 220
+    assert extractor.dim == ColourTexture().dim + 1416 and extractor.id.endswith("+score-cone8")
+    out = extractor(batch)
+    stretched_flat, _, score_flat, score_sloped = out[0, extractor.base_dim:].split(list(extractor.hist_blocks))
+    # The score's own histogram of the roof's pixels: the two colours, half each, none of their mean.
+    expected = torch.from_numpy(hsv_cone_histogram(np.round(roof * 255).astype(np.uint8)))[keep].float()
+    assert torch.allclose(score_flat / score_flat.sum(), expected, atol=1e-6)
+    assert int((expected > 0).sum()) == 2 and float(score_sloped.sum()) == 0.0
+    assert float(score_flat.sum()) == pytest.approx(64 / size ** 2)  # the roof's share of the tile's pixels
+    # The stretched histogram of 2x2 means sees the blend instead (one colour, in neither of the two bins).
+    without = RoofColourExtractor(ColourTexture(), _Stub(blocks), power=1.0)
+    assert torch.equal(without(batch), out[:, :without.dim])
+    assert extractor.dihedral_invariant
+    assert torch.allclose(extractor(torch.rot90(batch, 1, (2, 3)).flip(-1)), out, atol=1e-6)
+    extremes = torch.stack([torch.zeros(3, size, size), torch.ones(3, size, size),
+                            torch.full((3, size, size), float("nan"))])
+    assert torch.isfinite(extractor(extremes)).all()
+    everywhere = RoofColourExtractor(ColourTexture(), _Stub(None), power=1.0, score_cone=True)
+    odd = everywhere.roof_histograms(torch.rand(1, 3, 17, 17))  # the last odd row and column are left out
+    assert odd.shape == (1, 1416) and float(odd[0, 976:1196].sum()) == pytest.approx(1.0)  # of the pixels counted
+
+
+def test_the_score_cone_is_kept_by_the_checkpoint_and_off_for_older_ones(tiles, tmp_path):
+    likelihood = ensure_roof_finder(tmp_path, tiles, "colour")
+    extractor = RoofColourExtractor(ColourTexture(), likelihood, score_cone=True)
+
+    class Ckpt:
+        extra = {"extractor_spec": "colour-texture", "roof_likelihood": extractor.to_dict()}
+        extractor_id = extractor.id
+
+    back = checkpoint_extractor(Ckpt())
+    assert back.score_cone and back.id == extractor.id and back.hist_blocks == extractor.hist_blocks
+    older = {k: v for k, v in extractor.to_dict().items() if k != "score_cone"}  # from before it existed
+    Ckpt.extra = {"extractor_spec": "colour-texture", "roof_likelihood": older}
+    Ckpt.extractor_id = RoofColourExtractor(ColourTexture(), likelihood).id
+    assert not checkpoint_extractor(Ckpt()).score_cone
+    Ckpt.extra = {"extractor_spec": "colour-texture", "roof_likelihood": {**older, "score_cone": "yes"}}
+    with pytest.raises(MetaSimError, match="score_cone"):
+        checkpoint_extractor(Ckpt())
+
+
+def test_the_colour_blur_covers_both_cones_block_by_block():
+    blur = colour_blur(1.5, (488, 488, 220, 220))
+    assert blur.shape == (1416, 1416) and torch.allclose(blur.sum(dim=0), torch.ones(1416, dtype=torch.float64))
+    assert torch.equal(blur[:488, :488], colour_blur(1.5)) and torch.equal(blur[488:976, 488:976], colour_blur(1.5))
+    assert float(blur[:976, 976:].abs().sum()) == 0.0 and float(blur[976:, :976].abs().sum()) == 0.0
+    assert torch.equal(blur[976:1196, 976:1196], blur[1196:, 1196:])
+    assert colour_comparison(0.3, 1.5, 30.0, (488, 488, 220, 220)).blur.shape == (1416, 1416)
+    with pytest.raises(MetaSimError, match="no colour cone has 100 bins"):
+        colour_blur(1.5, (100,))

@@ -29,6 +29,7 @@ from .sheet import contact_sheet
 from .similarity import (
     Similarity,
     bank_similarity,
+    hsv_cone_bins,
     hsv_cone_histogram,
     load_similarity,
     rank_by_similarity,
@@ -59,6 +60,7 @@ __all__ = [
     "ensure_heldout_banks",
     "generate",
     "heldout_bank_dir",
+    "hsv_cone_bins",
     "hsv_cone_histogram",
     "load_bank",
     "load_similarity",

@@ -47,9 +47,9 @@ DEFINITION = (
 )
 
 
-def hsv_cone_histogram(rgb: np.ndarray) -> np.ndarray:
-    """Normalised (512,) float64 histogram of a uint8 HxWx3 image's colours
-    in the HSV cone (see the module docstring)."""
+def hsv_cone_bins(rgb: np.ndarray) -> np.ndarray:
+    """(H*W,) int64: the flat HSV-cone bin (see the module docstring) of each pixel of a uint8 HxWx3
+    image, row by row."""
     arr = np.asarray(rgb)
     if arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] * arr.shape[1] == 0:
         raise ValueError(f"need a non-empty uint8 HxWx3 image, got {arr.dtype} {arr.shape}")
@@ -70,8 +70,14 @@ def hsv_cone_histogram(rgb: np.ndarray) -> np.ndarray:
     i = np.clip(np.floor((x + 1.0) * 0.5 * BINS), 0, BINS - 1).astype(np.int64)
     j = np.clip(np.floor((y + 1.0) * 0.5 * BINS), 0, BINS - 1).astype(np.int64)
     k = np.clip(np.floor(v * BINS), 0, BINS - 1).astype(np.int64)
-    counts = np.bincount(i * BINS * BINS + j * BINS + k, minlength=BINS**3)
-    return counts.astype(np.float64) / float(len(pix))
+    return i * BINS * BINS + j * BINS + k
+
+
+def hsv_cone_histogram(rgb: np.ndarray) -> np.ndarray:
+    """Normalised (512,) float64 histogram of a uint8 HxWx3 image's colours
+    in the HSV cone (see the module docstring)."""
+    bins = hsv_cone_bins(rgb)
+    return np.bincount(bins, minlength=BINS**3).astype(np.float64) / float(len(bins))
 
 
 def similarity(h1: np.ndarray, h2: np.ndarray) -> float:
