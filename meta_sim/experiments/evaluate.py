@@ -426,6 +426,7 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
 
     from ..nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
     from ..nams.nre import nre_predict
+    from ..pipeline.roofcolour import search_colour
 
     space, feats, n = ctx.nams.space, ctx.features, len(ctx.jobs)
     generator = torch.Generator().manual_seed(seed)
@@ -444,10 +445,12 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
     if ctx.sbi is not None:
         runs["sbi_nre"] = lambda: [r.design for r in nre_predict(ctx.sbi.model, ctx.sbi.feature_norm.apply(feats),
                                                                  space)]
+    colour = search_colour(ctx.nams)
     runs["nams_adjoint"] = lambda: [r.design for r in adjoint_search(
-        ctx.nams.model, normed, space, generator=generator, **adjoint_settings)]
+        ctx.nams.model, normed, space, generator=generator, colour=colour, **adjoint_settings)]
     if discrete(space):  # the exhaustive search enumerates every design
-        runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S)]
+        runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S,
+                                                                               colour=colour)]
     return runs
 
 

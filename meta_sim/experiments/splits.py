@@ -113,6 +113,7 @@ MEASURED_DEFAULTS = {
     "segmenter roof finder": ("meta_sim.pipeline.workflow:ModelSettings.roof_finder", VALIDATION),
     "roof-weight power 4": ("meta_sim.pipeline.workflow:ModelSettings.roof_weight_power", VALIDATION),
     "score-cone roof histograms": ("meta_sim.pipeline.workflow:ModelSettings.roof_score_cone", VALIDATION),
+    "search colour comparison": ("meta_sim.pipeline.roofcolour:SEARCH_COLOUR", VALIDATION),
     "exhaustive search": ("meta_sim.nams.search:resolve_method", VALIDATION),
     "CONTINUOUS_SEARCH": ("meta_sim.experiments.evaluate:CONTINUOUS_SEARCH", VALIDATION),
     "fastest_adjoint_keeping_e1": ("meta_sim.experiments.bench:fastest_adjoint", VALIDATION),

@@ -193,13 +193,13 @@ def _bfloat16(model: Path, tiles: list[np.ndarray]) -> dict:
 
     from ..nams import load_checkpoint, search
     from ..pipeline.features import features_for_groups
-    from ..pipeline.roofcolour import checkpoint_extractor
+    from ..pipeline.roofcolour import checkpoint_extractor, search_colour
 
     ckpt = load_checkpoint(model, "nams")
     features = features_for_groups([tiles], checkpoint_extractor(ckpt), 1)
     options = {k: v for k, v in ADJOINT.items() if k != "method"}
     results = search(ckpt.model, ckpt.feature_norm.apply(features), ckpt.space, "adjoint", dtype=torch.bfloat16,
-                     generator=torch.Generator().manual_seed(0), **options)
+                     generator=torch.Generator().manual_seed(0), colour=search_colour(ckpt), **options)
     return _finite_results([r.design for r in results], [r.best_loss for r in results], ckpt.space)
 
 

@@ -90,7 +90,7 @@ class _Experiment:
         from ..nams import load_checkpoint
         from ..pipeline.dataset import job_tiles
         from ..pipeline.features import features_for_groups
-        from ..pipeline.roofcolour import checkpoint_extractor
+        from ..pipeline.roofcolour import checkpoint_extractor, search_colour
         from ..pipeline.workflow import ModelSettings, ensure_models
         from ..render.jobs import sample_designs
         from ..sim.design import DesignSpace
@@ -103,6 +103,7 @@ class _Experiment:
         self.training_designs = sample_designs(DesignSpace.load(dataset.space), dataset.designs, dataset.seed)
         models = ensure_models(dataset, ModelSettings(views=views), root, bars)
         self.nams = load_checkpoint(models.nams_path, "nams")
+        self.colour = search_colour(self.nams)
         self.per_seed = targets
         extractor = checkpoint_extractor(self.nams)
         tiles = max(GROUP_TILES)
@@ -148,9 +149,9 @@ class _Experiment:
             normed = self.nams.feature_norm.apply(tile_features[chosen, :group_tiles].mean(dim=1))
             started = time.perf_counter()
             if method == "exhaustive":
-                results = exhaustive_search(self.nams.model, normed, self.nams.space)
+                results = exhaustive_search(self.nams.model, normed, self.nams.space, colour=self.colour)
             else:  # the searches' random starts seeded as bench-nams's: by the split's first target seed
-                results = adjoint_search(self.nams.model, normed, self.nams.space,
+                results = adjoint_search(self.nams.model, normed, self.nams.space, colour=self.colour,
                                          generator=torch.Generator().manual_seed(split.seeds[0]),
                                          **{"S": min(50, adjoint["M"]), **adjoint})
             search_seconds += time.perf_counter() - started

@@ -17,6 +17,7 @@ from .ms2 import MS2Config, ms2_search
 from .norm import FeatureNorm
 from .nre import NREConfig, NRETrainConfig, RatioClassifier, nre_predict, train_nre
 from .search import (
+    PLAIN_COLOUR,
     ColourComparison,
     SearchResult,
     adjoint_search,
@@ -32,7 +33,7 @@ from .train import EpochReport, Fit, TrainConfig, train_dr, train_nams
 __all__ = [
     "ARCHITECTURES", "DEFAULT_ARCHITECTURE", "architecture_options", "Checkpoint", "ColourComparison", "DRConfig",
     "DirectRegression", "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS", "NAMSConfig", "NREConfig",
-    "NRETrainConfig", "RatioClassifier", "SearchResult", "TrainConfig", "adjoint_search", "build_model",
+    "NRETrainConfig", "PLAIN_COLOUR", "RatioClassifier", "SearchResult", "TrainConfig", "adjoint_search", "build_model",
     "design_table", "dr_predict", "exhaustive_search", "load_checkpoint", "model_id", "ms2_search", "nre_predict",
     "save_checkpoint", "search", "time_search", "train_dr", "train_nams", "train_nre", "uniform_predict",
 ]

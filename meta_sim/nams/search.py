@@ -455,6 +455,20 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
     return table
 
 
+def _blurred_table(model: NAMS, space: DesignSpace, table: DesignTable, colour: ColourComparison,
+                   lead: int) -> torch.Tensor:
+    """The design table's histograms blurred by ``colour``, cached beside the table (a search of one target
+    group would otherwise blur every design's histograms again, the bulk of its time)."""
+    key = ("blurred", json.dumps(space.to_dict(), sort_keys=True), id(colour))
+    cached = model._design_tables.get(key)
+    if cached is not None and cached[0] is colour and cached[1] is table.features:
+        return cached[2]
+    blurred = colour.blurred(table.features[:, lead:].double())
+    if not model.training:  # kept with the comparison itself, so that its id is not another's
+        model._design_tables[key] = (colour, table.features, blurred)
+    return blurred
+
+
 def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top: int = 10, r: float = 0.0,
                       generator: torch.Generator | None = None, batch: int = 16384,
                       colour: ColourComparison = PLAIN_COLOUR) -> list[SearchResult]:
@@ -478,7 +492,7 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     sq_targets = [targets[:, b].square().sum(dim=1, keepdim=True) for b in blocks]
     blur = colour.blurs and len(blocks) == 2
     if blur:  # the blurred histograms, compared like the plain ones
-        blurred_table = colour.blurred(table.features[:, lead:].double())
+        blurred_table = _blurred_table(model, space, table, colour, lead)
         blurred_targets = colour.blurred(targets[:, lead:])
 
     def block_mses(rows: slice) -> list[torch.Tensor]:

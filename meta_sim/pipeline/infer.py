@@ -24,7 +24,7 @@ from ..core.fileio import atomic_dir, writable_dir, write_text_atomic
 from ..core.progress import Bars
 from ..nams.search import SearchOptions
 from ..sim.presets import DesignPreset, population, save_preset
-from .roofcolour import EVIDENCE_QUANTILE, evidence_reference, roof_evidence
+from .roofcolour import EVIDENCE_QUANTILE, evidence_reference, roof_evidence, search_colour
 
 METHODS = ("auto", "adjoint", "exhaustive")
 # Groups featurised and searched together: memory stays that of one batch whatever the folder holds.
@@ -162,6 +162,7 @@ class _Run:
         self.seconds = {"features": 0.0, "search": 0.0}
         self.method = settings.method
         self.evidence_reference = evidence_reference(ckpt.extra)
+        self.colour = search_colour(ckpt)  # built once: the search blurs the model's design table once
 
     def search(self, groups: list, out_dir: Path) -> None:
         """Features, search and one preset file per group, for one batch of groups."""
@@ -173,7 +174,7 @@ class _Run:
         self.seconds["features"] += time.perf_counter() - started
         started = time.perf_counter()
         results = search(self.ckpt.model, self.ckpt.feature_norm.apply(feats), self.ckpt.space, self.settings.method,
-                         generator=self.generator, **self.settings.search_options())
+                         generator=self.generator, colour=self.colour, **self.settings.search_options())
         self.seconds["search"] += time.perf_counter() - started
         evidence = roof_evidence(feats, self.extractor) or {}
         for k, (group, result) in enumerate(zip(groups, results)):

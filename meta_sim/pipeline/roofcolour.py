@@ -50,6 +50,7 @@ stores it, so inference needs no labels. The reasoning is in docs/design.md
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from pathlib import Path
@@ -307,6 +308,26 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
     blurred = blur_sigma > 0 and blur_weight > 0
     return ColourComparison(exponent, colour_blur(blur_sigma, tuple(blocks)) if blurred else None,
                             blur_weight if blurred else 0.0)
+
+
+# The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), chosen
+# on E1/E2's validation split by `make bench-objective` (docs/design.md, "Roof colour").
+SEARCH_COLOUR = (0.3, 1.0, 30.0)
+
+
+@functools.lru_cache(maxsize=8)
+def _search_colour(blocks: tuple[int, ...]):
+    return colour_comparison(*SEARCH_COLOUR, blocks)
+
+
+def search_colour(ckpt):
+    """How the search compares a checkpoint's roof-colour histograms: ``SEARCH_COLOUR`` over its histogram
+    blocks, or the plain comparison for a model without them. One object per layout, so that the
+    exhaustive search blurs a model's design table once."""
+    from ..nams import PLAIN_COLOUR
+
+    blocks = tuple(ckpt.feature_norm.hist_blocks)
+    return _search_colour(blocks) if blocks else PLAIN_COLOUR
 
 
 def roof_evidence(features: torch.Tensor, extractor) -> dict | None:

@@ -2,6 +2,7 @@
 
 from meta_sim.experiments.objective import (
     DEFAULT,
+    PLAIN,
     WITHOUT_SCORE_CONE,
     Setting,
     choose,
@@ -9,6 +10,7 @@ from meta_sim.experiments.objective import (
     format_objective_table,
     grid,
 )
+from meta_sim.pipeline.roofcolour import SEARCH_COLOUR
 
 
 def _metrics(e1: float, e2: float) -> dict:
@@ -18,7 +20,8 @@ def _metrics(e1: float, e2: float) -> dict:
 
 def test_the_grid_starts_with_the_default_and_names_each_setting_once():
     settings = grid()
-    assert settings[0] == DEFAULT and DEFAULT.comparison().blur is None
+    assert settings[0] == DEFAULT and (DEFAULT.exponent, DEFAULT.sigma, DEFAULT.weight) == SEARCH_COLOUR
+    assert PLAIN in settings and PLAIN.comparison().blur is None and PLAIN.score_cone
     assert len({s.name for s in settings}) == len(settings)
     assert Setting(0.3, 1.5, 30.0).name == "exponent 0.3, blur 1.5 bins x 30"
     assert Setting(0.3, 1.5, 30.0).comparison().blur.shape == (488, 488)

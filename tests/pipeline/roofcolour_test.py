@@ -483,3 +483,41 @@ def test_the_colour_blur_covers_both_cones_block_by_block():
     assert colour_comparison(0.3, 1.5, 30.0, (488, 488, 220, 220)).blur.shape == (1416, 1416)
     with pytest.raises(MetaSimError, match="no colour cone has 100 bins"):
         colour_blur(1.5, (100,))
+
+
+def test_the_blurred_design_table_is_kept_per_comparison_and_gives_the_same_answers(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    targets = fit.norm.apply(coloured["targets"])
+    blurred = ColourComparison(exponent=0.3, blur=_line_blur(), blur_weight=30.0)
+    fit.model.train()  # drops what the other tests' searches kept
+    fit.model.eval()
+    first = exhaustive_search(fit.model, targets, space, colour=blurred)
+    kept = [k for k in fit.model._design_tables if k[0] == "blurred"]
+    assert len(kept) == 1
+    again = exhaustive_search(fit.model, targets, space, colour=blurred)  # from the kept table
+    assert [r.ranked for r in again] == [r.ranked for r in first]
+    other = ColourComparison(exponent=0.3, blur=_line_blur() * 0 + torch.eye(8, dtype=torch.float64),
+                             blur_weight=30.0)  # another comparison: its own table, never the first's
+    exhaustive_search(fit.model, targets, space, colour=other)
+    assert len([k for k in fit.model._design_tables if k[0] == "blurred"]) == 2
+    fit.model.train()  # new weights to come: every kept table goes
+    assert not fit.model._design_tables
+    fit.model.eval()
+    assert [r.ranked for r in exhaustive_search(fit.model, targets, space, colour=blurred)] == \
+        [r.ranked for r in first]
+
+
+def test_the_search_colour_is_the_chosen_comparison_for_a_model_with_roof_colours(coloured):
+    from meta_sim.nams import PLAIN_COLOUR
+    from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, search_colour
+
+    class Ckpt:
+        feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4), hist_blocks=(488, 488, 220, 220))
+
+    colour = search_colour(Ckpt())
+    assert (colour.exponent, colour.blur_weight) == (SEARCH_COLOUR[0], SEARCH_COLOUR[2])
+    assert colour.blur.shape == (1416, 1416) and torch.equal(colour.blur, colour_blur(SEARCH_COLOUR[1],
+                                                                                       (488, 488, 220, 220)))
+    assert search_colour(Ckpt()) is colour  # one object per layout: the search blurs a design table once
+    Ckpt.feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4))
+    assert search_colour(Ckpt()) is PLAIN_COLOUR
