@@ -210,6 +210,8 @@ class _Run:
                   "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
                   "nodata_tiles": nodata,
                   "architecture": ckpt.model.config.architecture, "method": self.method,
+                  "colour_comparison": {"exponent": self.colour.exponent, "blurred": self.colour.blurs,
+                                        "blur_weight": self.colour.blur_weight},
                   "seconds": {"read_and_features": self.seconds["features"], "search": self.seconds["search"],
                               "search_per_group": self.seconds["search"] / len(presets)},
                   "population": pop.distribution,

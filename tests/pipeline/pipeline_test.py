@@ -164,6 +164,8 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert report["architecture"] == "additive"
     assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
     assert set(report["groups"][0]["roof_pixels"]) == {"flat", "sloped"}
+    # How the search compared the roof colours: the default (roofcolour.SEARCH_COLOUR), blurred.
+    assert report["colour_comparison"] == {"exponent": 0.3, "blurred": True, "blur_weight": 30.0}
     assert "| flat roof pixels |" in (tmp_path / "inferred" / "report.md").read_text()
     assert set(report["roof_pixels_range"]) == {"flat", "sloped"}
     assert set(report["groups_outside_roof_pixels_range"]) == {"flat", "sloped"}
