@@ -53,7 +53,7 @@ def roof_histograms(paths, finder=None) -> dict[str, dict[str, np.ndarray]]:
     features count it."""
     from ..sim.tiles import read_tile
 
-    counts = {way: {kind: np.zeros(512) for kind in ROOF_CLASS_OF} for way in ("labels", "finder")[:1 + bool(finder)]}
+    counts = {way: {kind: np.zeros(512) for kind in ROOF_CLASS_OF} for way in WAYS[:1 + bool(finder)]}
     for path in paths:
         tile = read_tile(path)
         rgb8 = np.round(linear_to_srgb(tile.rgb) * 255.0).astype(np.uint8)
@@ -68,21 +68,16 @@ def roof_histograms(paths, finder=None) -> dict[str, dict[str, np.ndarray]]:
 
 def _finder_weights(rgb8: np.ndarray, finder, power: float) -> list[np.ndarray]:
     """Per roof kind, (H, W) float64: ``finder``'s probability of that kind for each pixel's 2x2 block
-    (a last odd row or column gets 0), to ``power``."""
+    (a last odd row or column gets 0), to ``power``, as the features weigh the pixels."""
     import torch
 
-    from ..pipeline.roofcolour import _level1
+    from ..pipeline.roofcolour import _level1, per_pixel, roof_weights
 
     h, w = rgb8.shape[0] // 2 * 2, rgb8.shape[1] // 2 * 2
     batch = torch.from_numpy(rgb8[:h, :w].astype(np.float32) / 255.0).permute(2, 0, 1)[None]
     with torch.no_grad():
-        blocks = finder.weights(_level1(batch))[0].double() ** power
-    out = []
-    for kind_blocks in blocks:
-        full = np.zeros(rgb8.shape[:2])
-        full[:h, :w] = kind_blocks.repeat_interleave(2, dim=0).repeat_interleave(2, dim=1).numpy()
-        out.append(full)
-    return out
+        weights = per_pixel(roof_weights(finder, _level1(batch), power))[0].double().numpy()
+    return [np.pad(kind, ((0, rgb8.shape[0] - h), (0, rgb8.shape[1] - w))) for kind in weights]
 
 
 def nearest(histogram: np.ndarray, references: dict[str, np.ndarray]) -> str | None:

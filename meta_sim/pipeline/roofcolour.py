@@ -190,6 +190,18 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
     return found
 
 
+def roof_weights(finder, level1: torch.Tensor, power: float) -> torch.Tensor:
+    """(N, kinds, h, w): ``finder``'s probability of each roof kind for each 2x2 block of ``level1``
+    (``_level1`` of an sRGB batch), to ``power``: what a pixel counts in its kind's histograms."""
+    weights = finder.weights(level1)
+    return weights if power == 1.0 else weights ** power
+
+
+def per_pixel(weights: torch.Tensor) -> torch.Tensor:
+    """(..., h, w) weights of 2x2 blocks -> (..., 2h, 2w), each pixel its block's."""
+    return weights.repeat_interleave(2, dim=-2).repeat_interleave(2, dim=-1)
+
+
 def score_cone_bins() -> torch.Tensor:
     """Mask of the E1/E2 score's HSV-cone bins (``sim.textures.similarity``: 8 x 8 x 8, (x, y) the chroma
     on the hue circle, z the value) that some colour reaches: chroma never exceeds value, so a bin is
@@ -259,14 +271,11 @@ class RoofColourExtractor:
             clean = torch.nan_to_num(chunk.float(), nan=0.0).clamp(0.0, 1.0)
             level1 = _level1(clean)
             axes = _cone_axes(level1, ColourTexture.COLOUR_BINS, ColourTexture.CHROMA_POWER)
-            weights = self.finder.weights(level1)
-            if self.power != 1.0:
-                weights = weights ** self.power
+            weights = roof_weights(self.finder, level1, self.power)
             hists = [_soft_histogram(axes, weights[:, k])[:, self._keep] for k in range(len(KINDS))]
-            if self.score_cone:  # each pixel weighted as its 2x2 block (a last odd row or column is left out)
+            if self.score_cone:  # a last odd row or column is left out, as by the 2x2 means
                 h, w = level1.shape[-2:]
-                full = weights.repeat_interleave(2, dim=-2).repeat_interleave(2, dim=-1)
-                hists.append(_score_histograms(clean[..., :2 * h, :2 * w], full, self._score_keep))
+                hists.append(_score_histograms(clean[..., :2 * h, :2 * w], per_pixel(weights), self._score_keep))
             parts.append(torch.cat(hists, dim=1))
         return torch.cat(parts)
 
