@@ -9,28 +9,35 @@ alone). This bench scores a grid of both on the default training set (the one be
 targets:
 
 * on the validation split of E1 and E2, every setting of the grid;
+* then, on the best of those with the score cone, every far-target comparison of a second grid
+  (``far_grid``: a target whose best loss exceeds a threshold is searched again by the score cone's histograms
+  alone, ``ColourComparison.far``);
 * the setting with the best mean of the four figures issue 20 sets targets on (E1 top-1 and E2 top-10, flat
-  and sloped) is chosen, the default (``pipeline.roofcolour.SEARCH_COLOUR`` on the default model, itself
-  this bench's choice) winning ties;
-* on the test split only the default, the chosen setting, the plain comparison (exponent 0.5, no blur) and
-  that on the model without the score cone (the default before 2026-12-02) are scored, for the report.
+  and sloped) is chosen, the default (``pipeline.roofcolour.SEARCH_COLOUR`` and ``SEARCH_FAR`` on the default
+  model, itself this bench's choice) winning ties;
+* on the test split only the default, the chosen setting, the default without its far-target search, the
+  plain comparison (exponent 0.5, no blur) and that on the model without the score cone (the default before
+  2026-12-02) are scored, for the report.
 
 ``make bench-objective`` writes ``benchmarks/objective.json`` and its table in docs/benchmarks.md.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from ..core.progress import Bars
-from ..pipeline.roofcolour import SEARCH_COLOUR
+from ..pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR
 from .evaluate import bootstrap_intervals, mean_scores, score
 from .splits import get_split
 
 EXPONENTS = (0.25, 0.3, 0.35, 0.5)
 SIGMAS = (1.0, 1.5, 2.0)  # bins of the 8 x 8 x 8 cone
 WEIGHTS = (1.0, 10.0, 30.0, 100.0)
+FAR_LOSSES = (3.0, 4.0, 6.0, 10.0)  # in the search's loss units (MSE in units of the feature scale)
+FAR_EXPONENTS = (0.4, 0.5, 0.6)
+FAR_WEIGHTS = (0.0, 10.0, 30.0)  # blurred by 1 bin
 CRITERION = ("e1", "flat_top1"), ("e1", "sloped_top1"), ("e2", "flat_top10"), ("e2", "sloped_top10")
 SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top10", "sloped_closeness")
 
@@ -38,38 +45,60 @@ SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top
 @dataclass(frozen=True)
 class Setting:
     """One colour comparison: the colour error's exponent, and the blur's sigma (bins) and weight (0: none);
-    and the model's histograms: with the score's cone or without."""
+    the model's histograms: with the score's cone or without; and for targets whose best loss exceeds
+    ``far_loss`` (None: none), the comparison of the score cone's histograms alone (exponent, blur)."""
 
     exponent: float = 0.5
     sigma: float = 0.0
     weight: float = 0.0
     score_cone: bool = True
+    far_loss: float | None = None
+    far_exponent: float = 0.5
+    far_sigma: float = 1.0
+    far_weight: float = 10.0
+
+    @property
+    def far(self) -> tuple[float, float, float, float] | None:
+        return (None if self.far_loss is None
+                else (self.far_loss, self.far_exponent, self.far_sigma, self.far_weight))
 
     @property
     def name(self) -> str:
         blur = f", blur {self.sigma:g} bins x {self.weight:g}" if self.weight else ", no blur"
-        return f"exponent {self.exponent:g}{blur}" + ("" if self.score_cone else ", no score cone")
+        name = f"exponent {self.exponent:g}{blur}" + ("" if self.score_cone else ", no score cone")
+        if self.far:
+            far_blur = f", blur {self.far_sigma:g} x {self.far_weight:g}" if self.far_weight else ", no blur"
+            name += f"; beyond {self.far_loss:g}: score cone, exponent {self.far_exponent:g}{far_blur}"
+        return name
 
     def comparison(self, blocks: tuple[int, ...] = (488,)):
         """The ``nams.ColourComparison`` for a model with the roof-colour histograms ``blocks``."""
         from ..pipeline.roofcolour import colour_comparison
 
-        return colour_comparison(self.exponent, self.sigma, self.weight, blocks)
+        return colour_comparison(self.exponent, self.sigma, self.weight, blocks, far=self.far)
 
 
-DEFAULT = Setting(*SEARCH_COLOUR)  # the search's default (pipeline.roofcolour.search_colour) on the default model
+# The search's default (pipeline.roofcolour.search_colour) on the default model.
+DEFAULT = Setting(*SEARCH_COLOUR, True, *SEARCH_FAR)
+WITHOUT_FAR = replace(DEFAULT, far_loss=None)
 PLAIN = Setting()  # the plain geometric mean
 WITHOUT_SCORE_CONE = Setting(score_cone=False)  # the default before the score cone and the blur
 
 
 def grid(exponents=EXPONENTS, sigmas=SIGMAS, weights=WEIGHTS) -> list[Setting]:
     """The default first, then for each model (with the score cone, then without) every exponent without
-    blur and with every blur."""
-    settings = [DEFAULT]
+    blur and with every blur, all without a far-target search."""
+    settings = [DEFAULT, WITHOUT_FAR]
     for cone in (True, False):
         settings += [Setting(e, score_cone=cone) for e in exponents]
         settings += [Setting(e, s, w, cone) for e in exponents for s in sigmas for w in weights]
     return [s for k, s in enumerate(settings) if s not in settings[:k]]
+
+
+def far_grid(main: Setting, losses=FAR_LOSSES, exponents=FAR_EXPONENTS, weights=FAR_WEIGHTS) -> list[Setting]:
+    """``main`` (a setting with the score cone) with every far-target comparison of the grid."""
+    return [replace(main, far_loss=loss, far_exponent=e, far_sigma=1.0, far_weight=w)
+            for loss in losses for e in exponents for w in weights]
 
 
 def criterion(metrics: dict) -> float:
@@ -114,7 +143,7 @@ def _score(setting: Setting, data: dict, intervals: bool = False) -> dict:
         if blocks not in comparisons:
             comparisons[blocks] = setting.comparison(blocks)
         found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=comparisons[blocks])
-        rows = [score(r.design, t, ranks, ckpt.space) for r, t in zip(found, truth)]
+        rows = [{**score(r.design, t, ranks, ckpt.space), "far": float(r.far)} for r, t in zip(found, truth)]
         out[experiment] = {k: round(v, 4) for k, v in mean_scores(rows).items()}
         if intervals:
             out[experiment]["intervals"] = {k: [round(a, 4), round(b, 4)]
@@ -134,17 +163,29 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
     validation = _targets("validation", targets, root, bars)
     update = bars("colour comparisons (validation)", len(settings)) if bars else None
     rows = []
-    for setting in settings:
+
+    def scored(setting: Setting) -> None:
         metrics = _score(setting, validation)
         rows.append({"setting": asdict(setting), "name": setting.name, "metrics": metrics,
                      "criterion": round(criterion(metrics), 4)})
         if update:
             update(1)
+
+    for setting in settings:
+        scored(setting)
+    # The far-target comparisons, on the best setting with the score cone and without a far search of its own.
+    main = choose([r for r in rows if r["setting"]["score_cone"] and r["setting"].get("far_loss") is None])
+    fars = [s for s in far_grid(Setting(**main["setting"])) if s.name not in {r["name"] for r in rows}]
+    if update and fars:
+        update = bars("far-target comparisons (validation)", len(fars))
+    for setting in fars:
+        scored(setting)
     chosen = choose(rows)
     test = _targets("test", targets, root, bars)
     reported = {}
     named = {r["name"]: r for r in rows}
-    for label, row in (("default", rows[0]), ("chosen", chosen), ("plain comparison", named[PLAIN.name]),
+    for label, row in (("default", rows[0]), ("chosen", chosen), ("without far search", named[WITHOUT_FAR.name]),
+                       ("plain comparison", named[PLAIN.name]),
                        ("without score cone", named[WITHOUT_SCORE_CONE.name])):
         setting = Setting(**row["setting"])
         metrics = _score(setting, test, intervals=True)
@@ -160,8 +201,8 @@ def format_objective_table(result: dict, best: int = 5) -> str:
     """The bench's Markdown table: the default and the chosen setting on test and validation, then the best
     ``best`` validation rows."""
     head = ("| setting | split | E1 flat top-1 | E1 sloped top-1 | E2 flat top-10 | E2 sloped top-10 | "
-            "E2 flat closeness | E2 sloped closeness | mean of the four |")
-    lines = [head, "|" + "---|" * 9]
+            "E2 flat closeness | E2 sloped closeness | searched as far, E1 / E2 | mean of the four |")
+    lines = [head, "|" + "---|" * 10]
 
     def cells(metrics: dict, with_intervals: bool) -> str:
         out = []
@@ -172,10 +213,11 @@ def format_objective_table(result: dict, best: int = 5) -> str:
                 low, high = metrics[e]["intervals"][k]
                 value += f" [{low:.3f}, {high:.3f}]"
             out.append(value)
+        out.append(f"{metrics['e1'].get('far', 0.0):.2f} / {metrics['e2'].get('far', 0.0):.2f}")
         return " | ".join(out)
 
     by_name = {r["name"]: r for r in result["validation"]}
-    for label in ("default", "chosen", "plain comparison", "without score cone"):
+    for label in ("default", "chosen", "without far search", "plain comparison", "without score cone"):
         row = result["test"].get(label)  # a result from before the score cone lacks the last two
         if row is None:
             continue
@@ -194,6 +236,6 @@ def format_objective_table(result: dict, best: int = 5) -> str:
               f"{', '.join(map(str, seeds['test']['e1']['seeds']))} "
               f"and E2 on `{seeds['test']['e2']['heldout']}` (95% intervals over the groups). "
               f"{len(result['validation'])} settings scored on validation; the test split scores only the default, "
-              f"the chosen one, the plain comparison (exponent 0.5, no blur) and that on the model without the "
-              f"score cone (the default before 2026-12-02)."]
+              f"the chosen one, the default without its far-target search, the plain comparison (exponent 0.5, "
+              f"no blur) and that on the model without the score cone (the default before 2026-12-02)."]
     return "\n".join(lines)

@@ -114,6 +114,7 @@ MEASURED_DEFAULTS = {
     "roof-weight power 4": ("meta_sim.pipeline.workflow:ModelSettings.roof_weight_power", VALIDATION),
     "score-cone roof histograms": ("meta_sim.pipeline.workflow:ModelSettings.roof_score_cone", VALIDATION),
     "search colour comparison": ("meta_sim.pipeline.roofcolour:SEARCH_COLOUR", VALIDATION),
+    "far-target search": ("meta_sim.pipeline.roofcolour:SEARCH_FAR", VALIDATION),
     "exhaustive search": ("meta_sim.nams.search:resolve_method", VALIDATION),
     "CONTINUOUS_SEARCH": ("meta_sim.experiments.evaluate:CONTINUOUS_SEARCH", VALIDATION),
     "fastest_adjoint_keeping_e1": ("meta_sim.experiments.bench:fastest_adjoint", VALIDATION),

@@ -94,12 +94,14 @@ class SearchResult:
     searched_design: dict
     rejected: bool = False
     ranked: list[tuple[dict, float]] = field(default_factory=list)
+    far: bool = False  # searched again as far from every design (``ColourComparison.far``)
 
     def to_dict(self) -> dict:
         """Plain JSON-ready values (``ranked`` as a list of {design, loss})."""
         return {"design": self.design, "votes": self.votes, "best_loss": self.best_loss,
                 "mean_loss": self.mean_loss, "method": self.method, "searched_design": self.searched_design,
-                "rejected": self.rejected, "ranked": [{"design": d, "loss": loss} for d, loss in self.ranked]}
+                "rejected": self.rejected, "ranked": [{"design": d, "loss": loss} for d, loss in self.ranked],
+                "far": self.far}
 
 
 # --- shared checks -------------------------------------------------------------------------------
@@ -167,11 +169,20 @@ class ColourComparison:
     different colours share nothing and every bank texture is as far as the next. The default
     (exponent 0.5, no blur) is the plain geometric mean of ``_combined``; a blur that fits the
     histograms' bins comes from the features (``pipeline.roofcolour.colour_comparison``).
+
+    ``keep`` (a boolean mask over the ``colour_dims`` histogram values) limits the colour error to some
+    histograms (None: all). ``far`` is the comparison for a target far from every design: one whose best
+    loss under this comparison exceeds ``far_loss`` is searched again with ``far`` (which has no ``far`` of
+    its own), and its ``SearchResult.far`` is True. A target nothing in the bank resembles is then ranked
+    by the histograms ``far`` keeps, not by errors over the whole tile that are large for every design.
     """
 
     exponent: float = 0.5
     blur: torch.Tensor | None = None
     blur_weight: float = 0.0
+    keep: torch.Tensor | None = None
+    far: ColourComparison | None = None
+    far_loss: float = math.inf
 
     def __post_init__(self):
         if not (isinstance(self.exponent, (int, float)) and 0.0 < self.exponent < 1.0):
@@ -185,17 +196,44 @@ class ColourComparison:
                     or not torch.allclose(b.double().sum(dim=0), torch.ones(b.shape[1], dtype=torch.float64),
                                           atol=1e-6)):
                 raise MetaSimError("the colour blur must be a square, non-negative matrix whose columns sum to 1")
+        if self.keep is not None and (self.keep.dtype != torch.bool or self.keep.ndim != 1 or not self.keep.any()):
+            raise MetaSimError("the colour comparison's keep must be a 1-D boolean mask keeping some histogram values")
+        if not (isinstance(self.far_loss, (int, float)) and self.far_loss > 0 and not math.isnan(self.far_loss)):
+            raise MetaSimError(f"the far-target loss must be a positive number, not {self.far_loss!r}")
+        if self.far is not None and (not isinstance(self.far, ColourComparison) or self.far.far is not None):
+            raise MetaSimError("the far-target comparison must be a ColourComparison without a far comparison "
+                               "of its own")
 
     @property
     def blurs(self) -> bool:
         """Whether the blurred histograms count at all."""
         return self.blur is not None and self.blur_weight > 0
 
+    @property
+    def searches_far(self) -> bool:
+        """Whether targets far from every design are searched again (with ``far``)."""
+        return self.far is not None and math.isfinite(self.far_loss)
+
     def check(self, colour_dims: int) -> None:
-        """MetaSimError when the blur does not fit a model's ``colour_dims`` histogram values."""
+        """MetaSimError when the blur or the mask does not fit a model's ``colour_dims`` histogram values."""
         if self.blurs and (not colour_dims or colour_dims % self.blur.shape[0]):
             raise MetaSimError(f"the colour blur has {self.blur.shape[0]} bins per histogram; the model's "
                                f"{colour_dims} histogram values are not whole histograms of that size")
+        if self.keep is not None and len(self.keep) != colour_dims:
+            raise MetaSimError(f"the colour comparison keeps {len(self.keep)} histogram values; the model has "
+                               f"{colour_dims}")
+        if self.far is not None:
+            self.far.check(colour_dims)
+
+    def to_dict(self) -> dict:
+        """What a report says about the comparison (the blur matrix and the mask by their sizes)."""
+        out = {"exponent": self.exponent, "blurred": self.blurs, "blur_weight": self.blur_weight}
+        if self.keep is not None:
+            out["kept_values"] = int(self.keep.sum())
+        if self.searches_far:
+            out["far_loss"] = self.far_loss
+            out["far"] = self.far.to_dict()
+        return out
 
     def blurred(self, values: torch.Tensor) -> torch.Tensor:
         """(..., colour_dims) square-rooted histograms -> the same, blurred block by block. A negative
@@ -218,10 +256,11 @@ def _block_mse(diff: torch.Tensor, colour_dims: int, pred: torch.Tensor | None =
     squares = diff.square()
     if not colour_dims:
         return (squares.mean(dim=-1),)
-    rest, plain = squares[..., :-colour_dims].mean(dim=-1), squares[..., -colour_dims:].mean(dim=-1)
+    keep = slice(None) if colour.keep is None else colour.keep
+    rest, plain = squares[..., :-colour_dims].mean(dim=-1), squares[..., -colour_dims:][..., keep].mean(dim=-1)
     if not colour.blurs:
         return rest, plain
-    blurred = (colour.blurred(pred[..., -colour_dims:]) - colour.blurred(target[..., -colour_dims:]))
+    blurred = (colour.blurred(pred[..., -colour_dims:]) - colour.blurred(target[..., -colour_dims:]))[..., keep]
     return rest, plain + colour.blur_weight * blurred.square().mean(dim=-1)
 
 
@@ -319,7 +358,8 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     of the networks' forward passes; z, Adam's state and the losses stay
     float32. Targets are processed in groups of at most ``max_rows`` starts
     to bound memory; the answer does not depend on the grouping. ``colour`` says how the roof-colour
-    histograms are compared (``ColourComparison``).
+    histograms are compared (``ColourComparison``); the targets it finds far from every design are
+    searched again with its ``far`` comparison, from new starts.
     """
     _check_nams(model)
     _check_space(model, space)
@@ -328,6 +368,22 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     colour.check(model.config.colour_dims)
     targets = _targets(targets, model.config.feature_dim)
 
+    results = _adjoint_pass(model, targets, space, M, k, S, iterations, lr, generator, dtype, bars, max_rows,
+                            boundary_weight, colour)
+    far = [t for t, result in enumerate(results) if colour.searches_far and result.best_loss > colour.far_loss]
+    if far:
+        for t, result in zip(far, _adjoint_pass(model, targets[far], space, M, k, S, iterations, lr, generator,
+                                                dtype, bars, max_rows, boundary_weight, colour.far)):
+            result.far = True
+            results[t] = result
+    return _diversify(results, space, r, generator)
+
+
+def _adjoint_pass(model: NAMS, targets: torch.Tensor, space: DesignSpace, M: int, k: float, S: int,
+                  iterations: int, lr: float, generator: torch.Generator | None, dtype: torch.dtype,
+                  bars: Bars | None, max_rows: int, boundary_weight: float,
+                  colour: ColourComparison) -> list[SearchResult]:
+    """``adjoint_search`` with one comparison, before diversifying."""
     # Frozen copies in the search dtype; the caller's model is left as it is.
     predictor, decoder = (copy.deepcopy(m).eval().requires_grad_(False).to(dtype)
                           for m in (model.predictor, model.decoder))
@@ -382,7 +438,7 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
             results.append(SearchResult(design=design, votes=shares, best_loss=float(loss[0]),
                                         mean_loss=float(loss.mean()), method="adjoint",
                                         searched_design=dict(design)))
-    return _diversify(results, space, r, generator)
+    return results
 
 
 # --- exhaustive ----------------------------------------------------------------------------------
@@ -457,16 +513,69 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
 
 def _blurred_table(model: NAMS, space: DesignSpace, table: DesignTable, colour: ColourComparison,
                    lead: int) -> torch.Tensor:
-    """The design table's histograms blurred by ``colour``, cached beside the table (a search of one target
-    group would otherwise blur every design's histograms again, the bulk of its time)."""
-    key = ("blurred", json.dumps(space.to_dict(), sort_keys=True), id(colour))
+    """The design table's histograms blurred by ``colour``, cached beside the table per blur matrix (a search
+    of one target group would otherwise blur every design's histograms again, the bulk of its time)."""
+    key = ("blurred", json.dumps(space.to_dict(), sort_keys=True), id(colour.blur))
+    cached = model._design_tables.get(key)
+    if cached is not None and cached[0] is colour.blur and cached[1] is table.features:
+        return cached[2]
+    blurred = colour.blurred(table.features[:, lead:].double())
+    if not model.training:  # kept with the blur itself, so that its id is not another's
+        model._design_tables[key] = (colour.blur, table.features, blurred)
+    return blurred
+
+
+def _kept_colours(model: NAMS, space: DesignSpace, table: DesignTable, colour: ColourComparison,
+                  lead: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The design table's histogram values that ``colour`` keeps (float64) and their squared norms, cached
+    beside the table like ``_blurred_table``."""
+    key = ("kept", json.dumps(space.to_dict(), sort_keys=True), id(colour))
     cached = model._design_tables.get(key)
     if cached is not None and cached[0] is colour and cached[1] is table.features:
         return cached[2]
-    blurred = colour.blurred(table.features[:, lead:].double())
-    if not model.training:  # kept with the comparison itself, so that its id is not another's
-        model._design_tables[key] = (colour, table.features, blurred)
-    return blurred
+    kept = table.features[:, lead:][:, colour.keep].double()
+    out = (kept, kept.square().sum(dim=1))
+    if not model.training:
+        model._design_tables[key] = (colour, table.features, out)
+    return out
+
+
+def _table_losses(model: NAMS, space: DesignSpace, table: DesignTable, targets: torch.Tensor,
+                  colour: ColourComparison, batch: int) -> torch.Tensor:
+    """(T, n) the search's loss of every design of ``table`` for each target row (in units of
+    ``feature_scale``, float64), under ``colour``, ``batch`` designs at a time."""
+    lead = model.config.feature_dim - model.config.colour_dims
+    coloured = bool(model.config.colour_dims)
+    keep = coloured and colour.keep is not None
+    if keep:
+        kept, kept_sq = _kept_colours(model, space, table, colour, lead)
+        target_colours = targets[:, lead:][:, colour.keep]
+    else:
+        target_colours = targets[:, lead:]
+    sq_targets = [targets[:, :lead].square().sum(dim=1, keepdim=True),
+                  target_colours.square().sum(dim=1, keepdim=True)]
+    blur = colour.blurs and coloured
+    if blur:  # the blurred histograms, compared like the plain ones
+        blurred_table = _blurred_table(model, space, table, colour, lead)
+        blurred_targets = colour.blurred(targets[:, lead:])
+        if keep:
+            blurred_table, blurred_targets = blurred_table[:, colour.keep], blurred_targets[:, colour.keep]
+
+    def block_mses(rows: slice) -> list[torch.Tensor]:
+        features = table.features[rows].double()
+        mses = [_pairwise_mse(targets[:, :lead], features[:, :lead], sq_targets[0], table.sq_norms[rows, 0])]
+        if not coloured:
+            return mses
+        if keep:
+            mses.append(_pairwise_mse(target_colours, kept[rows], sq_targets[1], kept_sq[rows]))
+        else:
+            mses.append(_pairwise_mse(target_colours, features[:, lead:], sq_targets[1], table.sq_norms[rows, 1]))
+        if blur:
+            mses[1] = mses[1] + colour.blur_weight * _pairwise_mse(blurred_targets, blurred_table[rows])
+        return mses
+
+    return torch.cat([_combined(*block_mses(slice(i, i + batch)), exponent=colour.exponent)
+                      for i in range(0, len(table.designs), batch)], dim=1)
 
 
 def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top: int = 10, r: float = 0.0,
@@ -478,7 +587,8 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     shares are the distribution of each parameter among the ``S`` best
     designs (at most the number of designs). Distances are computed in
     float64, ``batch`` designs at a time, for all targets at once. ``colour``
-    says how the roof-colour histograms are compared (``ColourComparison``).
+    says how the roof-colour histograms are compared (``ColourComparison``); the targets it finds far
+    from every design are ranked again by its ``far`` comparison.
     """
     _check_common(S, r)
     if top < 1:
@@ -487,24 +597,12 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     table = design_table(model, space)
     targets = _targets(targets, model.config.feature_dim).double() / model.feature_scale.double()
     n = len(table.designs)
-    lead = model.config.feature_dim - model.config.colour_dims
-    blocks = [slice(0, lead)] + ([slice(lead, None)] if model.config.colour_dims else [])
-    sq_targets = [targets[:, b].square().sum(dim=1, keepdim=True) for b in blocks]
-    blur = colour.blurs and len(blocks) == 2
-    if blur:  # the blurred histograms, compared like the plain ones
-        blurred_table = _blurred_table(model, space, table, colour, lead)
-        blurred_targets = colour.blurred(targets[:, lead:])
-
-    def block_mses(rows: slice) -> list[torch.Tensor]:
-        features = table.features[rows].double()
-        mses = [_pairwise_mse(targets[:, b], features[:, b], sq, table.sq_norms[rows, j])
-                for j, (b, sq) in enumerate(zip(blocks, sq_targets))]
-        if blur:
-            mses[1] = mses[1] + colour.blur_weight * _pairwise_mse(blurred_targets, blurred_table[rows])
-        return mses
-
-    losses = torch.cat([_combined(*block_mses(slice(i, i + batch)), exponent=colour.exponent)
-                        for i in range(0, n, batch)], dim=1)
+    losses = _table_losses(model, space, table, targets, colour, batch)
+    far = torch.zeros(len(targets), dtype=torch.bool)
+    if colour.searches_far:
+        far = losses.min(dim=1).values > colour.far_loss
+        if far.any():
+            losses[far] = _table_losses(model, space, table, targets[far], colour.far, batch)
     keep = min(max(S, top), n)
     kept_loss, kept = torch.topk(losses, keep, dim=1, largest=False, sorted=True)
     s = min(S, n)
@@ -515,7 +613,7 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
                   for i, loss in zip(kept[t, :top].tolist(), kept_loss[t, :top].tolist())]
         results.append(SearchResult(design=dict(ranked[0][0]), votes=shares, best_loss=ranked[0][1],
                                     mean_loss=float(kept_loss[t, :s].mean()), method="exhaustive",
-                                    searched_design=dict(ranked[0][0]), ranked=ranked))
+                                    searched_design=dict(ranked[0][0]), ranked=ranked, far=bool(far[t])))
     return _diversify(results, space, r, generator)
 
 

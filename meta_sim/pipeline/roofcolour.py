@@ -307,31 +307,54 @@ def colour_blur(sigma: float, blocks: tuple[int, ...] = (488,)) -> torch.Tensor:
 
 
 def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weight: float = 0.0,
-                      blocks: tuple[int, ...] = (488,)):
+                      blocks: tuple[int, ...] = (488,), far: tuple[float, float, float, float] | None = None):
     """A ``nams.ColourComparison`` for models with the roof-colour histograms ``blocks``
     (``FeatureNorm.hist_blocks``): the colour error's exponent, and with ``blur_sigma`` > 0 and
     ``blur_weight`` > 0 the histograms also compared blurred by ``colour_blur(blur_sigma, blocks)``. The
-    defaults are the plain geometric mean."""
+    defaults are the plain geometric mean.
+
+    ``far`` (loss, exponent, blur sigma, blur weight): a target whose best design's loss exceeds ``loss`` is
+    searched again comparing only the histograms in the score's cone (``score_cone_bins``), with that
+    exponent and blur (``ColourComparison.far``). MetaSimError when ``blocks`` has no such histograms."""
     from ..nams import ColourComparison
 
+    blocks = tuple(blocks)
     blurred = blur_sigma > 0 and blur_weight > 0
-    return ColourComparison(exponent, colour_blur(blur_sigma, tuple(blocks)) if blurred else None,
-                            blur_weight if blurred else 0.0)
+    blur = colour_blur(blur_sigma, blocks) if blurred else None
+    if far is None:
+        return ColourComparison(exponent, blur, blur_weight if blurred else 0.0)
+    far_loss, far_exponent, far_sigma, far_weight = far
+    score_bins = int(score_cone_bins().sum())
+    if score_bins not in blocks:
+        raise MetaSimError(f"a far-target comparison compares the histograms in the score's cone "
+                           f"({score_bins} bins); a model with histogram blocks {blocks} has none")
+    keep = torch.cat([torch.full((width,), width == score_bins) for width in blocks])
+    far_blurred = far_sigma > 0 and far_weight > 0
+    far_blur = None
+    if far_blurred:
+        far_blur = blur if blurred and far_sigma == blur_sigma else colour_blur(far_sigma, blocks)
+    return ColourComparison(exponent, blur, blur_weight if blurred else 0.0,
+                            far=ColourComparison(far_exponent, far_blur, far_weight if far_blurred else 0.0, keep),
+                            far_loss=far_loss)
 
 
-# The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), chosen
-# on E1/E2's validation split by `make bench-objective` (docs/design.md, "Roof colour").
+# The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), and for
+# targets far from every design (loss, then the same three over the score cone's histograms alone; for models with
+# those histograms), chosen on E1/E2's validation split by `make bench-objective` (docs/design.md, "Roof colour").
 SEARCH_COLOUR = (0.3, 1.0, 30.0)
+SEARCH_FAR = (4.0, 0.5, 1.0, 10.0)
 
 
 @functools.lru_cache(maxsize=8)
 def _search_colour(blocks: tuple[int, ...]):
-    return colour_comparison(*SEARCH_COLOUR, blocks)
+    far = SEARCH_FAR if int(score_cone_bins().sum()) in blocks else None
+    return colour_comparison(*SEARCH_COLOUR, blocks, far=far)
 
 
 def search_colour(ckpt):
     """How the search compares a checkpoint's roof-colour histograms: ``SEARCH_COLOUR`` over its histogram
-    blocks, or the plain comparison for a model without them. One object per layout, so that the
+    blocks (with ``SEARCH_FAR`` when it has the score cone's), or the plain comparison for a model without
+    them. One object per layout, so that the
     exhaustive search blurs a model's design table once."""
     from ..nams import PLAIN_COLOUR
 

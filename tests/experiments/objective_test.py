@@ -3,14 +3,16 @@
 from meta_sim.experiments.objective import (
     DEFAULT,
     PLAIN,
+    WITHOUT_FAR,
     WITHOUT_SCORE_CONE,
     Setting,
     choose,
     criterion,
+    far_grid,
     format_objective_table,
     grid,
 )
-from meta_sim.pipeline.roofcolour import SEARCH_COLOUR
+from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR
 
 
 def _metrics(e1: float, e2: float) -> dict:
@@ -21,6 +23,8 @@ def _metrics(e1: float, e2: float) -> dict:
 def test_the_grid_starts_with_the_default_and_names_each_setting_once():
     settings = grid()
     assert settings[0] == DEFAULT and (DEFAULT.exponent, DEFAULT.sigma, DEFAULT.weight) == SEARCH_COLOUR
+    assert DEFAULT.far == SEARCH_FAR and settings[1] == WITHOUT_FAR and WITHOUT_FAR.far is None
+    assert all(s.far is None for s in settings[1:])  # the far-target comparisons are far_grid's
     assert PLAIN in settings and PLAIN.comparison().blur is None and PLAIN.score_cone
     assert len({s.name for s in settings}) == len(settings)
     assert Setting(0.3, 1.5, 30.0).name == "exponent 0.3, blur 1.5 bins x 30"
@@ -28,8 +32,20 @@ def test_the_grid_starts_with_the_default_and_names_each_setting_once():
     assert Setting(0.3, 1.5, 30.0).comparison((488, 488, 220, 220)).blur.shape == (1416, 1416)
     # Both models: with the score cone (the default) and without, each with every comparison.
     assert DEFAULT.score_cone and WITHOUT_SCORE_CONE in settings
-    assert sum(s.score_cone for s in settings) == sum(not s.score_cone for s in settings) == len(settings) // 2
+    assert sum(s.score_cone for s in settings[1:]) == sum(not s.score_cone for s in settings) == len(settings) // 2
     assert WITHOUT_SCORE_CONE.name == "exponent 0.5, no blur, no score cone"
+
+
+def test_the_far_grid_adds_every_far_comparison_to_one_setting():
+    main = Setting(0.3, 1.0, 30.0)
+    fars = far_grid(main, losses=(3.0, 4.0), exponents=(0.5,), weights=(0.0, 10.0))
+    assert len(fars) == 4 and all((s.exponent, s.sigma, s.weight, s.score_cone) == (0.3, 1.0, 30.0, True)
+                                  for s in fars)
+    assert fars[1].name == "exponent 0.3, blur 1 bins x 30; beyond 3: score cone, exponent 0.5, blur 1 x 10"
+    assert fars[0].name.endswith("beyond 3: score cone, exponent 0.5, no blur")
+    assert fars[1].comparison((488, 488, 220, 220)).far_loss == 3.0
+    assert fars[1].comparison((488, 488, 220, 220)).far.keep.sum() == 440
+    assert len({s.name for s in far_grid(main)}) == len(far_grid(main))
 
 
 def test_the_choice_is_the_best_mean_of_the_four_targets_and_the_default_wins_ties():
@@ -57,7 +73,8 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
     lines = table.splitlines()
     assert lines[2].startswith("| default: exponent 0.5, no blur | test | 0.800")
     assert "| chosen: exponent 0.3, blur 1.5 bins x 30 | test |" in table and "0.450 [0.400, 0.500]" in table
-    assert lines[5].endswith("| 0.800 |")  # the chosen setting's validation row: mean of 0.9, 0.9, 0.7, 0.7
+    # The chosen setting's validation row: no target searched as far; the mean of 0.9, 0.9, 0.7, 0.7.
+    assert lines[5].endswith("| 0.00 / 0.00 | 0.800 |")
     assert "validation #1: exponent 0.3, blur 1.5 bins x 30" in table and "`v2`" in table
     assert "| without score cone: exponent 0.5, no blur, no score cone | test | 0.800" in table
     del result["test"]["without score cone"]  # a result from before the score cone

@@ -164,8 +164,16 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert report["architecture"] == "additive"
     assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
     assert set(report["groups"][0]["roof_pixels"]) == {"flat", "sloped"}
-    # How the search compared the roof colours: the default (roofcolour.SEARCH_COLOUR), blurred.
-    assert report["colour_comparison"] == {"exponent": 0.3, "blurred": True, "blur_weight": 30.0}
+    # How the search compared the roof colours: the default (roofcolour.SEARCH_COLOUR), blurred, and for a target
+    # far from every design the score cone's histograms alone (SEARCH_FAR); which groups were searched so.
+    from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR
+
+    assert report["colour_comparison"] == {
+        "exponent": SEARCH_COLOUR[0], "blurred": True, "blur_weight": SEARCH_COLOUR[2], "far_loss": SEARCH_FAR[0],
+        "far": {"exponent": SEARCH_FAR[1], "blurred": True, "blur_weight": SEARCH_FAR[3], "kept_values": 440}}
+    assert report["groups_far_from_every_design"] == sum(g["far"] for g in report["groups"])
+    assert all(isinstance(load_preset(tmp_path / "inferred" / "presets" / f"{g['name']}.json").search["far"], bool)
+               for g in report["groups"])
     assert "| flat roof pixels |" in (tmp_path / "inferred" / "report.md").read_text()
     assert set(report["roof_pixels_range"]) == {"flat", "sloped"}
     assert set(report["groups_outside_roof_pixels_range"]) == {"flat", "sloped"}

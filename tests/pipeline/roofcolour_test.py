@@ -521,3 +521,104 @@ def test_the_search_colour_is_the_chosen_comparison_for_a_model_with_roof_colour
     assert search_colour(Ckpt()) is colour  # one object per layout: the search blurs a design table once
     Ckpt.feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4))
     assert search_colour(Ckpt()) is PLAIN_COLOUR
+
+
+def _p0_only() -> torch.Tensor:
+    """Keeps the toy model's first histogram (p0's, the first 8 of its 16 histogram values)."""
+    return torch.arange(16) < 8
+
+
+def test_a_target_far_from_every_design_is_searched_again_by_the_kept_histograms(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    model, targets = fit.model, fit.norm.apply(coloured["targets"])
+    shifted = coloured["targets"].clone()
+    shifted[:, :12] += 40.0 * torch.randn(12, generator=torch.Generator().manual_seed(5))
+    targets = torch.cat([targets[:10], fit.norm.apply(shifted)[:10]])  # ten near, ten far off
+    plain = exhaustive_search(model, targets, space)
+    threshold = float(np.median([r.best_loss for r in plain]))
+    colour = ColourComparison(far=ColourComparison(keep=_p0_only()), far_loss=threshold)
+    found = exhaustive_search(model, targets, space, colour=colour)
+    far = [r.best_loss > threshold for r in plain]
+    assert 0 < sum(far) < len(far) and [r.far for r in found] == far
+    for near, result in zip(plain, found):  # a target near some design is searched as before
+        if not result.far:
+            assert result.ranked == near.ranked
+    table = design_table(model, space)
+    errors = (targets[:, None].double() / model.feature_scale.double() - table.features[None].double()).square()
+    expected = (errors[..., :12].mean(-1) * errors[..., 12:20].mean(-1)).sqrt().min(dim=1).values
+    got = torch.tensor([r.best_loss for r in found], dtype=torch.float64)
+    assert torch.allclose(got[torch.tensor(far)], expected[torch.tensor(far)], rtol=1e-6)
+    # Without a threshold, or with one no target exceeds, nothing is searched again.
+    for unused in (ColourComparison(far=ColourComparison(keep=_p0_only())),
+                   ColourComparison(far=ColourComparison(keep=_p0_only()), far_loss=1e30)):
+        assert [r.ranked for r in exhaustive_search(model, targets, space, colour=unused)] == \
+            [r.ranked for r in plain]
+    # The adjoint search too: every target beyond a tiny threshold, none beyond a huge one.
+    for loss, expect in ((1e-12, True), (1e30, False)):
+        out = adjoint_search(model, targets[:4], space, M=16, S=4, iterations=10,
+                             colour=ColourComparison(far=ColourComparison(keep=_p0_only()), far_loss=loss),
+                             generator=torch.Generator().manual_seed(0))
+        assert all(r.far is expect and math.isfinite(r.best_loss) for r in out)
+        assert all(r.to_dict()["far"] is expect for r in out)
+
+
+def test_a_far_search_is_deterministic(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    targets = fit.norm.apply(coloured["targets"][:4])
+    colour = ColourComparison(far=ColourComparison(keep=_p0_only()), far_loss=1e-12)
+
+    def run():
+        return [(r.design, r.best_loss) for r in adjoint_search(
+            fit.model, targets, space, M=16, S=4, iterations=10, colour=colour, r=0.5,
+            generator=torch.Generator().manual_seed(3))]
+
+    assert run() == run()
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"keep": torch.ones(16)}, "boolean mask"), ({"keep": torch.zeros(16, dtype=torch.bool)}, "keeping some"),
+    ({"far_loss": 0.0}, "positive"), ({"far_loss": math.nan}, "positive"),
+    ({"far": ColourComparison(far=ColourComparison()), "far_loss": 1.0}, "without a far comparison"),
+])
+def test_bad_far_comparisons_are_refused(kwargs, message):
+    with pytest.raises(MetaSimError, match=message):
+        ColourComparison(**kwargs)
+
+
+def test_a_mask_must_fit_the_models_histograms(coloured):
+    space, fit = coloured["space"], coloured["fit"]
+    targets = fit.norm.apply(coloured["targets"][:2])
+    for wrong in (ColourComparison(keep=torch.ones(5, dtype=torch.bool)),
+                  ColourComparison(far=ColourComparison(keep=torch.ones(5, dtype=torch.bool)), far_loss=1.0)):
+        for search in (exhaustive_search, lambda *a, **k: adjoint_search(*a, M=8, S=2, iterations=1, **k)):
+            with pytest.raises(MetaSimError, match="keeps 5 histogram values; the model has 16"):
+                search(fit.model, targets, space, colour=wrong)
+
+
+def test_the_far_comparison_keeps_the_score_cones_histograms_and_shares_the_blur():
+    from meta_sim.pipeline.roofcolour import SEARCH_FAR
+
+    blocks = (488, 488, 220, 220)
+    colour = colour_comparison(0.3, 1.0, 30.0, blocks, far=(4.0, 0.5, 1.0, 10.0))
+    assert colour.searches_far and colour.far_loss == 4.0 and colour.far.exponent == 0.5
+    assert colour.far.keep.tolist() == [False] * 976 + [True] * 440
+    assert colour.far.blur is colour.blur and colour.far.blur_weight == 10.0  # one blurred table for both
+    assert colour_comparison(0.3, 1.0, 30.0, blocks, far=(4.0, 0.5, 1.5, 10.0)).far.blur is not None
+    assert colour_comparison(0.3, 1.0, 30.0, blocks, far=(4.0, 0.5, 1.0, 0.0)).far.blur is None
+    assert colour.to_dict() == {"exponent": 0.3, "blurred": True, "blur_weight": 30.0, "far_loss": 4.0,
+                                "far": {"exponent": 0.5, "blurred": True, "blur_weight": 10.0, "kept_values": 440}}
+    with pytest.raises(MetaSimError, match="score's cone"):
+        colour_comparison(0.3, 1.0, 30.0, (488, 488), far=SEARCH_FAR)
+
+
+def test_the_search_colour_searches_far_targets_only_for_a_model_with_the_score_cone():
+    from meta_sim.pipeline.roofcolour import SEARCH_FAR, search_colour
+
+    class Ckpt:
+        feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4), hist_blocks=(488, 488, 220, 220))
+
+    colour = search_colour(Ckpt())
+    assert colour.searches_far and (colour.far_loss, colour.far.exponent, colour.far.blur_weight) == \
+        (SEARCH_FAR[0], SEARCH_FAR[1], SEARCH_FAR[3])
+    Ckpt.feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4), hist_blocks=(488, 488))
+    assert not search_colour(Ckpt()).searches_far
