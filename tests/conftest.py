@@ -36,3 +36,10 @@ def heldout_v2_bank():
     from meta_sim.sim.textures import ensure_heldout_bank
 
     return ensure_heldout_bank(name="heldout-v2")
+
+
+@pytest.fixture(scope="session")
+def heldout_v3_bank():
+    from meta_sim.sim.textures import ensure_heldout_bank
+
+    return ensure_heldout_bank(name="heldout-v3")

@@ -8,7 +8,7 @@ import click
 
 from ..core.errors import MetaSimError
 from ..core.fileio import writable_dir
-from ..experiments.splits import SPLIT_NAMES, get_split, single_seed
+from ..experiments.splits import ALL_SPLIT_NAMES, get_split, single_seed
 from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
 
 
@@ -214,9 +214,10 @@ def _design_eval(experiment: str, summary: str):
                   help="tiles per target group (the paper's groups have 9)")
     @click.option("--seed", type=int, default=1, show_default=True,
                   help="target seed (and the searches'); E2 then draws from heldout-v1")
-    @click.option("--split", "split_name", type=click.Choice(list(SPLIT_NAMES)), default=None,
-                  help="the targets of a split instead of --seed: validation (choices may be made on it) or test "
-                       "(report only; E2 with heldout-v2), --targets groups of each of its seeds")
+    @click.option("--split", "split_name", type=click.Choice(list(ALL_SPLIT_NAMES)), default=None,
+                  help="the targets of a split instead of --seed: validation (choices may be made on it), test "
+                       "(report only; E2 with heldout-v2) or check (report only, no bench runs it; E2 with "
+                       "heldout-v3), --targets groups of each of its seeds")
     @click.option("--ms2/--no-ms2", default=True, show_default=True,
                   help="run the MS2 baseline (computes and caches features of every training tile once)")
     @click.option("--sbi/--no-sbi", default=True, show_default=True,
@@ -241,8 +242,8 @@ def _design_eval(experiment: str, summary: str):
         bars.close()
         click.echo(results_markdown(results))
         if split.touches_test:
-            click.echo("These targets are the test split's: report these figures; choose nothing by them "
-                       "(choose on --split validation).")
+            click.echo(f"These targets are the {split.report_split} split's: report these figures; choose nothing "
+                       "by them (choose on --split validation).")
         click.echo(f"results, sheet.png and the checkpoint nams.pt are in {out}"
                    + (" with breakdown.md and breakdown.png: where NAMS's top-10 misses come from"
                       if experiment == "e2" else ""))

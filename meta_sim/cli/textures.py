@@ -24,7 +24,8 @@ def textures():
 @click.option("--heldout", type=click.Choice(list(HELDOUT_SETS)), is_flag=False, flag_value=FIRST_HELDOUT,
               default=None,
               help="build a held-out set (design-gap textures) instead: heldout-v1 (E2 validation; the set "
-                   "`--heldout` alone builds) or heldout-v2 (E2 test)")
+                   "`--heldout` alone builds), heldout-v2 (E2 test) or heldout-v3 (a check on textures no "
+                   "choice looked at)")
 @click.option("--size", type=int, default=256, show_default=True, help="texture size in pixels")
 @click.option("--repeat-m", type=float, default=8.0, show_default=True,
               help="with --from: physical size of one photo repeat in metres")

@@ -11,6 +11,10 @@ cities, ``evaluate.target_jobs``) and, for E2, the held-out texture set the targ
   declared, and E2 uses the second held-out set, ``heldout-v2``, generated for it
   (``meta_sim/sim/textures/procedural.py``), whose colours neither the bank nor ``heldout-v1`` has.
   Nothing may be chosen by looking at its figures: a choice made there makes it a validation split.
+* ``check``: report only, like ``test``, and not run by the benches: fresh seeds (31, 32, 33) and, for E2, the
+  third held-out set, ``heldout-v3``, made on 2026-12-02 after the test split's figures had suggested a change
+  to the search (its numbers were chosen on validation). It confirms such a change on targets nothing ever
+  looked at: `meta-sim eval e1|e2 --split check`.
 
 Pure Python: imported by the CLI without torch.
 """
@@ -21,7 +25,9 @@ from dataclasses import dataclass, replace
 
 from ..core.errors import MetaSimError
 
-SPLIT_NAMES = ("validation", "test")
+SPLIT_NAMES = ("validation", "test")  # the splits every bench measures
+ALL_SPLIT_NAMES = SPLIT_NAMES + ("check",)
+REPORT_ONLY = ("test", "check")
 EXPERIMENTS = ("e1", "e2")
 FIRST_HELDOUT = "heldout-v1"  # sim.textures.procedural.FIRST_HELDOUT: what a single seed's E2 uses
 # Target cities are TARGET_CITY_SEED + 1000 * seed + group (evaluate.target_jobs): more groups than this
@@ -48,10 +54,18 @@ class Split:
 
     @property
     def touches_test(self) -> bool:
-        """Whether these targets share a seed or (E2) the texture set with the experiment's test split:
-        figures measured on them may be reported, never used to choose anything."""
-        test = SPLITS[(self.experiment, "test")]
-        return bool(set(self.seeds) & set(test.seeds)) or (self.heldout is not None and self.heldout == test.heldout)
+        """Whether these targets share a seed or (E2) the texture set with the experiment's test or check
+        split: figures measured on them may be reported, never used to choose anything."""
+        return self.report_split is not None
+
+    @property
+    def report_split(self) -> str | None:
+        """The name of the report-only split (test, check) these targets share a seed or texture set with."""
+        for name in REPORT_ONLY:
+            other = SPLITS[(self.experiment, name)]
+            if set(self.seeds) & set(other.seeds) or (self.heldout is not None and self.heldout == other.heldout):
+                return name
+        return None
 
     def to_dict(self) -> dict:
         return {"experiment": self.experiment, "name": self.name, "seeds": list(self.seeds),
@@ -60,11 +74,14 @@ class Split:
 
 VALIDATION_SEEDS = (1, 2, 7)
 TEST_SEEDS = (21, 22, 23)
+CHECK_SEEDS = (31, 32, 33)
 SPLITS = {
     ("e1", "validation"): Split("e1", "validation", VALIDATION_SEEDS),
     ("e1", "test"): Split("e1", "test", TEST_SEEDS),
     ("e2", "validation"): Split("e2", "validation", VALIDATION_SEEDS, "heldout-v1"),
     ("e2", "test"): Split("e2", "test", TEST_SEEDS, "heldout-v2"),
+    ("e1", "check"): Split("e1", "check", CHECK_SEEDS),
+    ("e2", "check"): Split("e2", "check", CHECK_SEEDS, "heldout-v3"),
 }
 
 
@@ -72,8 +89,8 @@ def get_split(experiment: str, name: str) -> Split:
     """The split ``name`` of ``experiment``; MetaSimError naming the choices for anything else."""
     if experiment not in EXPERIMENTS:
         raise MetaSimError(f"unknown experiment {experiment!r}; choose one of {', '.join(EXPERIMENTS)}")
-    if name not in SPLIT_NAMES:
-        raise MetaSimError(f"unknown split {name!r}; choose one of {', '.join(SPLIT_NAMES)}")
+    if name not in ALL_SPLIT_NAMES:
+        raise MetaSimError(f"unknown split {name!r}; choose one of {', '.join(ALL_SPLIT_NAMES)}")
     return SPLITS[(experiment, name)]
 
 
@@ -94,7 +111,7 @@ def single_seed(experiment: str, seed: int, heldout: str = FIRST_HELDOUT) -> Spl
     split = Split(experiment, f"seed {seed}", (seed,), heldout if experiment == "e2" else None)
     validation = SPLITS[(experiment, "validation")]
     if split.touches_test:
-        return replace(split, name=f"seed {seed}, of the test split")
+        return replace(split, name=f"seed {seed}, of the {split.report_split} split")
     if seed in validation.seeds and split.heldout == validation.heldout:
         return replace(split, name=f"seed {seed}, of the validation split")
     return split

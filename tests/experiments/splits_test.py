@@ -31,7 +31,10 @@ def test_validation_holds_the_seed_choices_were_made_on_and_test_is_disjoint_fro
         assert test.touches_test and not validation.touches_test
     assert get_split("e1", "test").heldout is None
     assert (get_split("e2", "validation").heldout, get_split("e2", "test").heldout) == ("heldout-v1", "heldout-v2")
-    assert set(SPLITS) == {(e, s) for e in ("e1", "e2") for s in ("validation", "test")}
+    assert set(SPLITS) == {(e, s) for e in ("e1", "e2") for s in ("validation", "test", "check")}
+    assert get_split("e2", "check").heldout == "heldout-v3" and get_split("e1", "check").touches_test
+    assert not set(get_split("e1", "check").seeds) & (set(get_split("e1", "test").seeds)
+                                                      | set(get_split("e1", "validation").seeds))
     with pytest.raises(MetaSimError, match="unknown split 'train'"):
         get_split("e1", "train")
     with pytest.raises(MetaSimError, match="unknown experiment 'e3'"):
@@ -42,7 +45,7 @@ def test_no_target_city_or_design_of_a_test_split_is_a_validation_one(bank):
     space = DesignSpace.load()
     for experiment in ("e1", "e2"):
         cities = {}
-        for name in ("validation", "test"):
+        for name in ("validation", "test", "check"):
             split = get_split(experiment, name)
             held = ensure_heldout_bank(name=split.heldout or "heldout-v1")
             jobs = [job for seed in split.seeds for job in target_jobs(experiment, space, held, 100, seed)]
@@ -52,6 +55,7 @@ def test_no_target_city_or_design_of_a_test_split_is_a_validation_one(bank):
                 assert {job.design["flat_roof"] for job in jobs} <= set(held.ids("flat"))
                 assert {job.design["sloped_roof"] for job in jobs} <= set(held.ids("sloped"))
         assert not cities["validation"] & cities["test"]
+        assert not cities["check"] & (cities["validation"] | cities["test"])
 
 
 def test_more_groups_per_seed_than_a_seed_has_cities_is_refused():
@@ -69,6 +73,8 @@ def test_a_single_seed_says_which_split_it_belongs_to():
     assert single_seed("e2", 22).touches_test and single_seed("e2", 22).name == "seed 22, of the test split"
     assert single_seed("e2", 5, "heldout-v2").touches_test  # the test textures, whatever the seed
     assert single_seed("e1", 5).name == "seed 5" and not single_seed("e1", 5).touches_test
+    assert single_seed("e1", 31).name == "seed 31, of the check split"
+    assert single_seed("e2", 5, "heldout-v3").touches_test  # the check textures, whatever the seed
     assert single_seed("e2", 1).heldout == "heldout-v1" and single_seed("e1", 1).heldout is None
     for bad in (-1, 1.5, True):
         with pytest.raises(MetaSimError, match="target seed"):

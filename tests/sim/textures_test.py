@@ -57,13 +57,18 @@ def heldout(heldout_bank):
 
 
 @pytest.fixture(scope="module")
+def heldout_v3(heldout_v3_bank):
+    return heldout_v3_bank
+
+
+@pytest.fixture(scope="module")
 def heldout_v2(heldout_v2_bank):
     return heldout_v2_bank
 
 
 @pytest.fixture(scope="module")
-def images(bank, heldout, heldout_v2):
-    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout, heldout_v2) for e in b.entries}
+def images(bank, heldout, heldout_v2, heldout_v3):
+    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout, heldout_v2, heldout_v3) for e in b.entries}
 
 
 def _all_recipes():
@@ -106,8 +111,18 @@ def test_heldout_v2_is_a_second_set_of_new_roofs(bank, heldout, heldout_v2):
     sim = load_similarity(heldout_v2.root / SIMILARITY_TO_DEFAULT_FILE)
     assert sim.rows == tuple(heldout_v2.ids()) and sim.cols == tuple(bank.ids())
     assert heldout_v2.root == heldout_bank_dir(name="heldout-v2") != heldout.root
-    with pytest.raises(MetaSimError, match="unknown held-out set 'heldout-v3'"):
-        ensure_heldout_bank(name="heldout-v3")
+    with pytest.raises(MetaSimError, match="unknown held-out set 'heldout-v4'"):
+        ensure_heldout_bank(name="heldout-v4")
+
+
+def test_heldout_v3_is_a_third_set_of_new_roofs(bank, heldout, heldout_v2, heldout_v3):
+    assert heldout_v3.name == "heldout-v3" and heldout_v3.root == heldout_bank_dir(name="heldout-v3")
+    assert len(heldout_v3.ids("flat")) >= 10 and len(heldout_v3.ids("sloped")) >= 10
+    before = (bank, heldout, heldout_v2)
+    assert not set(heldout_v3.ids()) & {i for b in before for i in b.ids()}
+    assert not {e.sha256 for e in heldout_v3.entries} & {e.sha256 for b in before for e in b.entries}
+    for entry in heldout_v3.entries:
+        assert ID_PATTERN.match(entry.id) and entry.id.startswith(entry.kind + "-")
 
 
 def _nearest(rows: np.ndarray, cols: np.ndarray, same: bool = False) -> np.ndarray:
@@ -118,31 +133,37 @@ def _nearest(rows: np.ndarray, cols: np.ndarray, same: bool = False) -> np.ndarr
     return sim.max(axis=1)
 
 
-def test_heldout_v2_is_unlike_the_bank_and_heldout_v1_yet_ranks_the_bank(bank, heldout, heldout_v2, images):
-    """E2's test textures must not be the validation textures in other colours' clothing, nor so far from
-    everything that the HSV ranking of the bank is a tie (a top-10 hit would then be a coin toss).
+@pytest.mark.parametrize("name", ["heldout-v2", "heldout-v3"])
+def test_a_later_heldout_set_is_unlike_every_set_before_it_yet_ranks_the_bank(name, bank, heldout, heldout_v2,
+                                                                            heldout_v3, images):
+    """E2's test textures (and the check set after them) must not be the earlier sets' textures in other
+    colours' clothing, nor so far from everything that the HSV ranking of the bank is a tie (a top-10 hit
+    would then be a coin toss).
 
     Unlike: a typical bank texture (the median) is this close to its nearest bank neighbour of its
-    kind; every heldout-v2 texture is further than that from everything in the bank and in heldout-v1,
-    of either kind, and the set as a whole is further from them than heldout-v1 is from the bank.
-    Rankable: each shares some colours (similarity above 0.01) with at least 10 bank textures of its
+    kind; every texture of the set is further than that from everything in the bank and in the held-out
+    sets before it, of either kind, and the set as a whole is further from them than heldout-v1 is from the
+    bank. Rankable: each shares some colours (similarity above 0.01) with at least 10 bank textures of its
     kind, so its top 10 are ranked by colour, not drawn by the tie rule."""
     def hists(b, kind=None):
         return np.stack([hsv_cone_histogram(images[i]) for i in b.ids(kind)])
 
-    known = np.concatenate([hists(bank), hists(heldout)])
+    sets = {"heldout-v2": (heldout_v2, (bank, heldout)), "heldout-v3": (heldout_v3, (bank, heldout, heldout_v2))}
+    later, before = sets[name]
+    known = np.concatenate([hists(b) for b in before])
     for kind in ("flat", "sloped"):
         typical = np.median(_nearest(hists(bank, kind), hists(bank, kind), same=True))
-        v2 = hists(heldout_v2, kind)
-        nearest_known = _nearest(v2, known)
+        new = hists(later, kind)
+        nearest_known = _nearest(new, known)
         assert nearest_known.max() < typical, (kind, nearest_known.max(), typical)
         assert np.median(nearest_known) < np.median(_nearest(hists(heldout, kind), hists(bank))), kind
-        shared = (similarity_matrix(v2, hists(bank, kind)) > 0.01).sum(axis=1)
-        assert shared.min() >= 10, (kind, dict(zip(heldout_v2.ids(kind), shared)))
+        shared = (similarity_matrix(new, hists(bank, kind)) > 0.01).sum(axis=1)
+        assert shared.min() >= 10, (kind, dict(zip(later.ids(kind), shared)))
 
 
-def test_heldout_v2_builds_to_the_same_bytes_twice(heldout_v2, tmp_path):
+def test_heldout_v2_and_v3_build_to_the_same_bytes_twice(heldout_v2, heldout_v3, tmp_path):
     _assert_same_files(heldout_v2.root, build_default_bank(tmp_path / "again", heldout="heldout-v2").root)
+    _assert_same_files(heldout_v3.root, build_default_bank(tmp_path / "again-v3", heldout="heldout-v3").root)
     with pytest.raises(MetaSimError, match="unknown held-out set"):
         build_default_bank(tmp_path / "bad", size=16, heldout="heldout-v0")
 
@@ -199,9 +220,9 @@ def test_building_twice_gives_byte_identical_files(bank, tmp_path):
     _assert_same_files(bank.root, build_default_bank(tmp_path / "again").root)
 
 
-def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2):
+def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2, heldout_v3):
     expected = json.loads(HASHES.read_text())["256"]
-    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2) for e in b.entries}
+    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2, heldout_v3) for e in b.entries}
     assert set(expected) == set(actual)
     changed = sorted(i for i in expected if actual.get(i) != expected[i])
     assert not changed, (
@@ -526,7 +547,7 @@ def test_the_cli_builds_either_held_out_set(tmp_path):
 
     from meta_sim.cli import main
 
-    for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2")):
+    for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2"), (["heldout-v3"], "heldout-v3")):
         out = tmp_path / name
         result = CliRunner().invoke(main, ["textures", "build", "--size", "16", "--heldout", *args, "--out", str(out)])
         assert result.exit_code == 0, result.output
