@@ -17,7 +17,9 @@ targets:
   model, itself this bench's choice) winning ties;
 * on the test split only the default, the chosen setting, the default without its far-target search, the
   plain comparison (exponent 0.5, no blur) and that on the model without the score cone (the default before
-  2026-12-02) are scored, for the report.
+  2026-12-02) are scored, for the report;
+* on the check split (``splits.py``: fresh seeds, E2 on ``heldout-v3``) the default, the default without its
+  far-target search and the default before the score cone, to confirm on targets no choice looked at.
 
 ``make bench-objective`` writes ``benchmarks/objective.json`` and its table in docs/benchmarks.md.
 """
@@ -187,14 +189,24 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
     for label, row in (("default", rows[0]), ("chosen", chosen), ("without far search", named[WITHOUT_FAR.name]),
                        ("plain comparison", named[PLAIN.name]),
                        ("without score cone", named[WITHOUT_SCORE_CONE.name])):
-        setting = Setting(**row["setting"])
-        metrics = _score(setting, test, intervals=True)
-        reported[label] = {"setting": row["setting"], "name": setting.name, "metrics": metrics,
-                           "criterion": round(criterion(metrics), 4)}
+        reported[label] = _reported(row, test)
+    # The check split (targets no choice looked at, E2 on heldout-v3): the default against what it replaced.
+    check = _targets("check", targets, root, bars)
+    checked = {label: _reported(row, check) for label, row in (
+        ("default", rows[0]), ("without far search", named[WITHOUT_FAR.name]),
+        ("without score cone", named[WITHOUT_SCORE_CONE.name]))}
     return {"criterion": [f"{e} {k}" for e, k in CRITERION], "targets_per_seed": targets,
-            "validation": rows, "chosen": chosen["setting"], "test": reported,
+            "validation": rows, "chosen": chosen["setting"], "test": reported, "check": checked,
             "splits": {name: {e: get_split(e, name).to_dict() for e in ("e1", "e2")}
-                       for name in ("validation", "test")}}
+                       for name in ("validation", "test", "check")}}
+
+
+def _reported(row: dict, data: dict) -> dict:
+    """A validation row's setting scored on another split's ``data``, with 95% intervals."""
+    setting = Setting(**row["setting"])
+    metrics = _score(setting, data, intervals=True)
+    return {"setting": row["setting"], "name": setting.name, "metrics": metrics,
+            "criterion": round(criterion(metrics), 4)}
 
 
 def format_objective_table(result: dict, best: int = 5) -> str:
@@ -222,6 +234,10 @@ def format_objective_table(result: dict, best: int = 5) -> str:
         if row is None:
             continue
         lines.append(f"| {label}: {row['name']} | test | {cells(row['metrics'], True)} | {row['criterion']:.3f} |")
+        checked = result.get("check", {}).get(label)  # a result from before the check split lacks it
+        if checked is not None:
+            lines.append(f"| {label}: {row['name']} | check | {cells(checked['metrics'], True)} | "
+                         f"{checked['criterion']:.3f} |")
         valid = by_name[row["name"]]
         lines.append(f"| {label}: {row['name']} | validation | {cells(valid['metrics'], False)} | "
                      f"{valid['criterion']:.3f} |")
@@ -234,7 +250,10 @@ def format_objective_table(result: dict, best: int = 5) -> str:
               f"{', '.join(map(str, seeds['validation']['e1']['seeds']))} and E2 on "
               f"`{seeds['validation']['e2']['heldout']}`; test seeds "
               f"{', '.join(map(str, seeds['test']['e1']['seeds']))} "
-              f"and E2 on `{seeds['test']['e2']['heldout']}` (95% intervals over the groups). "
+              f"and E2 on `{seeds['test']['e2']['heldout']}` (95% intervals over the groups)"
+              + (f"; check seeds {', '.join(map(str, seeds['check']['e1']['seeds']))} and E2 on "
+                 f"`{seeds['check']['e2']['heldout']}`, targets no choice looked at" if "check" in seeds else "")
+              + ". "
               f"{len(result['validation'])} settings scored on validation; the test split scores only the default, "
               f"the chosen one, the default without its far-target search, the plain comparison (exponent 0.5, "
               f"no blur) and that on the model without the score cone (the default before 2026-12-02)."]

@@ -77,6 +77,12 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
     assert lines[5].endswith("| 0.00 / 0.00 | 0.800 |")
     assert "validation #1: exponent 0.3, blur 1.5 bins x 30" in table and "`v2`" in table
     assert "| without score cone: exponent 0.5, no blur, no score cone | test | 0.800" in table
+    assert "| check |" not in table and "check seeds" not in table  # a result from before the check split
+    result["check"] = {"default": {**test["default"], "criterion": 0.5}}
+    result["splits"]["check"] = {"e1": {"seeds": [31]}, "e2": {"seeds": [31], "heldout": "heldout-v3"}}
+    lines = format_objective_table(result).splitlines()
+    assert lines[3].startswith("| default: exponent 0.5, no blur | check |") and lines[3].endswith("| 0.500 |")
+    assert "check seeds 31 and E2 on `heldout-v3`" in lines[-1]
     del result["test"]["without score cone"]  # a result from before the score cone
     assert "without score cone" not in format_objective_table(result).split("validation #1")[0]
 
