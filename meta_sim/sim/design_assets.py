@@ -37,6 +37,7 @@ ASSET_FORMAT = "meta-sim-design-asset"
 ASSET_VERSION = 1
 CATALOG_ROOT = "Meta-Sim"
 TAG = "Meta-Sim"
+FAR_TAG = "unlike-the-bank"  # a group searched as far from every design (nams ColourComparison.far)
 INFER_REPORT = "report.json"  # `meta-sim infer` writes it beside population.json: a report, not a preset
 PRESETS_SUBDIR = "presets"  # where `meta-sim infer` puts the groups' presets
 POPULATION_TILES = 4  # a population's preview: its most common designs, 2 x 2
@@ -128,6 +129,8 @@ def description(preset: DesignPreset, space: DesignSpace) -> str:
     loss = preset.search.get("loss")
     if isinstance(loss, (int, float)) and not isinstance(loss, bool):
         parts.append(f"Search loss {loss:.4g}.")
+    if preset.search.get("far") is True:
+        parts.append("Unlike every design the model knows: the roofs were chosen by their colours alone.")
     if preset.kind == "population" and preset.designs:
         parts.append(f"{len(preset.designs)} distinct designs over {sum(d['count'] for d in preset.designs)} groups.")
     parts.append(f"Target: {preset.target()}.")
@@ -146,14 +149,17 @@ def properties(found: Found) -> dict:
     loss = preset.search.get("loss")
     if isinstance(loss, (int, float)) and not isinstance(loss, bool):
         props["search_loss"] = float(loss)
+    props["far_from_every_design"] = int(preset.search.get("far") is True)
     return props
 
 
 def tags(preset: DesignPreset, space: DesignSpace) -> list[str]:
-    """Tags to filter by: Meta-Sim, the kind, the design space and each texture chosen."""
+    """Tags to filter by: Meta-Sim, the kind, the design space, each texture chosen, and FAR_TAG for a group
+    unlike every design the model knows (searched by its roof colours alone)."""
     textures = [str(preset.design[p.name]) for p in (space.texture_parameter(k) for k in ("flat", "sloped"))
                 if p is not None and p.name in preset.design]
-    return list(dict.fromkeys([TAG, preset.kind, preset.design_space, *textures]))
+    far = [FAR_TAG] if preset.search.get("far") is True else []
+    return list(dict.fromkeys([TAG, preset.kind, preset.design_space, *textures, *far]))
 
 
 def is_design_asset(metadata) -> bool:

@@ -2,6 +2,7 @@
 
 import json
 import uuid
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -82,6 +83,18 @@ def test_description_properties_and_tags_carry_what_the_preset_says(folder, spac
     assert all(isinstance(v, (str, int, float)) for v in props.values())  # what Blender's custom properties take
     assert lib.tags(group.preset, space)[:2] == ["Meta-Sim", "group"] and flat in lib.tags(group.preset, space)
     assert "2 distinct designs over 2 groups" in lib.description(pop.preset, space)
+    assert props["far_from_every_design"] == 0 and lib.FAR_TAG not in lib.tags(group.preset, space)
+    assert "Unlike every design" not in text
+
+
+def test_a_group_unlike_every_design_says_so(space):
+    far = _group(space, 1, "rio-000")
+    far.search["far"] = True  # infer searched it again by the roof colours alone (nams ColourComparison.far)
+    assert "Unlike every design the model knows" in lib.description(far, space)
+    assert lib.properties(lib.Found(Path("x.json"), "presets/x.json", far))["far_from_every_design"] == 1
+    assert lib.tags(far, space)[-1] == lib.FAR_TAG
+    far.search["far"] = "yes"  # only a true boolean counts
+    assert lib.FAR_TAG not in lib.tags(far, space) and "Unlike" not in lib.description(far, space)
 
 
 def test_an_asset_finds_its_preset_only_inside_the_presets_folder(folder, space):
