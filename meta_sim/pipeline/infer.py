@@ -245,7 +245,12 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
         evidence = "".join(f" {g['roof_pixels'][k]:.2%}"
                            + (f" ({g['roof_pixels_outside'][k]})" if k in g['roof_pixels_outside'] else "") + " |"
                            for k in kinds)
-        lines.append(f"| {g['name']} | {cells} |{evidence}")
+        lines.append(f"| {g['name']}{' (far)' if g.get('far') else ''} | {cells} |{evidence}")
+    if report.get("groups_far_from_every_design"):
+        lines += ["", f"(far): {report['groups_far_from_every_design']} of {report['group_count']} groups are unlike "
+                  "every design the model knows (their best design's loss exceeded "
+                  f"{report['colour_comparison']['far_loss']:g}); their roof textures were chosen by the roof "
+                  "colours alone, the bank texture nearest in colour to what the roof finder sees."]
     if kinds:
         lines += ["", "Roof pixels: the share of a group's pixels the model's roof finder counts as roofs of each "
                   "kind, which the inferred roof textures rest on. The roof finder learnt roofs from renders: near 0 "

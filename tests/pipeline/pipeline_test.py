@@ -172,6 +172,8 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
         "exponent": SEARCH_COLOUR[0], "blurred": True, "blur_weight": SEARCH_COLOUR[2], "far_loss": SEARCH_FAR[0],
         "far": {"exponent": SEARCH_FAR[1], "blurred": True, "blur_weight": SEARCH_FAR[3], "kept_values": 440}}
     assert report["groups_far_from_every_design"] == sum(g["far"] for g in report["groups"])
+    assert ("(far):" in (tmp_path / "inferred" / "report.md").read_text()) == bool(
+        report["groups_far_from_every_design"])
     assert all(isinstance(load_preset(tmp_path / "inferred" / "presets" / f"{g['name']}.json").search["far"], bool)
                for g in report["groups"])
     assert "| flat roof pixels |" in (tmp_path / "inferred" / "report.md").read_text()
