@@ -526,15 +526,16 @@ def _blurred_table(model: NAMS, space: DesignSpace, table: DesignTable, colour: 
 
 
 def _kept_colours(model: NAMS, space: DesignSpace, table: DesignTable, colour: ColourComparison,
-                  lead: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The design table's histogram values that ``colour`` keeps (float64) and their squared norms, cached
-    beside the table like ``_blurred_table``."""
+                  lead: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    """The design table's histogram values that ``colour`` keeps (float64), their squared norms and (with a
+    blur) the kept values of the blurred table, cached beside the table like ``_blurred_table``."""
     key = ("kept", json.dumps(space.to_dict(), sort_keys=True), id(colour))
     cached = model._design_tables.get(key)
     if cached is not None and cached[0] is colour and cached[1] is table.features:
         return cached[2]
     kept = table.features[:, lead:][:, colour.keep].double()
-    out = (kept, kept.square().sum(dim=1))
+    blurred = _blurred_table(model, space, table, colour, lead)[:, colour.keep] if colour.blurs else None
+    out = (kept, kept.square().sum(dim=1), blurred)
     if not model.training:
         model._design_tables[key] = (colour, table.features, out)
     return out
@@ -547,19 +548,20 @@ def _table_losses(model: NAMS, space: DesignSpace, table: DesignTable, targets: 
     lead = model.config.feature_dim - model.config.colour_dims
     coloured = bool(model.config.colour_dims)
     keep = coloured and colour.keep is not None
+    blur = colour.blurs and coloured
     if keep:
-        kept, kept_sq = _kept_colours(model, space, table, colour, lead)
+        kept, kept_sq, blurred_table = _kept_colours(model, space, table, colour, lead)
         target_colours = targets[:, lead:][:, colour.keep]
     else:
         target_colours = targets[:, lead:]
+        if blur:
+            blurred_table = _blurred_table(model, space, table, colour, lead)
     sq_targets = [targets[:, :lead].square().sum(dim=1, keepdim=True),
                   target_colours.square().sum(dim=1, keepdim=True)]
-    blur = colour.blurs and coloured
     if blur:  # the blurred histograms, compared like the plain ones
-        blurred_table = _blurred_table(model, space, table, colour, lead)
         blurred_targets = colour.blurred(targets[:, lead:])
         if keep:
-            blurred_table, blurred_targets = blurred_table[:, colour.keep], blurred_targets[:, colour.keep]
+            blurred_targets = blurred_targets[:, colour.keep]
 
     def block_mses(rows: slice) -> list[torch.Tensor]:
         features = table.features[rows].double()
