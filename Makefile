@@ -7,10 +7,10 @@ DEMO := out/demo
 DEMO_DESIGN := flat_roof=flat-membrane-white-tpo,sloped_roof=sloped-clay-terracotta
 DEMO_HIDDEN := flat_roof=flat-gravel-dark,sloped_roof=sloped-seam-green
 DEMO_TARGETS := 12
-DEMO_STARTS := 256
+DEMO_STARTS := 64
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective clean
+.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-ablations bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,7 +22,10 @@ setup: $(STAMP)
 
 # The main job on its embedded defaults: build the texture bank, render a training set, train NAMS and the
 # DR baseline, run E1 (without the sbi baseline, to keep within the demo's 15 minutes; bench-nams scores it),
-# then infer the design of a target city rendered with a design the model is not told.
+# then infer the design of a target city rendered with a design the model is not told. Nothing runs beside it, so
+# the torch side uses every CPU (META_SIM_THREADS; by default it leaves one free), and its E1 runs the adjoint
+# search at the continuous spaces' default (64 starts x 100 steps, not the paper's 1000 x 200: bench-nams has both).
+demo: export META_SIM_THREADS ?= $(shell nproc 2>/dev/null || echo 2)
 demo: setup
 	$(BIN)/meta-sim textures build
 	$(BIN)/meta-sim textures sheet --out $(DEMO)/texture-bank.png
@@ -54,8 +57,8 @@ bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
 
 # Every knob that costs time against E1 accuracy, and the fast/balanced/paper profiles (long: the paper
-# profile renders 15,300 tiles). Reads benchmarks/render.json (render cost) and benchmarks/nams.json
-# (the search methods' rows): run bench-render and bench-nams first.
+# profile renders 15,300 tiles). Reads benchmarks/render.json (render cost), benchmarks/nams.json (the search
+# methods' rows) and benchmarks/ablations.json (the variants'): run bench-render, bench-nams and bench-ablations first.
 bench-tradeoff: setup
 	$(BIN)/meta-sim bench tradeoff --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png
 
@@ -88,6 +91,11 @@ bench-realism: setup
 # (long: the neural-adjoint sweep runs on both splits of both experiments; the validation targets of seed 1 are reused).
 bench-nams: setup
 	$(BIN)/meta-sim bench nams --out benchmarks/nams.json
+
+# The default model beside its variants (the other NAMS architectures, the roof-colour ablations), each trained on
+# the same training set, on bench-nams' targets (long on an empty cache: six models to train, two feature sets).
+bench-ablations: setup
+	$(BIN)/meta-sim bench ablations --out benchmarks/ablations.json
 
 # Each training set's roof finder on the real domains' labelled scenes (rooftops-v1's and overhead-v2's; learns
 # what the cache lacks): roof pixels it counts against the building masks and the training cities' range.

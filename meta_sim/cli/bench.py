@@ -118,6 +118,22 @@ def _on_bench_nams_targets(out: str):
     return decorate
 
 
+@bench.command("ablations")
+@_on_bench_nams_targets("benchmarks/ablations.json")
+@_torch_threads
+def bench_ablations_command(out, docs, targets, cache):
+    """E1/E2 of the default model beside its variants (the other NAMS architectures, the roof-colour ablations),
+    each trained on the same training set, on bench-nams' test and validation targets with 95% intervals."""
+    from ..experiments.bench import bench_ablations, format_ablations_table
+
+    bars = _Bars()
+    try:
+        result = bench_ablations(targets=targets, root=cache, bars=bars)
+    finally:
+        bars.close()
+    _publish(result, out, format_ablations_table(result), "ablations", docs)
+
+
 @bench.command("reference")
 @_on_bench_nams_targets("benchmarks/reference.json")
 def bench_reference_command(out, docs, targets, cache):

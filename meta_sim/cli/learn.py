@@ -54,10 +54,10 @@ def _dataset_options(command):
         click.option("--roof-weight-power", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
                      show_default=True,
                      help="a pixel counts p(roof kind) to this power in its kind's colour histogram: higher "
-                          "keeps only the pixels the roof finder is sure of (see `make bench-nams`)"),
+                          "keeps only the pixels the roof finder is sure of (see `make bench-ablations`)"),
         click.option("--roof-score-cone/--no-roof-score-cone", default=True, show_default=True,
                      help="also count the roof colours in the E1/E2 score's own colour cone, at full "
-                          "resolution (see `make bench-nams`, row nams_exhaustive_no_score_cone)"),
+                          "resolution (see `make bench-ablations`, row nams_exhaustive_no_score_cone)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):

@@ -107,8 +107,7 @@ ADJOINT_SWEEP = ((1000, 200), (250, 200), (250, 100), (64, 100), (64, 50), (16, 
 
 
 def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None = None, bars: Bars | None = None,
-               dataset=None, settings=None, tiles: int = 9, sweep=ADJOINT_SWEEP, variants: bool = True,
-               time_training: bool = True) -> dict:
+               dataset=None, settings=None, tiles: int = 9, sweep=ADJOINT_SWEEP, time_training: bool = True) -> dict:
     """Training time, feature time per target group, and search time and E1/E2 accuracy per method, on
     the validation and the test split of each experiment (``splits.py``).
 
@@ -116,47 +115,27 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
     from the cache. Each split has ``targets`` groups of ``tiles`` tiles (9, as in the paper) per
     target seed; every rate comes with a 95% interval from resampling the groups. The neural-adjoint
     settings of ``sweep`` run on ``adjoint_targets`` groups only, spread over the seeds: at the
-    paper's setting a group costs seconds, not milliseconds. With ``variants`` the other
-    architectures and the ablations of the roof-colour features are scored too. The fastest adjoint
-    setting that keeps E1 is chosen on the validation split; with ``time_training`` training (NAMS, DR and
-    the sbi baseline) is timed on a fresh run into a temporary folder.
+    paper's setting a group costs seconds, not milliseconds (the other architectures and the ablations of
+    the roof-colour features: ``bench_ablations``, on the same targets). The fastest adjoint
+    setting that keeps E1 is chosen on the validation split; with ``time_training`` training (the roof
+    segmenter, NAMS, DR and the sbi baseline) is timed: as this run trained them, or else on a fresh run into a
+    temporary folder (``_training_times``).
     """
-    import dataclasses
-
     import torch
 
     from ..core.cache import cache_root
-    from ..nams import ARCHITECTURES, load_checkpoint
+    from ..nams import load_checkpoint
     from ..pipeline.dataset import DatasetConfig
     from ..pipeline.features import time_extractor
     from ..pipeline.roofcolour import checkpoint_extractor
-    from ..pipeline.workflow import ModelSettings, ensure_models, train_models
+    from ..pipeline.workflow import ModelSettings, ensure_models
     from .splits import SPLIT_NAMES, get_split
 
+    started_at = time.time()  # models trained after this were trained by this run
     root = Path(root or cache_root())
     dataset, settings = dataset or DatasetConfig(), settings or ModelSettings()
-    others, own_features = {}, {}
-    if variants:
-        # The other NAMS architectures on the same training set, scored below with the exhaustive search.
-        others = {name: load_checkpoint(ensure_models(dataset, dataclasses.replace(settings, architecture=name),
-                                                      root, bars).nams_path, "nams")
-                  for name in ARCHITECTURES if name != settings.architecture}
-        # The default without the roof-colour histograms: its features are the default's leading part.
-        others["no_roof_colour"] = load_checkpoint(
-            ensure_models(dataset, dataclasses.replace(settings, roof_colour=False), root, bars).nams_path, "nams")
-        # The default without the histograms in the score's colour cone (its leading part too).
-        if settings.roof_colour and settings.roof_score_cone:
-            others["no_score_cone"] = load_checkpoint(ensure_models(
-                dataset, dataclasses.replace(settings, roof_score_cone=False), root, bars).nams_path, "nams")
-        # The roof colours counted on the pixels a colour-only likelihood finds, instead of the segmenter's:
-        # its features differ, so it is scored on targets featurised by its own extractor.
-        # Likewise each pixel weighted by the plain probability of its roof kind, not by its power.
-        own_features = {"colour_roof_finder": dataclasses.replace(settings, roof_finder="colour"),
-                        "roof_weight_power_1": dataclasses.replace(settings, roof_weight_power=1.0)}
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
               "architecture": settings.architecture,
-              "train_seconds_other_architectures": {name: round(ckpt.extra["seconds"], 1)
-                                                    for name, ckpt in others.items()},
               "roof_finder": settings.roof_finder,
               "roof_weight_power": settings.roof_weight_power,
               "targets_per_seed": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": tiles,
@@ -166,7 +145,7 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
         for experiment in ("e1", "e2"):
             split = get_split(experiment, split_name)
             experiments[experiment], breakdown = _nams_rows(split, targets, tiles, adjoint_targets, sweep, dataset,
-                                                            settings, others, own_features, root, bars)
+                                                            settings, root, bars)
             seeds[experiment] = split.to_dict()
             if breakdown is not None:
                 breakdowns[experiment] = breakdown
@@ -175,36 +154,64 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
                                                            sweep)
     extractor = checkpoint_extractor(load_checkpoint(ensure_models(dataset, settings, root).nams_path, "nams"))
     result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, tiles, 8), 4)
-    if not time_training:
-        return result
-    if settings.roof_colour and settings.roof_finder.startswith("segmenter"):
+    if time_training:
+        result.update(_training_times(dataset, settings, root, started_at))
+    return result
+
+
+def _training_times(dataset, settings, root: Path, since: float) -> dict:
+    """bench_nams's training times: "train_seconds" (NAMS, DR, the sbi baseline) and, for the segmenter roof
+    finder, "roof_segmenter_seconds". When this run trained all of them (cache files written after ``since``) the
+    times it measured then are reported ("training_timed": "in this run"); otherwise they are trained again into a
+    temporary folder and timed there ("fresh run"), so that no time measured on another day, or on a busier
+    machine, is reported as today's."""
+    from ..nams import load_checkpoint
+    from ..pipeline.roofcolour import roof_finder_path, roof_finder_seconds
+    from ..pipeline.workflow import dataset_dir, ensure_models, ensure_nre, prepare_features, train_models
+
+    models = ensure_models(dataset, settings, root)
+    sbi_path, _ = ensure_nre(models, dataset, settings)
+    segmenter = settings.roof_colour and settings.roof_finder.startswith("segmenter")
+    folder = dataset_dir(dataset, root)
+    paths = [models.nams_path, models.dr_path, sbi_path]
+    if segmenter:
+        paths.append(roof_finder_path(folder, settings.roof_finder, settings.seed))
+    if all(path.stat().st_mtime >= since for path in paths) and (
+            not segmenter or roof_finder_seconds(folder, settings.roof_finder, settings.seed) is not None):
+        times = {"training_timed": "in this run", "train_seconds": {
+            f"train_{kind}": round(load_checkpoint(path, kind).extra["seconds"], 2)
+            for kind, path in (("nams", models.nams_path), ("dr", models.dr_path), ("sbi_nre", sbi_path))}}
+        if segmenter:
+            times["roof_segmenter_seconds"] = round(roof_finder_seconds(folder, settings.roof_finder, settings.seed), 1)
+        return times
+    times = {"training_timed": "fresh run"}
+    if segmenter:
         from ..pipeline.dataset import training_tiles
         from ..pipeline.roofcolour import SEGMENTER_AUGMENT
         from ..pipeline.roofsegment import RoofSegmenter
-        from ..pipeline.workflow import dataset_dir
 
         started = time.perf_counter()
-        RoofSegmenter.fit(training_tiles(dataset_dir(dataset, root), dataset), settings.seed,
+        RoofSegmenter.fit(training_tiles(folder, dataset), settings.seed,
                           augment=SEGMENTER_AUGMENT[settings.roof_finder])
-        result["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
+        times["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
     with tempfile.TemporaryDirectory() as out:
-        from ..pipeline.workflow import prepare_features, train_nre_checkpoint
+        from ..pipeline.workflow import train_nre_checkpoint
 
         feature_set = prepare_features(dataset, settings, root).features
         seconds = train_models(feature_set, Path(out), settings, dataset)
         seconds["train_sbi_nre"] = train_nre_checkpoint(feature_set, load_checkpoint(Path(out) / "nams.pt", "nams"),
                                                         Path(out) / "sbi_nre.pt", settings, dataset)
-        result["train_seconds"] = {k: round(v, 2) for k, v in seconds.items()}
-    return result
+        times["train_seconds"] = {k: round(v, 2) for k, v in seconds.items()}
+    return times
 
 
-def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dataset, settings, others: dict,
-               own_features: dict, root: Path, bars: Bars | None) -> tuple[dict, dict | None]:
+def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dataset, settings, root: Path,
+               bars: Bars | None) -> tuple[dict, dict | None]:
     """bench_nams's rows of one experiment on one split (method name -> metrics, intervals, targets) and, in
     E2, where NAMS's top-10 misses come from (``breakdown.error_breakdown``; None in E1)."""
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
     from .breakdown import error_breakdown
-    from .evaluate import EvalSettings, best_nams_name, method_runs, prepare_eval, score_method, score_other_model
+    from .evaluate import EvalSettings, best_nams_name, method_runs, prepare_eval, score_method
     from .ranking import rankings
     from .splits import spread
 
@@ -231,14 +238,92 @@ def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dat
         name = f"nams_adjoint_M{starts}_it{iterations}"
         rows[name], _ = score_method(few, run)
         rows[name]["targets"] = len(few.jobs)
-    for name, ckpt in others.items():  # same targets and features
-        rows[f"nams_exhaustive_{name}"] = score_other_model(ctx, ckpt, seed)
-    for name, variant in own_features.items():
-        own = prepare_eval(split.experiment, dataset, variant,
-                           EvalSettings(targets=targets, tiles=tiles, split=split, ms2=False, sbi=False), root, bars)
-        rows[f"nams_exhaustive_{name}"], _ = score_method(own, method_runs(own, seed, {})["nams_exhaustive"])
-        rows[f"nams_exhaustive_{name}"]["targets"] = len(own.jobs)
     return rows, breakdown
+
+
+# bench_ablations's rows besides the default's: what each variant of the default model changes.
+ABLATIONS = {
+    "no_roof_colour": "the default without the roof-colour histograms",
+    "no_score_cone": "without those in the score's own colour cone",
+    "colour_roof_finder": "roofs for those histograms found by colour alone, not by the roof finder",
+    "roof_weight_power_1": "each pixel counted with its plain roof probability, not to the weight power",
+}
+
+
+def ablation_settings(settings) -> tuple[dict, dict]:
+    """The variants of the default ``settings`` bench_ablations scores: (name -> ModelSettings whose features are
+    the default's or their leading part, scored on the default's target features; name -> ModelSettings whose
+    features differ, scored on targets featurised by their own extractor). The first holds the other
+    architectures too."""
+    import dataclasses
+
+    from ..nams import ARCHITECTURES
+
+    same = {name: dataclasses.replace(settings, architecture=name) for name in ARCHITECTURES
+            if name != settings.architecture}
+    if settings.roof_colour:
+        same["no_roof_colour"] = dataclasses.replace(settings, roof_colour=False)
+        if settings.roof_score_cone:
+            same["no_score_cone"] = dataclasses.replace(settings, roof_score_cone=False)
+    own = {}
+    if settings.roof_colour:
+        if settings.roof_finder != "colour":
+            own["colour_roof_finder"] = dataclasses.replace(settings, roof_finder="colour")
+        if settings.roof_weight_power != 1.0:
+            own["roof_weight_power_1"] = dataclasses.replace(settings, roof_weight_power=1.0)
+    return same, own
+
+
+def bench_ablations(targets: int = 100, root: Path | None = None, bars: Bars | None = None, dataset=None,
+                    settings=None, tiles: int = 9) -> dict:
+    """E1/E2 accuracy with the exhaustive search of the default model beside each variant of it
+    (``ablation_settings``: the other NAMS architectures, the roof-colour ablations), on bench_nams's targets
+    (``targets`` groups of ``tiles`` tiles per seed of the validation and the test split of each experiment), with
+    95% intervals. Each variant's model is trained on the same training set (or taken from the cache) and its
+    training time kept. The defaults were chosen on the validation rows."""
+    from ..core.cache import cache_root
+    from ..nams import load_checkpoint
+    from ..pipeline.dataset import DatasetConfig
+    from ..pipeline.workflow import ModelSettings, ensure_models
+    from .evaluate import EvalSettings, prepare_eval, score_other_model
+    from .splits import SPLIT_NAMES, get_split
+
+    root = Path(root or cache_root())
+    dataset, settings = dataset or DatasetConfig(), settings or ModelSettings()
+    same, own = ablation_settings(settings)
+    others = {name: load_checkpoint(ensure_models(dataset, variant, root, bars).nams_path, "nams")
+              for name, variant in same.items()}
+    own_models = {name: load_checkpoint(ensure_models(dataset, variant, root, bars).nams_path, "nams")
+                  for name, variant in own.items()}
+    result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
+              "architecture": settings.architecture, "roof_finder": settings.roof_finder,
+              "roof_weight_power": settings.roof_weight_power, "targets_per_seed": targets, "tiles_per_target": tiles,
+              "train_seconds": {name: round(ckpt.extra["seconds"], 1)
+                                for name, ckpt in {**others, **own_models}.items()},
+              "splits": {}}
+    for split_name in SPLIT_NAMES:
+        experiments, seeds = {}, {}
+        for experiment in ("e1", "e2"):
+            split = get_split(experiment, split_name)
+            seed = split.seeds[0]  # of the searches' random starts, as in bench_nams
+            scored = EvalSettings(targets=targets, tiles=tiles, split=split, ms2=False, sbi=False)
+            ctx = prepare_eval(experiment, dataset, settings, scored, root, bars)
+            rows = {"nams_exhaustive": _exhaustive_row(ctx, seed)}
+            rows.update({f"nams_exhaustive_{name}": score_other_model(ctx, ckpt, seed)
+                         for name, ckpt in others.items()})
+            for name, variant in own.items():
+                rows[f"nams_exhaustive_{name}"] = _exhaustive_row(
+                    prepare_eval(experiment, dataset, variant, scored, root, bars), seed)
+            experiments[experiment], seeds[experiment] = rows, split.to_dict()
+        result["splits"][split_name] = {"settings": seeds, "experiments": experiments}
+    return result
+
+
+def _exhaustive_row(ctx, seed: int) -> dict:
+    from .evaluate import method_runs, score_method
+
+    row, _ = score_method(ctx, method_runs(ctx, seed, {})["nams_exhaustive"])
+    return {**row, "targets": len(ctx.jobs)}
 
 
 def fastest_adjoint(e1_rows: dict, sweep=ADJOINT_SWEEP) -> dict:
@@ -259,27 +344,10 @@ def format_nams_table(result: dict) -> str:
     the splits, training and feature times, the stage times (E4), and per split where NAMS's E2
     top-10 misses come from (``breakdown.breakdown_markdown``; results from before it lack them)."""
     from .breakdown import breakdown_markdown, breakdown_title
-    from .evaluate import with_interval
 
-    lines = ["| experiment | method | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | "
-             "closeness flat / sloped | s per target | targets | top-1 flat / sloped, unseen designs |",
-             "|---" * 11 + "|"]
     splits = result["splits"]
     order = [name for name in ("test", "validation") if name in splits]
-    for experiment in splits[order[0]]["experiments"]:
-        for name in splits[order[0]]["experiments"][experiment]:
-            for split in order:
-                m = splits[split]["experiments"][experiment].get(name)
-                if m is None:
-                    continue
-                unseen = (f"{m['unseen']['flat_top1']:.3f} / {m['unseen']['sloped_top1']:.3f} "
-                          f"({m['unseen_targets']})" if m.get("unseen") else "-")
-                cells = " | ".join(with_interval(m, k) for k in ("flat_top1", "flat_top10", "sloped_top1",
-                                                                  "sloped_top10"))
-                closeness = (f"{m['flat_closeness']:.3f} / {m['sloped_closeness']:.3f}" if "flat_closeness" in m
-                             else "-")  # rows measured before it lack it
-                lines.append(f"| {experiment.upper()} | {name} | {split} | {cells} | {closeness} "
-                             f"| {m['seconds_per_target']:.4f} | {m['targets']} | {unseen} |")
+    lines = _accuracy_table(splits)
     f = result["fastest_adjoint_keeping_e1"]
     described = "; ".join(f"{split}: E1 seeds {', '.join(map(str, s['settings']['e1']['seeds']))}, E2 seeds "
                           f"{', '.join(map(str, s['settings']['e2']['seeds']))} with {s['settings']['e2']['heldout']}"
@@ -290,20 +358,17 @@ def format_nams_table(result: dict) -> str:
              "(2,000 draws). Choices are made on the validation rows only.",
              f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
              f"({result['dataset']['preset']}). NAMS architecture {result['architecture']}"]
-    if result["train_seconds_other_architectures"]:
-        notes[-1] += (" (rows nams_exhaustive_NAME: the other architectures; nams_exhaustive_no_roof_colour: the "
-                      "default without the roof-colour histograms; nams_exhaustive_no_score_cone: without those in "
-                      "the score's own colour cone; nams_exhaustive_colour_roof_finder: roofs for "
-                      f"those histograms found by colour alone, not by the {result['roof_finder']} roof finder; "
-                      "nams_exhaustive_roof_weight_power_1: each pixel counted with its plain roof probability, not "
-                      f"to the power {result['roof_weight_power']:g})")
+    if result.get("train_seconds_other_architectures"):  # results from before bench-ablations held the variants
+        notes[-1] += " (rows nams_exhaustive_NAME: variants of the default, now measured by `make bench-ablations`)"
     notes[-1] += "."
     if "train_seconds" in result:
         t = result["train_seconds"]
-        notes.append(f"Training: NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
+        notes.append("Training" + {"in this run": " (timed as this run trained the models)",
+                                   "fresh run": " (timed on a fresh run)"}.get(result.get("training_timed"), "")
+                     + f": NAMS {t['train_nams']:.0f} s, DR {t['train_dr']:.0f} s"
                      + (f", sbi_nre {t['train_sbi_nre']:.0f} s" if "train_sbi_nre" in t else "")
                      + "".join(f", {name} {s:.0f} s (when its cached model was trained)"
-                               for name, s in result["train_seconds_other_architectures"].items()) + ".")
+                               for name, s in result.get("train_seconds_other_architectures", {}).items()) + ".")
     notes.append(f"Features: {result['feature_seconds_per_group']:.3f} s per group of {result['tiles_per_target']} "
                  "tiles x 8 views"
                  + (f"; the roof segmenter learns in {result['roof_segmenter_seconds']:.0f} s, once per training set"
@@ -321,6 +386,55 @@ def format_nams_table(result: dict) -> str:
             title = breakdown_title(experiment, splits[split]["settings"][experiment])
             lines += ["", breakdown_markdown(breakdown, title).rstrip("\n")]
     return "\n".join(lines)
+
+
+def _accuracy_table(splits: dict) -> list[str]:
+    """The accuracy table of bench_nams and bench_ablations: a row per experiment, method and split (test
+    first, validation beside it), rates with 95% intervals, search seconds per target."""
+    from .evaluate import with_interval
+
+    lines = ["| experiment | method | split | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | "
+             "closeness flat / sloped | s per target | targets | top-1 flat / sloped, unseen designs |",
+             "|---" * 11 + "|"]
+    order = [name for name in ("test", "validation") if name in splits]
+    for experiment in splits[order[0]]["experiments"]:
+        for name in splits[order[0]]["experiments"][experiment]:
+            for split in order:
+                m = splits[split]["experiments"][experiment].get(name)
+                if m is None:
+                    continue
+                unseen = (f"{m['unseen']['flat_top1']:.3f} / {m['unseen']['sloped_top1']:.3f} "
+                          f"({m['unseen_targets']})" if m.get("unseen") else "-")
+                cells = " | ".join(with_interval(m, k) for k in ("flat_top1", "flat_top10", "sloped_top1",
+                                                                  "sloped_top10"))
+                closeness = (f"{m['flat_closeness']:.3f} / {m['sloped_closeness']:.3f}" if "flat_closeness" in m
+                             else "-")  # rows measured before it lack it
+                lines.append(f"| {experiment.upper()} | {name} | {split} | {cells} | {closeness} "
+                             f"| {m['seconds_per_target']:.4f} | {m['targets']} | {unseen} |")
+    return lines
+
+
+def format_ablations_table(result: dict) -> str:
+    """``bench_ablations``'s result as the Markdown of docs/benchmarks.md: the accuracy table, what each row
+    is and how long each variant's model took to train."""
+    from ..nams import ARCHITECTURES
+
+    splits = result["splits"]
+    meaning = {**{name: "the other NAMS architecture of that name" for name in ARCHITECTURES}, **ABLATIONS}
+    power = f" ({result['roof_weight_power']:g})"
+    rows = sorted({name.removeprefix("nams_exhaustive_") for s in splits.values() for e in s["experiments"].values()
+                   for name in e if name != "nams_exhaustive"})
+    described = "; ".join(f"`nams_exhaustive_{name}`: {meaning.get(name, name)}"
+                          + (power if name == "roof_weight_power_1" else "")
+                          + (f" ({result['roof_finder']})" if name == "colour_roof_finder" else "") for name in rows)
+    trained = ", ".join(f"{name} {s:.0f} s" for name, s in result["train_seconds"].items())
+    note = (f"The default ({result['architecture']} NAMS, row `nams_exhaustive`) beside its variants, each trained "
+            f"on the same training set ({result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles, "
+            f"{result['dataset']['preset']}) and scored with the exhaustive search on bench-nams' targets "
+            f"({result['targets_per_seed']} groups of {result['tiles_per_target']} tiles per seed): {described}. "
+            f"Training (when each cached model was trained): {trained}. The defaults were chosen on the validation "
+            "rows; [95% interval] from resampling the groups (2,000 draws).")
+    return "\n".join([*_accuracy_table(splits), "", note])
 
 
 def stage_times(result: dict, render_bench: Path = Path("benchmarks/render.json")) -> list[tuple[str, float, str]]:

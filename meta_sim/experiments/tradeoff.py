@@ -16,8 +16,9 @@ renders, target groups of 9 tiles, exhaustive search):
 * ``tiles per target group``: 1, 2, 4, 9;
 * ``search``, ``architecture``, ``roof colour``, ``roof finder``, ``roof weight power``: the exhaustive
   search, the neural-adjoint search at several (M, iterations), the paper's (1000, 200) first, DR, MS2
-  and the sbi baseline, the other NAMS architectures and the roof-colour ablations: taken from ``make
-  bench-nams`` (``benchmarks/nams.json``, the same model and E1 targets, split for split), with this
+  and the sbi baseline, taken from ``make bench-nams`` (``benchmarks/nams.json``), and the other NAMS
+  architectures and the roof-colour ablations, from ``make bench-ablations``
+  (``benchmarks/ablations.json``); both on the same model and E1 targets, split for split, with this
   bench's feature time per tile added;
 * ``views``: the default extractor is invariant to the 8 dihedral views, so
   8 views give the features of 1 at the cost of 1 (checked, not assumed:
@@ -196,21 +197,21 @@ class _AllViews:
         return self.inner(batch)
 
 
-def read_nams_rows(nams_bench: Path, per_seed: int) -> dict:
-    """The E1 rows of ``make bench-nams`` per split (split name -> method name -> row), checked to be on
-    this bench's targets: ``per_seed`` groups of 9 tiles per seed of each split. A split the file lacks is
-    left out (its figures are missing, never another split's); MetaSimError without the validation split's,
-    for a file from before the splits, or for other targets."""
+def read_nams_rows(nams_bench: Path, per_seed: int, make: str = "bench-nams") -> dict:
+    """The E1 rows of ``make bench-nams`` (or of ``make MAKE``, on the same targets) per split (split name ->
+    method name -> row), checked to be on this bench's targets: ``per_seed`` groups of 9 tiles per seed of
+    each split. A split the file lacks is left out (its figures are missing, never another split's);
+    MetaSimError without the validation split's, for a file from before the splits, or for other targets."""
     try:
         bench = json.loads(nams_bench.read_text())
     except (OSError, ValueError) as exc:
-        raise MetaSimError(f"cannot read {nams_bench} ({exc}); run `make bench-nams` first") from None
+        raise MetaSimError(f"cannot read {nams_bench} ({exc}); run `make {make}` first") from None
     if "splits" not in bench:
         raise MetaSimError(f"{nams_bench} predates the validation and test splits (its E1 rows are target seed 1's "
-                           "alone): run `make bench-nams` again")
+                           f"alone): run `make {make}` again")
     if bench.get("tiles_per_target") != max(GROUP_TILES):
         raise MetaSimError(f"{nams_bench} was measured on groups of {bench.get('tiles_per_target')} tiles, "
-                           f"not {max(GROUP_TILES)}: run `make bench-nams` again")
+                           f"not {max(GROUP_TILES)}: run `make {make}` again")
     rows = {}
     for split in SPLITS:
         part = bench["splits"].get(split.name)
@@ -219,27 +220,27 @@ def read_nams_rows(nams_bench: Path, per_seed: int) -> dict:
         try:
             rows[split.name], seeds = part["experiments"]["e1"], part["settings"]["e1"]["seeds"]
         except (KeyError, TypeError) as exc:
-            raise MetaSimError(f"no E1 {split.name} rows in {nams_bench} ({exc}); run `make bench-nams` "
+            raise MetaSimError(f"no E1 {split.name} rows in {nams_bench} ({exc}); run `make {make}` "
                                "again") from None
         if (seeds, bench.get("targets_per_seed")) != (list(split.seeds), per_seed):
             raise MetaSimError(f"{nams_bench} was measured on {bench.get('targets_per_seed')} target groups of "
                                f"{split.name} seeds {seeds}, not {per_seed} of {list(split.seeds)}: run "
-                               "`make bench-nams` again with as many --targets")
+                               f"`make {make}` again with as many --targets")
     if "validation" not in rows:
         raise MetaSimError(f"no E1 validation rows in {nams_bench}, on which the choices are made; run "
-                           "`make bench-nams` again")
+                           f"`make {make}` again")
     return rows
 
 
-# bench-nams's variants of the default model (rows nams_exhaustive_NAME), each a knob of its own.
+# bench-ablations's variants of the default model (rows nams_exhaustive_NAME), each a knob of its own.
 _VARIANTS = {"no_roof_colour": ("roof colour", "none"), "no_score_cone": ("roof colour", "no score cone"),
              "colour_roof_finder": ("roof finder", "colour"),
              "roof_weight_power_1": ("roof weight power", "1")}
 
 
 def _nams_knob(name: str) -> tuple[str, str]:
-    """The knob and setting of a bench-nams row: a search method or setting, another architecture, or a
-    variant of the roof colours."""
+    """The knob and setting of a bench-nams or bench-ablations row: a search method or setting, another
+    architecture, or a variant of the roof colours."""
     from ..nams.model import ARCHITECTURES
 
     adjoint = re.fullmatch(r"nams_adjoint_M(\d+)_it(\d+)", name)
@@ -255,13 +256,14 @@ def _nams_knob(name: str) -> tuple[str, str]:
     return "search", name
 
 
-def _search_points(rows: dict, base: _Experiment) -> list[Point]:
-    """bench-nams's E1 rows (``read_nams_rows``) as points, every split's beside the others: search time
-    (over the groups of all splits) plus 9 tiles' features of this bench."""
+def _search_points(rows: dict, base: _Experiment, source: str = "bench-nams",
+                   skip: tuple[str, ...] = ("uniform",)) -> list[Point]:
+    """E1 rows of ``source`` (``read_nams_rows``) as points but those named in ``skip``, every split's beside the
+    others: search time (over the groups of all splits) plus 9 tiles' features of this bench."""
     features = max(GROUP_TILES) * base.feature_seconds_per_tile
     points = []
     for name in rows["validation"]:
-        if name == "uniform":
+        if name in skip:
             continue
         per_split = {split: split_rows[name] for split, split_rows in rows.items() if name in split_rows}
         metrics = {split: {**{k: row[k] for k in METRICS},
@@ -272,13 +274,14 @@ def _search_points(rows: dict, base: _Experiment) -> list[Point]:
         search = sum(row["seconds_per_target"] * targets[split] for split, row in per_split.items()) / sum(
             targets.values())
         points.append(Point(*_nams_knob(name), metrics, round(search + features, 5), round(base.one_off, 1), targets,
-                            {"search_seconds_per_group": round(search, 5), "from": f"bench-nams row {name}"}))
+                            {"search_seconds_per_group": round(search, 5), "from": f"{source} row {name}"}))
     return points
 
 
 def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | None = None,
                    render_bench: Path = Path("benchmarks/render.json"),
-                   nams_bench: Path = Path("benchmarks/nams.json"), presets=RENDER_PRESETS,
+                   nams_bench: Path = Path("benchmarks/nams.json"),
+                   ablations_bench: Path = Path("benchmarks/ablations.json"), presets=RENDER_PRESETS,
                    training_sets=TRAINING_SETS, profiles=tuple(PROFILES), bars: Bars | None = None) -> dict:
     """Measure every knob alone, then every profile end to end, on ``targets`` groups of each seed of E1's
     validation and test splits (the adjoint search on ``adjoint_targets`` of each split); returns a
@@ -287,6 +290,7 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
 
     root = Path(root or cache_root())
     nams_rows = read_nams_rows(nams_bench, targets)  # before hours of work, not after
+    ablation_rows = read_nams_rows(ablations_bench, targets, "bench-ablations")
     experiments: dict = {}
 
     def experiment(dataset: DatasetConfig, views: int = 8) -> _Experiment:
@@ -297,6 +301,7 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
     base = experiment(DatasetConfig())
     points = [base.run("tiles per target group", str(g), group_tiles=g) for g in GROUP_TILES]
     points += _search_points(nams_rows, base)
+    points += _search_points(ablation_rows, base, "bench-ablations", skip=("nams_exhaustive",))  # bench-nams' too
     points += [experiment(DatasetConfig(designs=d, tiles=t)).run("training set", f"{d} x {t}")
                for d, t in training_sets]
     points += [experiment(DatasetConfig(preset=preset)).run("render preset", preset) for preset in presets]

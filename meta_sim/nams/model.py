@@ -118,7 +118,7 @@ ARCHITECTURES = {
                                                 "parameter: a tile's features add up over its flat and "
                                                 "sloped roofs"),
 }
-# Chosen on E1/E2's validation split (bench-nams's rows per architecture; docs/design.md, "Splits").
+# Chosen on E1/E2's validation split (bench-ablations's rows per architecture; docs/design.md, "Splits").
 DEFAULT_ARCHITECTURE = "additive"
 
 

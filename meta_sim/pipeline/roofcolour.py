@@ -13,7 +13,7 @@ histograms by their plain distance, not whitened by the noise (see
 * The roof finder gives each pixel a probability of being a flat and a
   sloped roof. By default ``roofsegment.RoofSegmenter``, a small net learnt
   on the training tiles' labels that sees roofs by shape and shading;
-  ``make bench-nams`` (row ``nams_exhaustive_colour_roof_finder``) measures
+  ``make bench-ablations`` (row ``nams_exhaustive_colour_roof_finder``) measures
   it against the colour-only finder below.
 * ``RoofLikelihood``: p(flat roof | colour) and p(sloped roof | colour) for
   each of 16^3 sRGB bins of 2x2-pixel means, counted on the training tiles'
@@ -40,7 +40,7 @@ histograms by their plain distance, not whitened by the noise (see
   apart (E1); these rank a texture the bank lacks as the score ranks it
   (E2): a 2x2 mean mixes a pattern's colours into colours the texture does
   not have, and the stretched cone spreads the greys the score lumps
-  together. ``make bench-nams`` (row ``nams_exhaustive_no_score_cone``)
+  together. ``make bench-ablations`` (row ``nams_exhaustive_no_score_cone``)
   measures what they add.
 
 The finder belongs to the training set it was learnt on; the checkpoint
@@ -53,6 +53,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import time
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -163,17 +164,26 @@ def roof_finder_from_dict(data: Mapping):
     return RoofLikelihood.from_dict(data)
 
 
+def roof_finder_path(folder: Path, finder: str, seed: int) -> Path:
+    """Where ``ensure_roof_finder`` caches the roof finder ``finder`` learnt with ``seed`` in a training set's
+    ``folder``."""
+    from .roofsegment import config_id
+
+    if finder in SEGMENTER_AUGMENT:
+        return Path(folder) / f"roof-segmenter-{config_id(SEGMENTER_AUGMENT[finder])}-seed{seed}.pt"
+    return Path(folder) / LIKELIHOOD_FILE
+
+
 def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segmenter", seed: int = 0,
                        progress: Callable[[int], None] | None = None):
     """A training set's roof finder (``ROOF_FINDERS``: the segmenter, or the colour likelihood), learnt
     once on its tiles and cached in its ``folder``. ``progress`` gets tiles counted or training steps."""
     if finder not in ROOF_FINDERS:
         raise MetaSimError(f"unknown roof finder {finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
-    from .roofsegment import RoofSegmenter, config_id
+    from .roofsegment import RoofSegmenter
 
     segmenter = finder in SEGMENTER_AUGMENT
-    path = Path(folder) / (f"roof-segmenter-{config_id(SEGMENTER_AUGMENT[finder])}-seed{seed}.pt" if segmenter
-                           else LIKELIHOOD_FILE)
+    path = roof_finder_path(folder, finder, seed)
     if path.is_file():
         try:
             data = torch.load(path, weights_only=True)
@@ -181,13 +191,24 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
                 return roof_finder_from_dict(data)
         except Exception:  # a damaged or outdated cache is learnt again, never trusted
             pass
+    started = time.perf_counter()
     if segmenter:
         found = RoofSegmenter.fit(tile_paths, seed, progress=progress, augment=SEGMENTER_AUGMENT[finder])
     else:
         found = RoofLikelihood.fit(tile_paths, progress)
-    with atomic_path(path) as tmp:
-        torch.save({**found.to_dict(), "tiles": len(tile_paths)}, tmp)
+    with atomic_path(path) as tmp:  # with the seconds it took, for the benchmarks' training times
+        torch.save({**found.to_dict(), "tiles": len(tile_paths), "seconds": time.perf_counter() - started}, tmp)
     return found
+
+
+def roof_finder_seconds(folder: Path, finder: str = "segmenter", seed: int = 0) -> float | None:
+    """The seconds ``ensure_roof_finder`` took to learn the finder cached in ``folder`` (None when it is
+    not cached, or was cached before its time was kept)."""
+    try:
+        seconds = torch.load(roof_finder_path(folder, finder, seed), weights_only=True).get("seconds")
+    except Exception:  # missing or damaged: not known
+        return None
+    return float(seconds) if isinstance(seconds, float) and math.isfinite(seconds) else None
 
 
 def roof_weights(finder, level1: torch.Tensor, power: float) -> torch.Tensor:

@@ -43,7 +43,7 @@ class ModelSettings:
     nams: dict = field(default_factory=dict)  # NAMSConfig overrides (hidden sizes, z_dim, loss weights)
     train: dict = field(default_factory=dict)  # TrainConfig overrides
     seed: int = 0
-    # The next four were chosen on E1/E2's validation split (bench-nams's ablation rows; docs/design.md,
+    # The next four were chosen on E1/E2's validation split (bench-ablations's rows; docs/design.md,
     # "Splits"). Add the roof-colour histograms to the features (meta_sim.pipeline.roofcolour); needs the
     # tiles' labels.
     roof_colour: bool = True

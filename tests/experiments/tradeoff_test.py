@@ -215,6 +215,15 @@ def test_search_points_come_from_the_nams_benchmarks_rows_split_for_split(tmp_pa
         read_nams_rows(path, 100)
     with pytest.raises(MetaSimError, match="bench-nams"):
         read_nams_rows(tmp_path / "missing.json", 100)
+    with pytest.raises(MetaSimError, match="run `make bench-ablations` first"):
+        read_nams_rows(tmp_path / "missing.json", 100, "bench-ablations")
+    # bench-ablations's rows say where they come from, and its default row (bench-nams' too) can be left out.
+    bench = _nams_result()
+    path.write_text(json.dumps(bench))
+    points = _search_points(read_nams_rows(path, 100, "bench-ablations"), base, "bench-ablations",
+                            skip=("nams_exhaustive",))
+    assert points and all(p.detail["from"].startswith("bench-ablations row ") for p in points)
+    assert ("search", "exhaustive") not in {(p.knob, p.setting) for p in points}
 
 
 @pytest.mark.slow

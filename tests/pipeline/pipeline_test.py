@@ -108,7 +108,7 @@ def test_bench_nams_reports_the_test_split_beside_validation(evaluated, tiny_env
     dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
     settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
     result = bench_nams(targets=1, adjoint_targets=2, root=tiny_env, dataset=dataset, settings=settings, tiles=2,
-                        sweep=((16, 5), (4, 5)), variants=False, time_training=False)
+                        sweep=((16, 5), (4, 5)), time_training=False)
     assert list(result["splits"]) == ["validation", "test"]
     for split, seeds in (("validation", [1, 2, 7]), ("test", [21, 22, 23])):
         settings_of = result["splits"][split]["settings"]
@@ -122,6 +122,59 @@ def test_bench_nams_reports_the_test_split_beside_validation(evaluated, tiny_env
     table = format_nams_table(result)
     assert "| E2 | nams_exhaustive | test |" in table and "| E2 | nams_exhaustive | validation |" in table
     assert "E2 seeds 21, 22, 23 with heldout-v2" in table
+    assert "nams_exhaustive_paper" not in table  # the variants are bench_ablations's
+
+
+def test_bench_ablations_scores_each_variant_beside_the_default_on_the_same_targets(evaluated, tiny_env):
+    from meta_sim.experiments.bench import ablation_settings, bench_ablations, format_ablations_table
+    from meta_sim.experiments.tradeoff import _nams_knob
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    same, own = ablation_settings(settings)
+    assert set(same) == {"paper", "factorised", "no_roof_colour", "no_score_cone"}
+    assert set(own) == {"colour_roof_finder", "roof_weight_power_1"}
+    assert own["colour_roof_finder"].roof_finder == "colour" and own["roof_weight_power_1"].roof_weight_power == 1.0
+    result = bench_ablations(targets=1, root=tiny_env, dataset=dataset, settings=settings, tiles=2)
+    assert list(result["splits"]) == ["validation", "test"]
+    names = {"nams_exhaustive", *(f"nams_exhaustive_{name}" for name in (*same, *own))}
+    assert set(result["train_seconds"]) == set(same) | set(own) and min(result["train_seconds"].values()) > 0
+    for part in result["splits"].values():
+        for rows in part["experiments"].values():
+            assert set(rows) == names
+            for row in rows.values():
+                assert row["targets"] == 3 and 0.0 <= row["flat_top1"] <= row["flat_top10"] <= 1.0
+    # Every variant row is a knob of the trade-off study.
+    assert {_nams_knob(name)[0] for name in names} == {"search", "architecture", "roof colour", "roof finder",
+                                                       "roof weight power"}
+    table = format_ablations_table(result)
+    assert "| E1 | nams_exhaustive_paper | test |" in table and "| E2 | nams_exhaustive | validation |" in table
+    assert "`nams_exhaustive_no_score_cone`: without those in the score's own colour cone" in table
+
+
+def test_training_times_are_those_this_run_measured_when_it_trained_every_model(evaluated, tiny_env):
+    """bench_nams does not train its models twice: when the run trained them, their recorded times are reported."""
+    from meta_sim.experiments.bench import _training_times
+    from meta_sim.nams import load_checkpoint
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.roofcolour import roof_finder_seconds
+    from meta_sim.pipeline.workflow import ModelSettings, dataset_dir, ensure_models
+
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    path = ensure_models(dataset, settings, tiny_env).nams_path
+    written = path.stat().st_mtime_ns
+    times = _training_times(dataset, settings, tiny_env, since=0.0)  # every cache file is newer than 1970
+    assert times["training_timed"] == "in this run"
+    nams = load_checkpoint(path, "nams")
+    assert times["train_seconds"]["train_nams"] == round(nams.extra["seconds"], 2)
+    assert set(times["train_seconds"]) == {"train_nams", "train_dr", "train_sbi_nre"}
+    seconds = roof_finder_seconds(dataset_dir(dataset, tiny_env))
+    assert seconds is not None and times["roof_segmenter_seconds"] == round(seconds, 1) > 0
+    assert path.stat().st_mtime_ns == written  # nothing was trained again
+    assert roof_finder_seconds(tiny_env / "nowhere") is None
 
 
 def _target_folder(tmp_path, tiny_env):
@@ -310,7 +363,7 @@ def test_train_with_the_papers_architecture(evaluated, tiny_env, tmp_path):
 
 
 def test_a_model_without_roof_colour_is_scored_on_the_defaults_features(evaluated, tiny_env, tmp_path):
-    """bench-nams' row nams_exhaustive_no_roof_colour: the default's targets, MS2 pool included, cut to
+    """bench-ablations' row nams_exhaustive_no_roof_colour: the default's targets, MS2 pool included, cut to
     the features the model without the roof-colour histograms was trained on."""
     from meta_sim.experiments.evaluate import EvalSettings, method_runs, prepare_eval, score_method, score_other_model
     from meta_sim.nams import load_checkpoint
