@@ -22,6 +22,15 @@ def _publish(result: dict, out: Path, table: str, section: str, docs: bool, *mor
     click.echo("wrote " + ", ".join(str(p) for p in [*written, *more]))
 
 
+def _with_bars(run, **kwargs):
+    """``run(bars=..., **kwargs)`` with a progress bar per stage, the bars closed however it ends."""
+    bars = _Bars()
+    try:
+        return run(bars=bars, **kwargs)
+    finally:
+        bars.close()
+
+
 @main.group()
 def bench():
     """Measure speed; results go to benchmarks/*.json."""
@@ -60,9 +69,7 @@ def bench_nams_command(out, docs, targets, adjoint_targets, cache):
             raise MetaSimError(f"{name} must be at least 1, not {value}")
     from ..experiments.bench import bench_nams, format_nams_table
 
-    bars = _Bars()
-    result = bench_nams(targets=targets, adjoint_targets=adjoint_targets, root=cache, bars=bars)
-    bars.close()
+    result = _with_bars(bench_nams, targets=targets, adjoint_targets=adjoint_targets, root=cache)
     _publish(result, out, format_nams_table(result), "nams", docs)
 
 
@@ -126,11 +133,7 @@ def bench_ablations_command(out, docs, targets, cache):
     each trained on the same training set, on bench-nams' test and validation targets with 95% intervals."""
     from ..experiments.bench import bench_ablations, format_ablations_table
 
-    bars = _Bars()
-    try:
-        result = bench_ablations(targets=targets, root=cache, bars=bars)
-    finally:
-        bars.close()
+    result = _with_bars(bench_ablations, targets=targets, root=cache)
     _publish(result, out, format_ablations_table(result), "ablations", docs)
 
 
@@ -141,9 +144,7 @@ def bench_reference_command(out, docs, targets, cache):
     (found with the roof labels) agree with the swatch similarity that scores every method."""
     from ..experiments.reference import bench_reference, format_reference_table
 
-    bars = _Bars()
-    result = bench_reference(targets=targets, root=cache, bars=bars)
-    bars.close()
+    result = _with_bars(bench_reference, targets=targets, root=cache)
     _publish(result, out, format_reference_table(result), "reference", docs)
 
 
@@ -154,11 +155,7 @@ def bench_objective_command(out, docs, targets, cache):
     split of E1 and E2, the best chosen there, and the default and the chosen one scored on test."""
     from ..experiments.objective import bench_objective, format_objective_table
 
-    bars = _Bars()
-    try:
-        result = bench_objective(targets=targets, root=cache, bars=bars)
-    finally:
-        bars.close()
+    result = _with_bars(bench_objective, targets=targets, root=cache)
     _publish(result, out, format_objective_table(result), "objective", docs)
 
 
