@@ -15,11 +15,11 @@ renders, target groups of 9 tiles, exhaustive search):
 
 * ``tiles per target group``: 1, 2, 4, 9;
 * ``search``, ``architecture``, ``roof colour``, ``roof finder``, ``roof weight power``: the exhaustive
-  search, the neural-adjoint search at several (M, iterations), the paper's (1000, 200) first, DR, MS2
-  and the sbi baseline, taken from ``make bench-nams`` (``benchmarks/nams.json``), and the other NAMS
-  architectures and the roof-colour ablations, from ``make bench-ablations``
-  (``benchmarks/ablations.json``); both on the same model and E1 targets, split for split, with this
-  bench's feature time per tile added;
+  search, DR, MS2 and the sbi baseline, taken from ``make bench-nams`` (``benchmarks/nams.json``), the
+  neural-adjoint search at several (M, iterations), the paper's (1000, 200) first, from ``make
+  bench-adjoint`` (``benchmarks/adjoint.json``), and the other NAMS architectures and the roof-colour
+  ablations, from ``make bench-ablations`` (``benchmarks/ablations.json``); all on the same model and E1
+  targets, split for split, with this bench's feature time per tile added;
 * ``views``: the default extractor is invariant to the 8 dihedral views, so
   8 views give the features of 1 at the cost of 1 (checked, not assumed:
   the bench compares the vectors); a backbone pays 8x;
@@ -279,8 +279,8 @@ def _search_points(rows: dict, base: _Experiment, source: str = "bench-nams",
 
 
 def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | None = None,
-                   render_bench: Path = Path("benchmarks/render.json"),
-                   nams_bench: Path = Path("benchmarks/nams.json"),
+                   render_bench: Path = Path("benchmarks/render.json"), nams_bench: Path = Path("benchmarks/nams.json"),
+                   adjoint_bench: Path = Path("benchmarks/adjoint.json"),
                    ablations_bench: Path = Path("benchmarks/ablations.json"), presets=RENDER_PRESETS,
                    training_sets=TRAINING_SETS, profiles=tuple(PROFILES), bars: Bars | None = None) -> dict:
     """Measure every knob alone, then every profile end to end, on ``targets`` groups of each seed of E1's
@@ -290,6 +290,7 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
 
     root = Path(root or cache_root())
     nams_rows = read_nams_rows(nams_bench, targets)  # before hours of work, not after
+    adjoint_rows = read_nams_rows(adjoint_bench, targets, "bench-adjoint")
     ablation_rows = read_nams_rows(ablations_bench, targets, "bench-ablations")
     experiments: dict = {}
 
@@ -301,7 +302,9 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
     base = experiment(DatasetConfig())
     points = [base.run("tiles per target group", str(g), group_tiles=g) for g in GROUP_TILES]
     points += _search_points(nams_rows, base)
-    points += _search_points(ablation_rows, base, "bench-ablations", skip=("nams_exhaustive",))  # bench-nams' too
+    # Rows bench-nams has too (its exhaustive search, its adjoint setting) are taken from it, on all its groups.
+    points += _search_points(adjoint_rows, base, "bench-adjoint", skip=tuple(nams_rows["validation"]))
+    points += _search_points(ablation_rows, base, "bench-ablations", skip=("nams_exhaustive",))
     points += [experiment(DatasetConfig(designs=d, tiles=t)).run("training set", f"{d} x {t}")
                for d, t in training_sets]
     points += [experiment(DatasetConfig(preset=preset)).run("render preset", preset) for preset in presets]

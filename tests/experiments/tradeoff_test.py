@@ -217,7 +217,8 @@ def test_search_points_come_from_the_nams_benchmarks_rows_split_for_split(tmp_pa
         read_nams_rows(tmp_path / "missing.json", 100)
     with pytest.raises(MetaSimError, match="run `make bench-ablations` first"):
         read_nams_rows(tmp_path / "missing.json", 100, "bench-ablations")
-    # bench-ablations's rows say where they come from, and its default row (bench-nams' too) can be left out.
+    # bench-ablations's (and bench-adjoint's) rows say where they come from, and rows bench-nams has too are left
+    # out.
     bench = _nams_result()
     path.write_text(json.dumps(bench))
     points = _search_points(read_nams_rows(path, 100, "bench-ablations"), base, "bench-ablations",

@@ -118,11 +118,31 @@ def test_bench_nams_reports_the_test_split_beside_validation(evaluated, tiny_env
             assert rows["nams_exhaustive"]["targets"] == 3 and rows["nams_adjoint_M16_it5"]["targets"] == 2
             assert set(rows["nams_exhaustive"]["intervals"]) == {
                 f"{kind}_{m}" for kind in ("flat", "sloped") for m in ("top1", "top10", "closeness")}
-    assert result["fastest_adjoint_keeping_e1"]["M"] in (16, 4)
+    assert "fastest_adjoint_keeping_e1" not in result  # bench_adjoint's choice
     table = format_nams_table(result)
     assert "| E2 | nams_exhaustive | test |" in table and "| E2 | nams_exhaustive | validation |" in table
     assert "E2 seeds 21, 22, 23 with heldout-v2" in table
     assert "nams_exhaustive_paper" not in table  # the variants are bench_ablations's
+
+
+def test_bench_adjoint_sweeps_the_settings_on_a_few_of_the_same_targets_and_chooses_on_validation(
+        evaluated, tiny_env):
+    from meta_sim.experiments.bench import bench_adjoint, format_adjoint_table
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    result = bench_adjoint(targets=1, adjoint_targets=2, root=tiny_env, dataset=dataset, settings=settings, tiles=2,
+                           sweep=((16, 5), (4, 5)))
+    assert list(result["splits"]) == ["validation", "test"] and result["sweep"] == [[16, 5], [4, 5]]
+    for part in result["splits"].values():
+        for rows in part["experiments"].values():
+            assert set(rows) == {"nams_exhaustive", "nams_adjoint_M16_it5", "nams_adjoint_M4_it5"}
+            assert all(row["targets"] == 2 for row in rows.values())
+    assert result["fastest_adjoint_keeping_e1"]["M"] in (16, 4)
+    table = format_adjoint_table(result)
+    assert "| E2 | nams_adjoint_M4_it5 | test |" in table and "Fastest setting within 0.05" in table
 
 
 def test_bench_ablations_scores_each_variant_beside_the_default_on_the_same_targets(evaluated, tiny_env):
