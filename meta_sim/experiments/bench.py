@@ -152,24 +152,24 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
             if breakdown is not None:
                 breakdowns[experiment] = breakdown
         result["splits"][split_name] = {"settings": seeds, "experiments": experiments, "breakdown": breakdowns}
-    extractor = checkpoint_extractor(load_checkpoint(ensure_models(dataset, settings, root).nams_path, "nams"))
+    models = ensure_models(dataset, settings, root)
+    extractor = checkpoint_extractor(load_checkpoint(models.nams_path, "nams"))
     result["feature_seconds_per_group"] = round(time_extractor(extractor, dataset.tile_px, tiles, 8), 4)
     if time_training:
-        result.update(_training_times(dataset, settings, root, started_at))
+        result.update(_training_times(models, dataset, settings, root, started_at))
     return result
 
 
-def _training_times(dataset, settings, root: Path, since: float) -> dict:
-    """bench_nams's training times: "train_seconds" (NAMS, DR, the sbi baseline) and, for the segmenter roof
-    finder, "roof_segmenter_seconds". When this run trained all of them (cache files written after ``since``) the
-    times it measured then are reported ("training_timed": "in this run"); otherwise they are trained again into a
-    temporary folder and timed there ("fresh run"), so that no time measured on another day, or on a busier
-    machine, is reported as today's."""
+def _training_times(models, dataset, settings, root: Path, since: float) -> dict:
+    """bench_nams's training times for ``models`` (what ``ensure_models`` returned): "train_seconds" (NAMS, DR, the
+    sbi baseline) and, for the segmenter roof finder, "roof_segmenter_seconds". When this run trained all of them
+    (cache files written after ``since``) the times it measured then are reported ("training_timed": "in this
+    run"); otherwise they are trained again into a temporary folder and timed there ("fresh run"), so that no
+    time measured on another day, or on a busier machine, is reported as today's."""
     from ..nams import load_checkpoint
     from ..pipeline.roofcolour import roof_finder_path, roof_finder_seconds
-    from ..pipeline.workflow import dataset_dir, ensure_models, ensure_nre, prepare_features, train_models
+    from ..pipeline.workflow import dataset_dir, ensure_nre, train_models
 
-    models = ensure_models(dataset, settings, root)
     sbi_path, _ = ensure_nre(models, dataset, settings)
     segmenter = settings.roof_colour and settings.roof_finder.startswith("segmenter")
     folder = dataset_dir(dataset, root)
@@ -197,7 +197,7 @@ def _training_times(dataset, settings, root: Path, since: float) -> dict:
     with tempfile.TemporaryDirectory() as out:
         from ..pipeline.workflow import train_nre_checkpoint
 
-        feature_set = prepare_features(dataset, settings, root).features
+        feature_set = models.features
         seconds = train_models(feature_set, Path(out), settings, dataset)
         seconds["train_sbi_nre"] = train_nre_checkpoint(feature_set, load_checkpoint(Path(out) / "nams.pt", "nams"),
                                                         Path(out) / "sbi_nre.pt", settings, dataset)

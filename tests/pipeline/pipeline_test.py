@@ -184,9 +184,10 @@ def test_training_times_are_those_this_run_measured_when_it_trained_every_model(
 
     dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
     settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
-    path = ensure_models(dataset, settings, tiny_env).nams_path
+    models = ensure_models(dataset, settings, tiny_env)
+    path = models.nams_path
     written = path.stat().st_mtime_ns
-    times = _training_times(dataset, settings, tiny_env, since=0.0)  # every cache file is newer than 1970
+    times = _training_times(models, dataset, settings, tiny_env, since=0.0)  # every cache file is newer than 1970
     assert times["training_timed"] == "in this run"
     nams = load_checkpoint(path, "nams")
     assert times["train_seconds"]["train_nams"] == round(nams.extra["seconds"], 2)
