@@ -132,6 +132,7 @@ MEASURED_DEFAULTS = {
     "score-cone roof histograms": ("meta_sim.pipeline.workflow:ModelSettings.roof_score_cone", VALIDATION),
     "search colour comparison": ("meta_sim.pipeline.roofcolour:SEARCH_COLOUR", VALIDATION),
     "far-target search": ("meta_sim.pipeline.roofcolour:SEARCH_FAR", VALIDATION),
+    "far-target margin": ("meta_sim.pipeline.roofcolour:SEARCH_FAR_MARGIN", VALIDATION),
     "exhaustive search": ("meta_sim.nams.search:resolve_method", VALIDATION),
     "CONTINUOUS_SEARCH": ("meta_sim.experiments.evaluate:CONTINUOUS_SEARCH", VALIDATION),
     "fastest_adjoint_keeping_e1": ("meta_sim.experiments.bench:fastest_adjoint", VALIDATION),

@@ -42,6 +42,7 @@ import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import numpy as np
 import torch
 
 from ..core.errors import MetaSimError
@@ -94,7 +95,7 @@ class SearchResult:
     searched_design: dict
     rejected: bool = False
     ranked: list[tuple[dict, float]] = field(default_factory=list)
-    far: bool = False  # searched again as far from every design (``ColourComparison.far``)
+    far: bool = False  # ranked again as far from every design (``ColourComparison.far``)
 
     def to_dict(self) -> dict:
         """Plain JSON-ready values (``ranked`` as a list of {design, loss})."""
@@ -175,6 +176,12 @@ class ColourComparison:
     loss under this comparison exceeds ``far_loss`` is searched again with ``far`` (which has no ``far`` of
     its own), and its ``SearchResult.far`` is True. A target nothing in the bank resembles is then ranked
     by the histograms ``far`` keeps, not by errors over the whole tile that are large for every design.
+
+    ``far_margin`` (None: no gate) keeps the first search's answer for a far target whose best design the far
+    comparison finds plausible too: one whose far loss is at most ``1 + far_margin`` times the far search's
+    best. A bank texture in a city unlike the training cities is far, yet the first search usually names it
+    right; a texture the bank lacks is far, and the first search's answer for it is not what its roof
+    colours say.
     """
 
     exponent: float = 0.5
@@ -183,6 +190,7 @@ class ColourComparison:
     keep: torch.Tensor | None = None
     far: ColourComparison | None = None
     far_loss: float = math.inf
+    far_margin: float | None = None
 
     def __post_init__(self):
         if not (isinstance(self.exponent, (int, float)) and 0.0 < self.exponent < 1.0):
@@ -203,6 +211,10 @@ class ColourComparison:
         if self.far is not None and (not isinstance(self.far, ColourComparison) or self.far.far is not None):
             raise MetaSimError("the far-target comparison must be a ColourComparison without a far comparison "
                                "of its own")
+        if self.far_margin is not None and not (isinstance(self.far_margin, (int, float))
+                                                and math.isfinite(self.far_margin) and self.far_margin >= 0):
+            raise MetaSimError(f"the far-target margin must be a finite number of at least 0 (or None), not "
+                               f"{self.far_margin!r}")
 
     @property
     def blurs(self) -> bool:
@@ -233,6 +245,8 @@ class ColourComparison:
         if self.searches_far:
             out["far_loss"] = self.far_loss
             out["far"] = self.far.to_dict()
+            if self.far_margin is not None:
+                out["far_margin"] = self.far_margin
         return out
 
     def blurred(self, values: torch.Tensor) -> torch.Tensor:
@@ -372,11 +386,39 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
                             boundary_weight, colour)
     far = [t for t, result in enumerate(results) if colour.searches_far and result.best_loss > colour.far_loss]
     if far:
-        for t, result in zip(far, _adjoint_pass(model, targets[far], space, M, k, S, iterations, lr, generator,
-                                                dtype, bars, max_rows, boundary_weight, colour.far)):
-            result.far = True
-            results[t] = result
+        found = _adjoint_pass(model, targets[far], space, M, k, S, iterations, lr, generator, dtype, bars, max_rows,
+                              boundary_weight, colour.far)
+        ranked_far = [True] * len(far)
+        if colour.far_margin is not None:  # the first answer kept where the far comparison finds it plausible
+            firsts = design_losses(model, space, [results[t].design for t in far], targets[far], colour.far)
+            agains = design_losses(model, space, [result.design for result in found], targets[far], colour.far)
+            ranked_far = (firsts > (1 + colour.far_margin) * agains).tolist()
+        for t, result, again in zip(far, found, ranked_far):
+            if again:
+                result.far = True
+                results[t] = result
     return _diversify(results, space, r, generator)
+
+
+def design_losses(model: NAMS, space: DesignSpace, designs: list[dict], targets,
+                  colour: ColourComparison = PLAIN_COLOUR) -> torch.Tensor:
+    """(T,) the search's loss (float64, in units of ``feature_scale``, under ``colour``) of ``designs[t]`` for
+    target row ``t``: the model's features for the design (its encoding's mean) against the target."""
+    _check_nams(model)
+    _check_space(model, space)
+    targets = _targets(targets, model.config.feature_dim).double() / model.feature_scale.double()
+    if len(designs) != len(targets):
+        raise MetaSimError(f"{len(designs)} designs for {len(targets)} targets")
+    colour.check(model.config.colour_dims)
+    vectors = torch.from_numpy(np.stack([space.encode(d) for d in designs]))
+    was_training = model.training
+    model.eval()
+    with torch.no_grad():
+        pred = (model.predict(model.encode(vectors)[0]) / model.feature_scale).double()
+    if was_training:
+        model.train()
+    return _combined(*_block_mse(pred - targets, model.config.colour_dims, pred, targets, colour),
+                     exponent=colour.exponent)
 
 
 def _adjoint_pass(model: NAMS, targets: torch.Tensor, space: DesignSpace, M: int, k: float, S: int,
@@ -604,7 +646,13 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     if colour.searches_far:
         far = losses.min(dim=1).values > colour.far_loss
         if far.any():
-            losses[far] = _table_losses(model, space, table, targets[far], colour.far, batch)
+            far_losses = _table_losses(model, space, table, targets[far], colour.far, batch)
+            if colour.far_margin is not None:  # the first answer kept where the far comparison finds it plausible
+                first = far_losses.gather(1, losses[far].argmin(dim=1, keepdim=True))[:, 0]
+                ranked_far = first > (1 + colour.far_margin) * far_losses.min(dim=1).values
+                far[far.nonzero()[:, 0][~ranked_far]] = False
+                far_losses = far_losses[ranked_far]
+            losses[far] = far_losses
     keep = min(max(S, top), n)
     kept_loss, kept = torch.topk(losses, keep, dim=1, largest=False, sorted=True)
     s = min(S, n)

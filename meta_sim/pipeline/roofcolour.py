@@ -328,7 +328,8 @@ def colour_blur(sigma: float, blocks: tuple[int, ...] = (488,)) -> torch.Tensor:
 
 
 def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weight: float = 0.0,
-                      blocks: tuple[int, ...] = (488,), far: tuple[float, float, float, float] | None = None):
+                      blocks: tuple[int, ...] = (488,), far: tuple[float, float, float, float] | None = None,
+                      far_margin: float | None = None):
     """A ``nams.ColourComparison`` for models with the roof-colour histograms ``blocks``
     (``FeatureNorm.hist_blocks``): the colour error's exponent, and with ``blur_sigma`` > 0 and
     ``blur_weight`` > 0 the histograms also compared blurred by ``colour_blur(blur_sigma, blocks)``. The
@@ -336,7 +337,9 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
 
     ``far`` (loss, exponent, blur sigma, blur weight): a target whose best design's loss exceeds ``loss`` is
     searched again comparing only the histograms in the score's cone (``score_cone_bins``), with that
-    exponent and blur (``ColourComparison.far``). MetaSimError when ``blocks`` has no such histograms."""
+    exponent and blur (``ColourComparison.far``), unless the first search's answer is within ``far_margin`` of
+    the far search's best (``ColourComparison.far_margin``; None: no such gate). MetaSimError when ``blocks`` has
+    no such histograms."""
     from ..nams import ColourComparison
 
     blocks = tuple(blocks)
@@ -356,7 +359,7 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
         far_blur = blur if blurred and far_sigma == blur_sigma else colour_blur(far_sigma, blocks)
     return ColourComparison(exponent, blur, blur_weight if blurred else 0.0,
                             far=ColourComparison(far_exponent, far_blur, far_weight if far_blurred else 0.0, keep),
-                            far_loss=far_loss)
+                            far_loss=far_loss, far_margin=far_margin)
 
 
 # The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), and for
@@ -364,12 +367,15 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
 # those histograms), chosen on E1/E2's validation split by `make bench-objective` (docs/design.md, "Roof colour").
 SEARCH_COLOUR = (0.3, 1.0, 30.0)
 SEARCH_FAR = (4.0, 0.5, 1.0, 10.0)
+# How much worse than the far search's best (as a fraction of it, under the far comparison) the first search's
+# answer for a far target may be and still be kept (``ColourComparison.far_margin``; None: always ranked again).
+SEARCH_FAR_MARGIN: float | None = None
 
 
 @functools.lru_cache(maxsize=8)
 def _search_colour(blocks: tuple[int, ...]):
     far = SEARCH_FAR if int(score_cone_bins().sum()) in blocks else None
-    return colour_comparison(*SEARCH_COLOUR, blocks, far=far)
+    return colour_comparison(*SEARCH_COLOUR, blocks, far=far, far_margin=SEARCH_FAR_MARGIN if far else None)
 
 
 def search_colour(ckpt):

@@ -38,7 +38,7 @@ def test_the_grid_starts_with_the_default_and_names_each_setting_once():
 
 def test_the_far_grid_adds_every_far_comparison_to_one_setting():
     main = Setting(0.3, 1.0, 30.0)
-    fars = far_grid(main, losses=(3.0, 4.0), exponents=(0.5,), weights=(0.0, 10.0))
+    fars = far_grid(main, losses=(3.0, 4.0), exponents=(0.5,), weights=(0.0, 10.0), margins=(None,))
     assert len(fars) == 4 and all((s.exponent, s.sigma, s.weight, s.score_cone) == (0.3, 1.0, 30.0, True)
                                   for s in fars)
     assert fars[1].name == "exponent 0.3, blur 1 bins x 30; beyond 3: score cone, exponent 0.5, blur 1 x 10"
@@ -46,6 +46,13 @@ def test_the_far_grid_adds_every_far_comparison_to_one_setting():
     assert fars[1].comparison((488, 488, 220, 220)).far_loss == 3.0
     assert fars[1].comparison((488, 488, 220, 220)).far.keep.sum() == 440
     assert len({s.name for s in far_grid(main)}) == len(far_grid(main))
+    # With a margin: the first answer kept where the far comparison finds it within 10% of its best.
+    gated = far_grid(main, losses=(4.0,), exponents=(0.5,), weights=(10.0,), margins=(None, 0.1))
+    assert [s.far_margin for s in gated] == [None, 0.1]
+    assert gated[1].name == gated[0].name + ", unless the first answer is within 10%"
+    assert gated[1].comparison((488, 488, 220, 220)).far_margin == 0.1
+    assert gated[0].comparison((488, 488, 220, 220)).far_margin is None
+    assert Setting(0.3, far_margin=0.1).comparison().far_margin is None  # no far search, no margin
 
 
 def test_the_choice_is_the_best_mean_of_the_four_targets_and_the_default_wins_ties():

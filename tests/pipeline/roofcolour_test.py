@@ -562,6 +562,46 @@ def test_a_target_far_from_every_design_is_searched_again_by_the_kept_histograms
         assert all(r.to_dict()["far"] is expect for r in out)
 
 
+def test_a_far_margin_keeps_the_first_answer_where_the_far_comparison_finds_it_plausible(coloured):
+    from meta_sim.nams import design_losses
+
+    space, fit = coloured["space"], coloured["fit"]
+    model = fit.model
+    shifted = coloured["targets"].clone()
+    shifted[:, :12] += 40.0 * torch.randn(12, generator=torch.Generator().manual_seed(5))
+    targets = torch.cat([fit.norm.apply(coloured["targets"])[:10], fit.norm.apply(shifted)[:10]])
+    plain = exhaustive_search(model, targets, space)
+    far_only = exhaustive_search(model, targets, space, colour=ColourComparison(keep=_p0_only()))
+    # The loss of a named design is the search's own: the best design's is the best loss.
+    assert torch.allclose(design_losses(model, space, [r.design for r in plain], targets),
+                          torch.tensor([r.best_loss for r in plain], dtype=torch.float64), rtol=1e-6)
+    # Far for every target; each first answer's far loss against the far search's best.
+    ratio = (design_losses(model, space, [r.design for r in plain], targets, ColourComparison(keep=_p0_only()))
+             / torch.tensor([r.best_loss for r in far_only], dtype=torch.float64))
+    assert (ratio >= 1 - 1e-9).all()
+    ordered = ratio.sort().values
+    gap = max(range(len(ordered) // 4, 3 * len(ordered) // 4), key=lambda i: ordered[i + 1] - ordered[i])
+    margin = float(ordered[gap] + ordered[gap + 1]) / 2 - 1  # in the widest gap between two middle ratios
+    for m in (0.0, margin, 1e9):
+        found = exhaustive_search(model, targets, space, colour=ColourComparison(
+            far=ColourComparison(keep=_p0_only()), far_loss=1e-12, far_margin=m))
+        # A margin of 0 ranks again where the far search's best is another design.
+        again = ([a.design != b.design for a, b in zip(plain, far_only)] if m == 0 else (ratio > 1 + m).tolist())
+        assert [r.far for r in found] == again
+        for result, first, other, a in zip(found, plain, far_only, again):
+            assert result.ranked == (other.ranked if a else first.ranked)
+    assert 0 < sum(ratio > 1 + margin) < len(ratio)  # the median margin keeps some and ranks some again
+    # The adjoint search: a huge margin keeps every first answer; without a margin every target is ranked again.
+    for m, expect in ((1e9, False), (None, True)):
+        out = adjoint_search(model, targets[:4], space, M=16, S=4, iterations=10,
+                             colour=ColourComparison(far=ColourComparison(keep=_p0_only()), far_loss=1e-12,
+                                                     far_margin=m),
+                             generator=torch.Generator().manual_seed(0))
+        assert all(r.far is expect for r in out)
+    with pytest.raises(MetaSimError, match="2 designs for 4 targets"):
+        design_losses(model, space, [r.design for r in plain[:2]], targets[:4])
+
+
 def test_a_far_search_is_deterministic(coloured):
     space, fit = coloured["space"], coloured["fit"]
     targets = fit.norm.apply(coloured["targets"][:4])
@@ -579,6 +619,7 @@ def test_a_far_search_is_deterministic(coloured):
     ({"keep": torch.ones(16)}, "boolean mask"), ({"keep": torch.zeros(16, dtype=torch.bool)}, "keeping some"),
     ({"far_loss": 0.0}, "positive"), ({"far_loss": math.nan}, "positive"),
     ({"far": ColourComparison(far=ColourComparison()), "far_loss": 1.0}, "without a far comparison"),
+    ({"far_margin": -0.1}, "margin"), ({"far_margin": math.inf}, "margin"), ({"far_margin": math.nan}, "margin"),
 ])
 def test_bad_far_comparisons_are_refused(kwargs, message):
     with pytest.raises(MetaSimError, match=message):
