@@ -35,6 +35,6 @@ __all__ = [
     "ARCHITECTURES", "DEFAULT_ARCHITECTURE", "architecture_options", "Checkpoint", "ColourComparison", "DRConfig",
     "DirectRegression", "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS", "NAMSConfig", "NREConfig",
     "NRETrainConfig", "PLAIN_COLOUR", "RatioClassifier", "SearchResult", "TrainConfig", "adjoint_search", "build_model",
-    "design_losses", "design_table", "dr_predict", "exhaustive_search", "load_checkpoint", "model_id", "ms2_search", "nre_predict",
-    "save_checkpoint", "search", "time_search", "train_dr", "train_nams", "train_nre", "uniform_predict",
+    "design_losses", "design_table", "dr_predict", "exhaustive_search", "load_checkpoint", "model_id", "ms2_search",
+    "nre_predict", "save_checkpoint", "search", "time_search", "train_dr", "train_nams", "train_nre", "uniform_predict",
 ]
