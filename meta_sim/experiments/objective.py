@@ -42,7 +42,7 @@ WEIGHTS = (1.0, 10.0, 30.0, 100.0)
 FAR_LOSSES = (3.0, 4.0, 6.0, 10.0)  # in the search's loss units (MSE in units of the feature scale)
 FAR_EXPONENTS = (0.4, 0.5, 0.6)
 FAR_WEIGHTS = (0.0, 10.0, 30.0)  # blurred by 1 bin
-FAR_MARGINS = (None, 0.0, 0.05, 0.1, 0.2, 0.5)  # None: a far target is always ranked again
+FAR_MARGINS = (None, 0.02, 0.05, 0.1, 0.2)  # None: a far target is always ranked again
 CRITERION = ("e1", "flat_top1"), ("e1", "sloped_top1"), ("e2", "flat_top10"), ("e2", "sloped_top10")
 SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top10", "sloped_closeness")
 
