@@ -172,9 +172,10 @@ def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettin
 
 
 def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, dataset: DatasetConfig,
-                 bars: Bars | None = None) -> dict:
-    """Train NAMS and the DR baseline on a feature set; write ``nams.pt`` and ``dr.pt`` into
-    ``out_dir`` and return the seconds each took ("train_nams", "train_dr").
+                 bars: Bars | None = None, kinds: tuple[str, ...] = ("nams", "dr")) -> dict:
+    """Train NAMS and the DR baseline (``kinds``: those of them) on a feature set; write ``nams.pt`` and
+    ``dr.pt`` into ``out_dir`` and return the seconds each took ("train_nams", "train_dr"). Each model is
+    seeded on its own, so one trained alone is the one trained beside the other.
 
     ``dataset`` is recorded in the checkpoints (tile size and pixel size are what inference cuts
     targets to). Raises MetaSimError for an unknown architecture or an invalid NAMS or training
@@ -194,6 +195,8 @@ def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, d
     jobs = (("nams", train_nams, nams_config, train_config),
             ("dr", train_dr, None, dataclasses.replace(train_config, whiten=0)))
     for kind, trainer, config, trainer_config in jobs:
+        if kind not in kinds:
+            continue
         update = bars(f"train {kind}", train_config.max_epochs) if bars else None
         started = time.perf_counter()
         fit = trainer(features.encoded, features.features, config, trainer_config,
@@ -218,8 +221,8 @@ def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | N
 
     Renders and computes features as ``prepare_features`` does, then looks in ``models/<key>``
     under ``root`` (default: the cache) for checkpoints keyed by every input
-    (``ModelSettings.key``); if either is missing or unreadable, both are trained again
-    (``train_models``). Returns their paths, the features and the seconds spent. Raises
+    (``ModelSettings.key``); one that is missing or unreadable is trained again (``train_models``), so a run
+    stopped between the two keeps the one it finished. Returns their paths, the features and the seconds spent. Raises
     MetaSimError as ``prepare_features`` and ``train_models`` do.
     """
     from ..nams import load_checkpoint
@@ -228,11 +231,14 @@ def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | N
     folder = Path(root or cache_root()) / "models" / settings.key(config, features.extractor_id)
     paths = {kind: folder / f"{kind}.pt" for kind in ("nams", "dr")}
     with locked(folder):
-        try:
-            for kind, path in paths.items():
+        missing = []
+        for kind, path in paths.items():
+            try:
                 load_checkpoint(path, kind)
-        except MetaSimError:
-            seconds.update(train_models(features, folder, settings, config, bars))
+            except MetaSimError:
+                missing.append(kind)
+        if missing:
+            seconds.update(train_models(features, folder, settings, config, bars, kinds=tuple(missing)))
     return Models(paths["nams"], paths["dr"], features, seconds)
 
 

@@ -198,6 +198,27 @@ def test_training_times_are_those_this_run_measured_when_it_trained_every_model(
     assert roof_finder_seconds(tiny_env / "nowhere") is None
 
 
+def test_a_run_stopped_between_the_models_keeps_the_one_it_trained(evaluated, tiny_env):
+    """ensure_models trains again only the checkpoint that is missing; a model trained alone is the same."""
+    import torch
+
+    from meta_sim.nams import load_checkpoint
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings, ensure_models
+
+    dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
+    settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    models = ensure_models(dataset, settings, tiny_env)
+    before = load_checkpoint(models.dr_path, "dr").model.state_dict()
+    written = models.nams_path.stat().st_mtime_ns
+    models.dr_path.unlink()
+    again = ensure_models(dataset, settings, tiny_env)
+    assert set(again.seconds) >= {"train_dr"} and "train_nams" not in again.seconds
+    assert models.nams_path.stat().st_mtime_ns == written  # NAMS was not trained again
+    after = load_checkpoint(again.dr_path, "dr").model.state_dict()
+    assert all(torch.equal(before[k], after[k]) for k in before)
+
+
 def _target_folder(tmp_path, tiny_env):
     folder = tmp_path / "targets"
     result = _cli("render", "--design", "flat_roof=3,sloped_roof=5", "--seed", 777, "--tiles", 4,
