@@ -411,12 +411,7 @@ def design_losses(model: NAMS, space: DesignSpace, designs: list[dict], targets,
         raise MetaSimError(f"{len(designs)} designs for {len(targets)} targets")
     colour.check(model.config.colour_dims)
     vectors = torch.from_numpy(np.stack([space.encode(d) for d in designs]))
-    was_training = model.training
-    model.eval()
-    with torch.no_grad():
-        pred = (model.predict(model.encode(vectors)[0]) / model.feature_scale).double()
-    if was_training:
-        model.train()
+    pred = _predicted_features(model, vectors, len(vectors)).double()
     return _combined(*_block_mse(pred - targets, model.config.colour_dims, pred, targets, colour),
                      exponent=colour.exponent)
 
@@ -536,21 +531,28 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
     if cached is not None:
         return cached
     designs = design_grid(space)
-    was_training = model.training
-    model.eval()
-    with torch.no_grad():
-        features = torch.cat([model.predict(model.encode(designs[i:i + batch])[0])
-                              for i in range(0, n, batch)]) / model.feature_scale
+    features = _predicted_features(model, designs, batch)
     if not torch.isfinite(features).all():
         raise MetaSimError("the model predicts NaN/Inf features for some designs; the checkpoint is unusable")
     lead = model.config.feature_dim - model.config.colour_dims
     squares = features.double().square()
     table = DesignTable(designs, features, torch.stack([squares[:, :lead].sum(dim=1), squares[:, lead:].sum(dim=1)], 1))
-    if was_training:
-        model.train()
-    else:
+    if not model.training:  # a model in training mode may change: nothing is kept for it
         model._design_tables[key] = table
     return table
+
+
+def _predicted_features(model: NAMS, vectors: torch.Tensor, batch: int) -> torch.Tensor:
+    """(N, F) the model's features for encoded designs (their encodings' means), in units of ``feature_scale``,
+    computed in eval mode ``batch`` designs at a time; the model is left in the mode it was in."""
+    was_training = model.training
+    model.eval()
+    with torch.no_grad():
+        features = torch.cat([model.predict(model.encode(vectors[i:i + batch])[0])
+                              for i in range(0, len(vectors), batch)]) / model.feature_scale
+    if was_training:
+        model.train()
+    return features
 
 
 def _blurred_table(model: NAMS, space: DesignSpace, table: DesignTable, colour: ColourComparison,
