@@ -58,6 +58,9 @@ def _dataset_options(command):
         click.option("--roof-score-cone/--no-roof-score-cone", default=True, show_default=True,
                      help="also count the roof colours in the E1/E2 score's own colour cone, at full "
                           "resolution (see `make bench-ablations`, row nams_exhaustive_no_score_cone)"),
+        click.option("--roof-finder-steps", type=int, default=None,
+                     help="training steps of the segmenter roof finder (default 3000; fewer learn it faster: see "
+                          "`make bench-ablations`, row nams_exhaustive_roof_finder_steps_1000)"),
         click.option("--cache", type=click.Path(path_type=Path), default=None,
                      help="cache folder (default: $META_SIM_CACHE or ~/.cache/meta-sim)"),
     ]):
@@ -91,7 +94,8 @@ def _configs(o):
     settings = ModelSettings(extractor=o["extractor"], weights=str(o["weights"]) if o["weights"] else None,
                              views=int(o["views"]), nams=nams, train=train, architecture=o["architecture"],
                              roof_colour=o["roof_colour"], roof_finder=o["roof_finder"],
-                             roof_weight_power=o["roof_weight_power"], roof_score_cone=o["roof_score_cone"])
+                             roof_weight_power=o["roof_weight_power"], roof_score_cone=o["roof_score_cone"],
+                             roof_finder_steps=o["roof_finder_steps"])
     return dataset.check(), settings.check()
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import platform
+import re
 import statistics
 import subprocess
 import sys
@@ -175,14 +176,15 @@ def _training_times(models, dataset, settings, root: Path, since: float) -> dict
     folder = dataset_dir(dataset, root)
     paths = [models.nams_path, models.dr_path, sbi_path]
     if segmenter:
-        paths.append(roof_finder_path(folder, settings.roof_finder, settings.seed))
-    if all(path.stat().st_mtime >= since for path in paths) and (
-            not segmenter or roof_finder_seconds(folder, settings.roof_finder, settings.seed) is not None):
+        paths.append(roof_finder_path(folder, settings.roof_finder, settings.seed, settings.roof_finder_steps))
+    finder_seconds = (roof_finder_seconds(folder, settings.roof_finder, settings.seed, settings.roof_finder_steps)
+                      if segmenter else None)
+    if all(path.stat().st_mtime >= since for path in paths) and (not segmenter or finder_seconds is not None):
         times = {"training_timed": "in this run", "train_seconds": {
             f"train_{kind}": round(load_checkpoint(path, kind).extra["seconds"], 2)
             for kind, path in (("nams", models.nams_path), ("dr", models.dr_path), ("sbi_nre", sbi_path))}}
         if segmenter:
-            times["roof_segmenter_seconds"] = round(roof_finder_seconds(folder, settings.roof_finder, settings.seed), 1)
+            times["roof_segmenter_seconds"] = round(finder_seconds, 1)
         return times
     times = {"training_timed": "fresh run"}
     if segmenter:
@@ -191,7 +193,7 @@ def _training_times(models, dataset, settings, root: Path, since: float) -> dict
         from ..pipeline.roofsegment import RoofSegmenter
 
         started = time.perf_counter()
-        RoofSegmenter.fit(training_tiles(folder, dataset), settings.seed,
+        RoofSegmenter.fit(training_tiles(folder, dataset), settings.seed, settings.roof_finder_steps,
                           augment=SEGMENTER_AUGMENT[settings.roof_finder])
         times["roof_segmenter_seconds"] = round(time.perf_counter() - started, 1)
     with tempfile.TemporaryDirectory() as out:
@@ -314,6 +316,26 @@ ABLATIONS = {
     "colour_roof_finder": "roofs for those histograms found by colour alone, not by the roof finder",
     "roof_weight_power_1": "each pixel counted with its plain roof probability, not to the weight power",
 }
+# Cheaper training: rows roof_finder_steps_N and max_epochs_N (the trade study's knobs for the training time).
+ABLATION_FINDER_STEPS = 1000
+ABLATION_MAX_EPOCHS = 300
+
+
+def ablation_meaning(name: str) -> str:
+    """What the bench_ablations row ``nams_exhaustive_NAME`` changes (its name when unknown)."""
+    from ..nams import ARCHITECTURES, TrainConfig
+    from ..pipeline.roofsegment import STEPS
+
+    if name in ARCHITECTURES:
+        return "the other NAMS architecture of that name"
+    steps = re.fullmatch(r"roof_finder_steps_(\d+)", name)
+    if steps:
+        return f"the roof segmenter learnt in {int(steps[1]):,} steps, not the default's {STEPS:,} (what its steps buy)"
+    epochs = re.fullmatch(r"max_epochs_(\d+)", name)
+    if epochs:
+        return (f"NAMS trained for at most {int(epochs[1]):,} epochs, not the default's {TrainConfig.max_epochs:,} "
+                "with early stopping (what its epochs buy)")
+    return ABLATIONS.get(name, name)
 
 
 def ablation_settings(settings) -> tuple[dict, dict]:
@@ -323,10 +345,15 @@ def ablation_settings(settings) -> tuple[dict, dict]:
     architectures too."""
     import dataclasses
 
-    from ..nams import ARCHITECTURES
+    from ..nams import ARCHITECTURES, TrainConfig
 
     same = {name: dataclasses.replace(settings, architecture=name) for name in ARCHITECTURES
             if name != settings.architecture}
+    from ..pipeline.roofsegment import STEPS
+
+    if TrainConfig.from_dict({"seed": settings.seed, **settings.train}).max_epochs > ABLATION_MAX_EPOCHS:
+        same[f"max_epochs_{ABLATION_MAX_EPOCHS}"] = dataclasses.replace(
+            settings, train={**settings.train, "max_epochs": ABLATION_MAX_EPOCHS})
     if settings.roof_colour:
         same["no_roof_colour"] = dataclasses.replace(settings, roof_colour=False)
         if settings.roof_score_cone:
@@ -337,6 +364,10 @@ def ablation_settings(settings) -> tuple[dict, dict]:
             own["colour_roof_finder"] = dataclasses.replace(settings, roof_finder="colour")
         if settings.roof_weight_power != 1.0:
             own["roof_weight_power_1"] = dataclasses.replace(settings, roof_weight_power=1.0)
+        steps = settings.roof_finder_steps or STEPS
+        if settings.roof_finder.startswith("segmenter") and steps > ABLATION_FINDER_STEPS:
+            own[f"roof_finder_steps_{ABLATION_FINDER_STEPS}"] = dataclasses.replace(
+                settings, roof_finder_steps=ABLATION_FINDER_STEPS)
     return same, own
 
 
@@ -365,6 +396,7 @@ def bench_ablations(targets: int = 100, root: Path | None = None, bars: Bars | N
               "roof_weight_power": settings.roof_weight_power, "targets_per_seed": targets, "tiles_per_target": tiles,
               "train_seconds": {name: round(ckpt.extra["seconds"], 1)
                                 for name, ckpt in {**others, **own_models}.items()},
+              "roof_segmenter_seconds": _finder_seconds(dataset, {"default": settings, **same, **own}, root),
               "splits": {}}
     for split_name, experiment, split, ctx in _split_contexts(dataset, settings, targets, tiles, root, bars):
         seed = split.seeds[0]  # of the searches' random starts, as in bench_nams
@@ -377,6 +409,25 @@ def bench_ablations(targets: int = 100, root: Path | None = None, bars: Bars | N
         part = result["splits"].setdefault(split_name, {"settings": {}, "experiments": {}})
         part["settings"][experiment], part["experiments"][experiment] = split.to_dict(), rows
     return result
+
+
+def _finder_seconds(dataset, variants: dict, root: Path) -> dict:
+    """Per variant (name -> ModelSettings) with a segmenter roof finder of its own (the default's and those
+    with other steps): the seconds its cached segmenter took to learn, where that was kept."""
+    from ..pipeline.roofcolour import roof_finder_seconds
+    from ..pipeline.workflow import dataset_dir
+
+    out, seen = {}, set()
+    for name, variant in variants.items():
+        key = (variant.roof_finder, variant.roof_finder_steps)
+        if not (variant.roof_colour and variant.roof_finder.startswith("segmenter")) or key in seen:
+            continue
+        seen.add(key)
+        seconds = roof_finder_seconds(dataset_dir(dataset, root), variant.roof_finder, variant.seed,
+                                      variant.roof_finder_steps)
+        if seconds is not None:
+            out[name] = round(seconds, 1)
+    return out
 
 
 def _exhaustive_row(ctx, seed: int) -> dict:
@@ -479,17 +530,17 @@ def _accuracy_table(splits: dict) -> list[str]:
 def format_ablations_table(result: dict) -> str:
     """``bench_ablations``'s result as the Markdown of docs/benchmarks.md: the accuracy table, what each row
     is and how long each variant's model took to train."""
-    from ..nams import ARCHITECTURES
-
     splits = result["splits"]
-    meaning = {**{name: "the other NAMS architecture of that name" for name in ARCHITECTURES}, **ABLATIONS}
     power = f" ({result['roof_weight_power']:g})"
     rows = sorted({name.removeprefix("nams_exhaustive_") for s in splits.values() for e in s["experiments"].values()
                    for name in e if name != "nams_exhaustive"})
-    described = "; ".join(f"`nams_exhaustive_{name}`: {meaning.get(name, name)}"
+    described = "; ".join(f"`nams_exhaustive_{name}`: {ablation_meaning(name)}"
                           + (power if name == "roof_weight_power_1" else "")
                           + (f" ({result['roof_finder']})" if name == "colour_roof_finder" else "") for name in rows)
     trained = ", ".join(f"{name} {s:.0f} s" for name, s in result["train_seconds"].items())
+    finders = result.get("roof_segmenter_seconds", {})  # results from before the steps variant lack it
+    if finders:
+        trained += "; the roof segmenter: " + ", ".join(f"{name} {s:.0f} s" for name, s in finders.items())
     note = (f"The default ({result['architecture']} NAMS, row `nams_exhaustive`) beside its variants, each trained "
             f"on the same training set ({result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles, "
             f"{result['dataset']['preset']}) and scored with the exhaustive search on bench-nams' targets "

@@ -107,7 +107,8 @@ def bench_reference(targets: int = 100, tiles: int = 9, root: Path | None = None
     settings = ModelSettings()
     paths = training_tiles(folder, dataset)
     finder = (ensure_roof_finder(folder, paths, settings.roof_finder, settings.seed,
-                                 bars("roof finder", len(paths)) if bars else None), settings.roof_weight_power)
+                                 bars("roof finder", len(paths)) if bars else None, settings.roof_finder_steps),
+              settings.roof_weight_power)
     update = bars("training roofs", len(jobs)) if bars else None
     sums = {way: {kind: {} for kind in ROOF_CLASS_OF} for way in WAYS}
     for job in jobs:

@@ -8,7 +8,7 @@ reports. Per split: top-1 and top-10 for flat and sloped roofs; and two costs, t
   (x views) plus the search, timed over the groups of both splits;
 * ``one_off_seconds``: before any inference, once: rendering the training
   set (tiles x the render preset's seconds per tile from ``make
-  bench-render``), its features and training NAMS.
+  bench-render``), learning its roof segmenter, its features and training NAMS.
 
 Knobs, each varied alone from the default (``DatasetConfig()``, "fast"
 renders, target groups of 9 tiles, exhaustive search):
@@ -24,6 +24,8 @@ renders, target groups of 9 tiles, exhaustive search):
   8 views give the features of 1 at the cost of 1 (checked, not assumed:
   the bench compares the vectors); a backbone pays 8x;
 * ``training set``: designs x tiles per design;
+* ``roof finder steps``, ``training epochs``: the roof segmenter learnt in fewer steps and NAMS trained for
+  fewer epochs, from ``make bench-ablations``, their one-off cost with the variant's training times;
 * ``render preset``: training set and targets both rendered with it.
 
 ``PROFILES`` names three recommended combinations -- fast, balanced and
@@ -55,7 +57,8 @@ METRICS = ("flat_top1", "flat_top10", "sloped_top1", "sloped_top10")
 # Validation: every choice (the profiles and the defaults) is made on it; test: only reported.
 SPLITS = tuple(get_split("e1", name) for name in SPLIT_NAMES)
 REPORTED = "test"
-ONE_OFF_KNOBS = ("training set", "render preset")  # plotted against the one-off cost; the others per group
+# Plotted against the one-off cost; the others per group.
+ONE_OFF_KNOBS = ("training set", "render preset", "roof finder steps", "training epochs")
 
 
 @dataclass
@@ -91,8 +94,8 @@ class _Experiment:
         from ..nams import load_checkpoint
         from ..pipeline.dataset import job_tiles
         from ..pipeline.features import features_for_groups
-        from ..pipeline.roofcolour import checkpoint_extractor, search_colour
-        from ..pipeline.workflow import ModelSettings, ensure_models
+        from ..pipeline.roofcolour import checkpoint_extractor, roof_finder_seconds, search_colour
+        from ..pipeline.workflow import ModelSettings, dataset_dir, ensure_models
         from ..render.jobs import sample_designs
         from ..sim.design import DesignSpace
         from ..sim.imageio import read_image
@@ -130,8 +133,11 @@ class _Experiment:
         self.ranks = rankings("e1", ensure_default_bank(), ensure_heldout_bank())
         feature_total = self.feature_seconds_per_tile * dataset.designs * dataset.tiles
         train = float(self.nams.extra.get("seconds", 0.0))
+        settings = ModelSettings(views=views)
+        self.finder_seconds = roof_finder_seconds(dataset_dir(dataset, root), settings.roof_finder,
+                                                  settings.seed) or 0.0
         self.one_off = (_render_seconds_per_tile(dataset.preset, render_bench) * dataset.designs * dataset.tiles
-                        + feature_total + train)
+                        + feature_total + self.finder_seconds + train)
         self.train_seconds = train
 
     def run(self, knob: str, setting: str, group_tiles: int = 9, method: str = "exhaustive",
@@ -236,6 +242,7 @@ def read_nams_rows(nams_bench: Path, per_seed: int, make: str = "bench-nams") ->
 _VARIANTS = {"no_roof_colour": ("roof colour", "none"), "no_score_cone": ("roof colour", "no score cone"),
              "colour_roof_finder": ("roof finder", "colour"),
              "roof_weight_power_1": ("roof weight power", "1")}
+_TRAINING_VARIANTS = {"roof_finder_steps": "roof finder steps", "max_epochs": "training epochs"}
 
 
 def _nams_knob(name: str) -> tuple[str, str]:
@@ -249,6 +256,9 @@ def _nams_knob(name: str) -> tuple[str, str]:
     if name == "nams_exhaustive":
         return "search", "exhaustive"
     variant = name.removeprefix("nams_exhaustive_")
+    training = re.fullmatch(r"(roof_finder_steps|max_epochs)_(\d+)", variant)
+    if training:
+        return _TRAINING_VARIANTS[training[1]], training[2]
     if variant in _VARIANTS:
         return _VARIANTS[variant]
     if variant in ARCHITECTURES:
@@ -256,10 +266,27 @@ def _nams_knob(name: str) -> tuple[str, str]:
     return "search", name
 
 
+def ablation_one_offs(ablations_bench: Path, base: _Experiment) -> dict:
+    """Per bench-ablations row (``nams_exhaustive_NAME``) whose training cost differs from the default's: the
+    default's one-off cost with NAMS's training and the roof segmenter's learning replaced by the variant's
+    (the times bench-ablations kept; a variant without its own segmenter time learns the default's)."""
+    bench = json.loads(Path(ablations_bench).read_text())
+    train, finders = bench.get("train_seconds", {}), bench.get("roof_segmenter_seconds", {})
+    out = {}
+    for name in {*train, *finders}:
+        if not re.fullmatch(r"(roof_finder_steps|max_epochs)_\d+", name):
+            continue
+        nams = train.get(name, base.train_seconds)
+        finder = finders.get(name, base.finder_seconds)
+        out[f"nams_exhaustive_{name}"] = base.one_off - base.train_seconds - base.finder_seconds + nams + finder
+    return out
+
+
 def _search_points(rows: dict, base: _Experiment, source: str = "bench-nams",
-                   skip: tuple[str, ...] = ("uniform",)) -> list[Point]:
+                   skip: tuple[str, ...] = ("uniform",), one_offs: dict | None = None) -> list[Point]:
     """E1 rows of ``source`` (``read_nams_rows``) as points but those named in ``skip``, every split's beside the
-    others: search time (over the groups of all splits) plus 9 tiles' features of this bench."""
+    others: search time (over the groups of all splits) plus 9 tiles' features of this bench; the one-off cost
+    the default's, or the row's own in ``one_offs`` (name -> seconds)."""
     features = max(GROUP_TILES) * base.feature_seconds_per_tile
     points = []
     for name in rows["validation"]:
@@ -273,7 +300,8 @@ def _search_points(rows: dict, base: _Experiment, source: str = "bench-nams",
         targets = {split: int(row["targets"]) for split, row in per_split.items()}
         search = sum(row["seconds_per_target"] * targets[split] for split, row in per_split.items()) / sum(
             targets.values())
-        points.append(Point(*_nams_knob(name), metrics, round(search + features, 5), round(base.one_off, 1), targets,
+        one_off = (one_offs or {}).get(name, base.one_off)
+        points.append(Point(*_nams_knob(name), metrics, round(search + features, 5), round(one_off, 1), targets,
                             {"search_seconds_per_group": round(search, 5), "from": f"{source} row {name}"}))
     return points
 
@@ -304,7 +332,8 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
     points += _search_points(nams_rows, base)
     # Rows bench-nams has too (its exhaustive search, its adjoint setting) are taken from it, on all its groups.
     points += _search_points(adjoint_rows, base, "bench-adjoint", skip=tuple(nams_rows["validation"]))
-    points += _search_points(ablation_rows, base, "bench-ablations", skip=("nams_exhaustive",))
+    points += _search_points(ablation_rows, base, "bench-ablations", skip=("nams_exhaustive",),
+                             one_offs=ablation_one_offs(ablations_bench, base))
     points += [experiment(DatasetConfig(designs=d, tiles=t)).run("training set", f"{d} x {t}")
                for d, t in training_sets]
     points += [experiment(DatasetConfig(preset=preset)).run("render preset", preset) for preset in presets]
@@ -382,7 +411,8 @@ def format_tradeoff_table(result: dict) -> str:
 LABEL_GID = "tradeoff-label"  # the gid of the plot's point labels
 _LABELS = {"tiles per target group": "group of {}", "training set": "set {}", "render preset": "{} renders",
            "profile": "profile {}", "architecture": "{} architecture", "roof finder": "{} roof finder",
-           "roof colour": "roof colour: {}", "roof weight power": "roof weight power {}"}
+           "roof colour": "roof colour: {}", "roof weight power": "roof weight power {}",
+           "roof finder steps": "segmenter {} steps", "training epochs": "at most {} epochs"}
 _MARKERS = "os^Dv<>pXhP"
 _RING_POINTS = 8  # the step between rings of candidate label places, in points
 _DIRECTIONS = tuple(math.radians(a) for a in (0, 30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180))

@@ -164,26 +164,27 @@ def roof_finder_from_dict(data: Mapping):
     return RoofLikelihood.from_dict(data)
 
 
-def roof_finder_path(folder: Path, finder: str, seed: int) -> Path:
-    """Where ``ensure_roof_finder`` caches the roof finder ``finder`` learnt with ``seed`` in a training set's
-    ``folder``."""
+def roof_finder_path(folder: Path, finder: str, seed: int, steps: int | None = None) -> Path:
+    """Where ``ensure_roof_finder`` caches the roof finder ``finder`` learnt with ``seed`` (a segmenter in
+    ``steps`` steps, None: ``roofsegment.STEPS``) in a training set's ``folder``."""
     from .roofsegment import config_id
 
     if finder in SEGMENTER_AUGMENT:
-        return Path(folder) / f"roof-segmenter-{config_id(SEGMENTER_AUGMENT[finder])}-seed{seed}.pt"
+        return Path(folder) / f"roof-segmenter-{config_id(SEGMENTER_AUGMENT[finder], steps)}-seed{seed}.pt"
     return Path(folder) / LIKELIHOOD_FILE
 
 
 def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segmenter", seed: int = 0,
-                       progress: Callable[[int], None] | None = None):
-    """A training set's roof finder (``ROOF_FINDERS``: the segmenter, or the colour likelihood), learnt
-    once on its tiles and cached in its ``folder``. ``progress`` gets tiles counted or training steps."""
+                       progress: Callable[[int], None] | None = None, steps: int | None = None):
+    """A training set's roof finder (``ROOF_FINDERS``: the segmenter, learnt in ``steps`` steps (None:
+    ``roofsegment.STEPS``), or the colour likelihood), learnt once on its tiles and cached in its
+    ``folder``. ``progress`` gets tiles counted or training steps."""
     if finder not in ROOF_FINDERS:
         raise MetaSimError(f"unknown roof finder {finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
     from .roofsegment import RoofSegmenter
 
     segmenter = finder in SEGMENTER_AUGMENT
-    path = roof_finder_path(folder, finder, seed)
+    path = roof_finder_path(folder, finder, seed, steps)
     if path.is_file():
         try:
             data = torch.load(path, weights_only=True)
@@ -193,7 +194,7 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
             pass
     started = time.perf_counter()
     if segmenter:
-        found = RoofSegmenter.fit(tile_paths, seed, progress=progress, augment=SEGMENTER_AUGMENT[finder])
+        found = RoofSegmenter.fit(tile_paths, seed, steps, progress=progress, augment=SEGMENTER_AUGMENT[finder])
     else:
         found = RoofLikelihood.fit(tile_paths, progress)
     with atomic_path(path) as tmp:  # with the seconds it took, for the benchmarks' training times
@@ -201,11 +202,12 @@ def ensure_roof_finder(folder: Path, tile_paths: list[Path], finder: str = "segm
     return found
 
 
-def roof_finder_seconds(folder: Path, finder: str = "segmenter", seed: int = 0) -> float | None:
+def roof_finder_seconds(folder: Path, finder: str = "segmenter", seed: int = 0,
+                        steps: int | None = None) -> float | None:
     """The seconds ``ensure_roof_finder`` took to learn the finder cached in ``folder`` (None when it is
     not cached, or was cached before its time was kept)."""
     try:
-        seconds = torch.load(roof_finder_path(folder, finder, seed), weights_only=True).get("seconds")
+        seconds = torch.load(roof_finder_path(folder, finder, seed, steps), weights_only=True).get("seconds")
     except Exception:  # missing or damaged: not known
         return None
     return float(seconds) if isinstance(seconds, float) and math.isfinite(seconds) else None

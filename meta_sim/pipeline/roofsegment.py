@@ -56,10 +56,12 @@ SCENE_JITTER = 0.8  # with "scene": share of the training crops whose ground and
 MEMORY_FORMAT = torch.channels_last
 
 
-def config_id(augment: str = "roofs") -> str:
-    """Names what a fit depends on besides the tiles and the seed (for caches); the default augmentation
-    keeps the names it had before the choice existed."""
-    settings = (VERSION, WIDTH, DILATIONS, STEPS, BATCH, CROP, LR, MAX_TILES, RECOLOUR, str(MEMORY_FORMAT))
+def config_id(augment: str = "roofs", steps: int | None = None) -> str:
+    """Names what a fit depends on besides the tiles and the seed (for caches): the augmentation and the
+    training steps (None: ``STEPS``); the default augmentation keeps the names it had before the choice
+    existed."""
+    steps = STEPS if steps is None else steps
+    settings = (VERSION, WIDTH, DILATIONS, steps, BATCH, CROP, LR, MAX_TILES, RECOLOUR, str(MEMORY_FORMAT))
     if augment != "roofs":
         settings += (augment, SCENE_JITTER)
     return hashlib.sha256(repr(settings).encode()).hexdigest()[:8]
@@ -164,7 +166,10 @@ class RoofSegmenter:
         tiles, they differ in size, or training diverges."""
         if augment not in AUGMENTS:
             raise MetaSimError(f"unknown roof segmenter augmentation {augment!r}; choose one of {', '.join(AUGMENTS)}")
-        steps = steps or STEPS
+        steps = STEPS if steps is None else steps
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+            raise MetaSimError(f"the roof segmenter's training steps must be a whole number of at least 1, not "
+                               f"{steps!r}")
         rgb, shares = _training_pixels(paths)
         generator = torch.Generator().manual_seed(int(seed))
         torch.manual_seed(int(seed))  # the layers' initial weights

@@ -53,6 +53,8 @@ class ModelSettings:
     roof_weight_power: float = 4.0
     # Also the roof pixels' histograms in the E1/E2 score's own colour cone (roofcolour.RoofColourExtractor).
     roof_score_cone: bool = True
+    # The segmenter roof finder's training steps (None: roofsegment.STEPS); the trade study's knob for its cost.
+    roof_finder_steps: int | None = None
 
     def check(self) -> "ModelSettings":
         """These settings, or MetaSimError for any that training would refuse (checked before any work)."""
@@ -71,6 +73,12 @@ class ModelSettings:
             raise MetaSimError(f"unknown roof finder {self.roof_finder!r}; choose one of {', '.join(ROOF_FINDERS)}")
         if not (math.isfinite(self.roof_weight_power) and 0 < self.roof_weight_power <= 64):
             raise MetaSimError(f"--roof-weight-power must be above 0 and at most 64, not {self.roof_weight_power}")
+        steps = self.roof_finder_steps
+        if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= 1_000_000):
+            raise MetaSimError(f"--roof-finder-steps must be a whole number from 1 to 1000000, not {steps!r}")
+        if steps is not None and not self.roof_finder.startswith("segmenter"):
+            raise MetaSimError(f"--roof-finder-steps sets the segmenter's training; the {self.roof_finder!r} roof "
+                               "finder has no steps")
         return self
 
     def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
@@ -159,11 +167,12 @@ def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettin
         if settings.roof_finder.startswith("segmenter"):
             from .roofsegment import STEPS
 
-            progress = bars("roof segmenter", STEPS) if bars else None
+            progress = bars("roof segmenter", settings.roof_finder_steps or STEPS) if bars else None
         else:
             progress = bars("roof colours", len(paths)) if bars else None
-        extractor = RoofColourExtractor(extractor, ensure_roof_finder(folder, paths, settings.roof_finder,
-                                                                      settings.seed, progress),
+        finder = ensure_roof_finder(folder, paths, settings.roof_finder, settings.seed, progress,
+                                    settings.roof_finder_steps)
+        extractor = RoofColourExtractor(extractor, finder,
                                         settings.roof_weight_power, settings.roof_score_cone)
     features = build_features(folder, config, extractor, settings.views,
                               bars("features", config.designs) if bars else None)

@@ -227,6 +227,34 @@ def test_search_points_come_from_the_nams_benchmarks_rows_split_for_split(tmp_pa
     assert ("search", "exhaustive") not in {(p.knob, p.setting) for p in points}
 
 
+
+def test_cheaper_training_rows_cost_their_own_training_and_are_plotted_against_the_one_off_cost(tmp_path):
+    """bench-ablations's rows that train for less (fewer segmenter steps, fewer NAMS epochs) keep the default's
+    render and feature costs, with NAMS's training and the segmenter's learning replaced by their own times."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments.tradeoff import ONE_OFF_KNOBS, _search_points, ablation_one_offs, read_nams_rows
+
+    bench = _nams_result()
+    for split in bench["splits"].values():
+        split["experiments"]["e1"].update(nams_exhaustive_roof_finder_steps_1000=_nams_row(0.9, 0.002),
+                                          nams_exhaustive_max_epochs_300=_nams_row(0.88, 0.002))
+    bench.update(train_seconds={"paper": 500.0, "max_epochs_300": 120.0, "roof_finder_steps_1000": 390.0},
+                 roof_segmenter_seconds={"default": 300.0, "roof_finder_steps_1000": 100.0})
+    path = tmp_path / "ablations.json"
+    path.write_text(json.dumps(bench))
+    base = SimpleNamespace(feature_seconds_per_tile=0.01, one_off=1000.0, train_seconds=400.0, finder_seconds=300.0)
+    one_offs = ablation_one_offs(path, base)
+    assert one_offs == {"nams_exhaustive_max_epochs_300": pytest.approx(1000 - 400 + 120),
+                        "nams_exhaustive_roof_finder_steps_1000": pytest.approx(1000 - 400 - 300 + 390 + 100)}
+    points = {(p.knob, p.setting): p for p in _search_points(read_nams_rows(path, 100, "bench-ablations"), base,
+                                                             "bench-ablations", ("nams_exhaustive",), one_offs)}
+    assert points["training epochs", "300"].one_off_seconds == pytest.approx(720.0)
+    assert points["roof finder steps", "1000"].one_off_seconds == pytest.approx(790.0)
+    assert points["search", "adjoint M=64, 100 it"].one_off_seconds == 1000.0  # the others: the default's
+    assert {"training epochs", "roof finder steps"} <= set(ONE_OFF_KNOBS)
+
+
 @pytest.mark.slow
 def test_a_tiny_experiment_measures_every_point_on_both_splits(tmp_path):
     """The measuring side on a tiny training set and 2 target groups per seed (renders; not a measurement)."""

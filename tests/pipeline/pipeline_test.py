@@ -145,18 +145,26 @@ def test_bench_adjoint_sweeps_the_settings_on_a_few_of_the_same_targets_and_choo
     assert "| E2 | nams_adjoint_M4_it5 | test |" in table and "Fastest setting within 0.05" in table
 
 
-def test_bench_ablations_scores_each_variant_beside_the_default_on_the_same_targets(evaluated, tiny_env):
+def test_bench_ablations_scores_each_variant_beside_the_default_on_the_same_targets(evaluated, tiny_env,
+                                                                                     monkeypatch):
+    from meta_sim.experiments import bench
     from meta_sim.experiments.bench import ablation_settings, bench_ablations, format_ablations_table
     from meta_sim.experiments.tradeoff import _nams_knob
     from meta_sim.pipeline.dataset import DatasetConfig
     from meta_sim.pipeline.workflow import ModelSettings
 
+    # The cheaper-training rows at this tiny model's scale (the default's: 1,000 segmenter steps, 300 epochs).
+    monkeypatch.setattr(bench, "ABLATION_FINDER_STEPS", 30)
+    monkeypatch.setattr(bench, "ABLATION_MAX_EPOCHS", 20)
     dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
     settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
     same, own = ablation_settings(settings)
-    assert set(same) == {"paper", "factorised", "no_roof_colour", "no_score_cone"}
-    assert set(own) == {"colour_roof_finder", "roof_weight_power_1"}
+    assert set(same) == {"paper", "factorised", "no_roof_colour", "no_score_cone", "max_epochs_20"}
+    assert set(own) == {"colour_roof_finder", "roof_weight_power_1", "roof_finder_steps_30"}
     assert own["colour_roof_finder"].roof_finder == "colour" and own["roof_weight_power_1"].roof_weight_power == 1.0
+    assert same["max_epochs_20"].train == {"max_epochs": 20} and own["roof_finder_steps_30"].roof_finder_steps == 30
+    cheap = ModelSettings(train={"max_epochs": 20}, roof_finder_steps=30)  # no "cheaper" row that is not cheaper
+    assert not {"max_epochs_20", "roof_finder_steps_30"} & set().union(*ablation_settings(cheap))
     result = bench_ablations(targets=1, root=tiny_env, dataset=dataset, settings=settings, tiles=2)
     assert list(result["splits"]) == ["validation", "test"]
     names = {"nams_exhaustive", *(f"nams_exhaustive_{name}" for name in (*same, *own))}
@@ -166,10 +174,14 @@ def test_bench_ablations_scores_each_variant_beside_the_default_on_the_same_targ
             assert set(rows) == names
             for row in rows.values():
                 assert row["targets"] == 3 and 0.0 <= row["flat_top1"] <= row["flat_top10"] <= 1.0
+    assert set(result["roof_segmenter_seconds"]) == {"default", "roof_finder_steps_30"}
+    assert result["roof_segmenter_seconds"]["roof_finder_steps_30"] < result["roof_segmenter_seconds"]["default"]
     # Every variant row is a knob of the trade-off study.
     assert {_nams_knob(name)[0] for name in names} == {"search", "architecture", "roof colour", "roof finder",
-                                                       "roof weight power"}
+                                                       "roof weight power", "roof finder steps", "training epochs"}
     table = format_ablations_table(result)
+    assert "the roof segmenter learnt in 30 steps, not the default's 3,000" in table
+    assert "NAMS trained for at most 20 epochs" in table and "the roof segmenter: default " in table
     assert "| E1 | nams_exhaustive_paper | test |" in table and "| E2 | nams_exhaustive | validation |" in table
     assert "`nams_exhaustive_no_score_cone`: without those in the score's own colour cone" in table
 

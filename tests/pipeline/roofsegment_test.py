@@ -7,7 +7,12 @@ import torch
 
 from meta_sim.core.errors import MetaSimError
 from meta_sim.pipeline.features import ColourTexture, _half
-from meta_sim.pipeline.roofcolour import RoofColourExtractor, checkpoint_extractor, ensure_roof_finder
+from meta_sim.pipeline.roofcolour import (
+    RoofColourExtractor,
+    checkpoint_extractor,
+    ensure_roof_finder,
+    roof_finder_seconds,
+)
 from meta_sim.pipeline.roofsegment import RoofSegmenter
 from meta_sim.sim.imageio import linear_to_srgb
 from meta_sim.sim.tiles import write_tile
@@ -108,6 +113,25 @@ def test_fit_is_deterministic_and_cached(tiles, tmp_path, monkeypatch):
         ensure_roof_finder(tmp_path, tiles, "labels")
     with pytest.raises(MetaSimError, match="no training tiles"):
         RoofSegmenter.fit([], steps=1)
+
+
+def test_a_segmenter_learnt_in_fewer_steps_is_cached_under_its_own_name_with_its_time(tiles, tmp_path, monkeypatch):
+    """The trade study's knob for the segmenter's cost: another number of steps is another finder, cached beside
+    the default one (never mistaken for it) with the seconds it took; steps that are not a whole number of at
+    least 1 are refused before any work."""
+    monkeypatch.setattr("meta_sim.pipeline.roofsegment.STEPS", 20)
+    default = ensure_roof_finder(tmp_path, tiles, "segmenter", seed=0)
+    fewer = ensure_roof_finder(tmp_path, tiles, "segmenter", seed=0, steps=8)
+    assert fewer.id != default.id and len(list(tmp_path.glob("roof-segmenter-*.pt"))) == 2
+    assert fewer.id == RoofSegmenter.fit(tiles, seed=0, steps=8).id
+    assert ensure_roof_finder(tmp_path, tiles, "segmenter", seed=0, steps=20).id == default.id  # the default's own
+    missing = [tmp_path / "missing.exr"] * len(tiles)
+    assert ensure_roof_finder(tmp_path, missing, "segmenter", seed=0, steps=8).id == fewer.id  # from the cache
+    assert roof_finder_seconds(tmp_path, "segmenter", 0, steps=8) > 0
+    assert roof_finder_seconds(tmp_path, "segmenter", 0, steps=9) is None
+    for bad in (0, -3, True, 2.5):
+        with pytest.raises(MetaSimError, match="training steps"):
+            RoofSegmenter.fit(tiles, steps=bad)
 
 
 def test_checkpoints_carry_the_segmenter(segmenter):
