@@ -334,6 +334,32 @@ def group_features(groups: list[list[np.ndarray]], extractor, views: int, label:
     return torch.stack([f.mean(dim=0) for f in per_group]), per_group
 
 
+# Target groups read at a time: 32 groups of 9 tiles are 288 tiles of 384 x 384 (about 0.5 GB as float32), where a
+# split's 2,700 at once held gigabytes and, one split after another, filled 24 GB. A multiple of the features'
+# batch of 32 tiles, so the batches (and the features) are those of reading them all at once.
+TARGET_GROUPS_READ = 32
+
+
+def _target_tile_features(jobs, folders, tiles: int, extractor, views: int, label: str,
+                          bars: Bars | None = None):
+    """(groups, tiles, dim) each target group's first ``tiles`` tiles' features (views averaged), read
+    ``TARGET_GROUPS_READ`` groups at a time."""
+    import torch
+
+    from ..pipeline.dataset import job_tiles
+    from ..pipeline.features import features_for_groups
+    from ..sim.imageio import read_image
+
+    progress = bars(label, len(jobs) * tiles) if bars else None
+    out = []
+    for start in range(0, len(jobs), TARGET_GROUPS_READ):
+        part = list(zip(jobs[start:start + TARGET_GROUPS_READ], folders[start:start + TARGET_GROUPS_READ]))
+        singles = [[read_image(p)] for job, folder in part for p in job_tiles(folder, job.name, tiles)]
+        feats = features_for_groups(singles, extractor, views, progress=progress)
+        out.append(feats.reshape(len(part), tiles, -1))
+    return torch.cat(out)
+
+
 def target_features_path(root: Path, extractor_id: str, views: int, folders: list, tiles: int) -> Path:
     """Where the features of the first ``tiles`` tiles of each target folder by ``extractor_id`` over
     ``views`` views are kept: the extractor's id names its roof finder's weights, so a retrained finder
@@ -388,11 +414,7 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     """
     import time
 
-    import torch
-
-    from ..pipeline.dataset import job_tiles
     from ..render.jobs import sample_designs
-    from ..sim.imageio import read_image
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
     split = settings.target_split(experiment)
@@ -406,9 +428,9 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
     stored = stored_target_features(root, methods.extractor.id, views, folders, tiles)
     if stored is None:
         started = time.perf_counter()
-        groups = [[read_image(p) for p in job_tiles(folder, job.name, tiles)] for job, folder in zip(jobs, folders)]
-        _, per_group = group_features(groups, methods.extractor, views, f"{experiment} target features", bars)
-        stored = store_target_features(root, methods.extractor.id, views, folders, tiles, torch.stack(per_group),
+        per_group = _target_tile_features(jobs, folders, tiles, methods.extractor, views,
+                                          f"{experiment} target features", bars)
+        stored = store_target_features(root, methods.extractor.id, views, folders, tiles, per_group,
                                        time.perf_counter() - started)
     per_tile = stored["features"]
     features = per_tile.mean(dim=1)  # every tile x view weighs the same in a group's mean

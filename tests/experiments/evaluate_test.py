@@ -205,3 +205,34 @@ def test_kept_target_features_are_read_back_only_for_the_same_extractor_and_targ
     nan[0, 0, 0] = float("nan")
     torch.save({"extractor": "colour+finder-abc", "features": nan, "seconds": 1.5}, path)
     assert stored_target_features(tmp_path, "colour+finder-abc", 8, folders, 2) is None  # not finite
+
+
+def test_target_features_read_a_few_groups_at_a_time_are_those_of_reading_them_all(tmp_path, monkeypatch):
+    """A split's tiles are read a few groups at a time (all at once, 2,700 tiles filled the memory of a 24 GB
+    machine over a bench's splits); the features, batches and order are the same as reading them all."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from meta_sim.experiments import evaluate
+    from meta_sim.experiments.evaluate import _target_tile_features, group_features
+    from meta_sim.pipeline.features import ColourTexture
+    from meta_sim.sim.imageio import read_image
+    from meta_sim.sim.tiles import write_tile
+
+    rng = np.random.default_rng(0)
+    jobs = [SimpleNamespace(name=f"d{g}") for g in range(5)]
+    folders = [tmp_path / f"seed{g % 2}" for g in range(5)]
+    for job, folder in zip(jobs, folders):
+        folder.mkdir(exist_ok=True)
+        for t in range(3):
+            rgb = rng.uniform(0.0, 1.0, (16, 16, 3)).astype(np.float32)
+            write_tile(folder / f"{job.name}_t{t:02d}.exr", rgb, np.zeros((16, 16), np.uint32),
+                       np.zeros((16, 16), np.uint32), {})
+    extractor = ColourTexture()
+    groups = [[read_image(folder / f"{job.name}_t{t:02d}.exr") for t in range(3)] for job, folder in zip(jobs, folders)]
+    _, whole = group_features(groups, extractor, 8, "all at once")
+    monkeypatch.setattr(evaluate, "TARGET_GROUPS_READ", 2)  # 3 reads: 2, 2 and 1 groups
+    parts = _target_tile_features(jobs, folders, 3, extractor, 8, "in parts")
+    assert parts.shape == (5, 3, extractor.dim) and torch.allclose(parts, torch.stack(whole), atol=1e-6)
+    assert torch.allclose(_target_tile_features(jobs, folders, 2, extractor, 8, "two tiles"), parts[:, :2], atol=1e-6)
