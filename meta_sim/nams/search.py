@@ -555,6 +555,23 @@ def _predicted_features(model: NAMS, vectors: torch.Tensor, batch: int) -> torch
     return features
 
 
+# Blurred and kept tables (``_blurred_table``, ``_kept_colours``) kept per model, the most recent first: a search
+# reuses its own comparison's, while a grid of comparisons (bench-objective scores some 250) kept one per comparison
+# for ever and filled 20 GB.
+DERIVED_TABLES_KEPT = 8
+
+
+def _keep_derived(model: NAMS, key: tuple, value) -> None:
+    """Keep ``value`` under ``key`` beside the design tables, dropping the oldest derived tables beyond
+    ``DERIVED_TABLES_KEPT`` (the design tables themselves, keyed by a space's JSON, stay)."""
+    tables = model._design_tables
+    tables.pop(key, None)
+    derived = [k for k in tables if isinstance(k, tuple)]
+    for old in derived[:max(0, len(derived) - DERIVED_TABLES_KEPT + 1)]:
+        del tables[old]
+    tables[key] = value
+
+
 def _blurred_table(model: NAMS, space: DesignSpace, table: DesignTable, colour: ColourComparison,
                    lead: int) -> torch.Tensor:
     """The design table's histograms blurred by ``colour``, cached beside the table per blur matrix (a search
@@ -565,7 +582,7 @@ def _blurred_table(model: NAMS, space: DesignSpace, table: DesignTable, colour: 
         return cached[2]
     blurred = colour.blurred(table.features[:, lead:].double())
     if not model.training:  # kept with the blur itself, so that its id is not another's
-        model._design_tables[key] = (colour.blur, table.features, blurred)
+        _keep_derived(model, key, (colour.blur, table.features, blurred))
     return blurred
 
 
@@ -581,7 +598,7 @@ def _kept_colours(model: NAMS, space: DesignSpace, table: DesignTable, colour: C
     blurred = _blurred_table(model, space, table, colour, lead)[:, colour.keep] if colour.blurs else None
     out = (kept, kept.square().sum(dim=1), blurred)
     if not model.training:
-        model._design_tables[key] = (colour, table.features, out)
+        _keep_derived(model, key, (colour, table.features, out))
     return out
 
 

@@ -305,6 +305,27 @@ def test_a_blurred_comparison_names_the_nearest_colour_for_one_the_bank_lacks(co
     assert _accuracy(exhaustive_search(fit.model, targets, space, colour=blurred), coloured["truth"], "p1") >= 0.9
 
 
+def test_a_grid_of_comparisons_keeps_a_bounded_cache_and_the_same_answers(coloured):
+    """Each comparison's blurred and kept tables are cached on the model for the searches that reuse it; a grid of
+    hundreds of comparisons (bench-objective's) keeps only the most recent few, and a comparison whose tables were
+    dropped ranks as it did when they were kept."""
+    from meta_sim.nams.search import DERIVED_TABLES_KEPT
+
+    space, fit = coloured["space"], coloured["fit"]
+    targets = fit.norm.apply(coloured["targets"])[:6]
+    grid = [ColourComparison(exponent=0.3, blur=_line_blur(sigma=0.5 + k / 10), blur_weight=30.0,
+                             far=ColourComparison(keep=_p0_only(), blur=_line_blur(sigma=0.5 + k / 10),
+                                                  blur_weight=10.0), far_loss=1e-12)
+             for k in range(3 * DERIVED_TABLES_KEPT)]
+    first = [r.ranked for r in exhaustive_search(fit.model, targets, space, colour=grid[0])]
+    for colour in grid[1:]:
+        exhaustive_search(fit.model, targets, space, colour=colour)
+        derived = [k for k in fit.model._design_tables if isinstance(k, tuple)]
+        assert len(derived) <= DERIVED_TABLES_KEPT
+    assert any(not isinstance(k, tuple) for k in fit.model._design_tables)  # the design table stays
+    assert [r.ranked for r in exhaustive_search(fit.model, targets, space, colour=grid[0])] == first
+
+
 def test_a_blurred_search_is_finite_at_the_extremes(coloured):
     space, fit = coloured["space"], coloured["fit"]
     blurred = ColourComparison(exponent=0.3, blur=_line_blur(), blur_weight=30.0)
