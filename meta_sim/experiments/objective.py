@@ -90,7 +90,7 @@ class Setting:
 
 # The search's default (pipeline.roofcolour.search_colour) on the default model.
 DEFAULT = Setting(*SEARCH_COLOUR, True, *SEARCH_FAR, SEARCH_FAR_MARGIN)
-WITHOUT_FAR = replace(DEFAULT, far_loss=None, far_margin=None)
+WITHOUT_FAR = Setting(*SEARCH_COLOUR, True)  # the far fields at their defaults: one setting, one name
 PLAIN = Setting()  # the plain geometric mean
 WITHOUT_SCORE_CONE = Setting(score_cone=False)  # the default before the score cone and the blur
 
