@@ -243,6 +243,7 @@ _VARIANTS = {"no_roof_colour": ("roof colour", "none"), "no_score_cone": ("roof 
              "colour_roof_finder": ("roof finder", "colour"),
              "roof_weight_power_1": ("roof weight power", "1")}
 _TRAINING_VARIANTS = {"roof_finder_steps": "roof finder steps", "max_epochs": "training epochs"}
+_TRAINING_ROW = re.compile(r"(roof_finder_steps|max_epochs)_(\d+)")  # a variant that only trains for less
 
 
 def _nams_knob(name: str) -> tuple[str, str]:
@@ -256,7 +257,7 @@ def _nams_knob(name: str) -> tuple[str, str]:
     if name == "nams_exhaustive":
         return "search", "exhaustive"
     variant = name.removeprefix("nams_exhaustive_")
-    training = re.fullmatch(r"(roof_finder_steps|max_epochs)_(\d+)", variant)
+    training = _TRAINING_ROW.fullmatch(variant)
     if training:
         return _TRAINING_VARIANTS[training[1]], training[2]
     if variant in _VARIANTS:
@@ -274,7 +275,7 @@ def ablation_one_offs(ablations_bench: Path, base: _Experiment) -> dict:
     train, finders = bench.get("train_seconds", {}), bench.get("roof_segmenter_seconds", {})
     out = {}
     for name in {*train, *finders}:
-        if not re.fullmatch(r"(roof_finder_steps|max_epochs)_\d+", name):
+        if not _TRAINING_ROW.fullmatch(name):
             continue
         nams = train.get(name, base.train_seconds)
         finder = finders.get(name, base.finder_seconds)
