@@ -43,3 +43,10 @@ def heldout_v3_bank():
     from meta_sim.sim.textures import ensure_heldout_bank
 
     return ensure_heldout_bank(name="heldout-v3")
+
+
+@pytest.fixture(scope="session")
+def heldout_v4_bank():
+    from meta_sim.sim.textures import ensure_heldout_bank
+
+    return ensure_heldout_bank(name="heldout-v4")

@@ -23,9 +23,9 @@ def textures():
               help="build from your own photos: a folder with flat/ and sloped/ subfolders")
 @click.option("--heldout", type=click.Choice(list(HELDOUT_SETS)), is_flag=False, flag_value=FIRST_HELDOUT,
               default=None,
-              help="build a held-out set (design-gap textures) instead: heldout-v1 (E2 validation; the set "
-                   "`--heldout` alone builds), heldout-v2 (E2 test) or heldout-v3 (a check on textures no "
-                   "choice looked at)")
+              help="build a held-out set (design-gap textures) instead: heldout-v1 (the set `--heldout` "
+                   "alone builds; a single seed's E2), heldout-v2 (E2 test), heldout-v3 (a check on textures "
+                   "no choice looked at) or heldout-v4 (E2 validation)")
 @click.option("--size", type=int, default=256, show_default=True, help="texture size in pixels")
 @click.option("--repeat-m", type=float, default=8.0, show_default=True,
               help="with --from: physical size of one photo repeat in metres")

@@ -37,7 +37,7 @@ from ..sim.imageio import linear_to_srgb
 from ..sim.meshes import FLAT_ROOF, SLOPED_ROOF
 from ..sim.textures import hsv_cone_bins
 from .evaluate import KIND_OF, mean_scores, rankings, render_split_targets, score
-from .splits import SPLIT_NAMES, get_split
+from .splits import FIRST_HELDOUT, SPLIT_NAMES, get_split
 
 ROOF_CLASS_OF = {"flat": FLAT_ROOF, "sloped": SLOPED_ROOF}
 # How the roof pixels are found: by the tiles' labels, or by the default model's roof finder (no labels).
@@ -132,7 +132,7 @@ def bench_reference(targets: int = 100, tiles: int = 9, root: Path | None = None
         split = get_split(experiment, split_name)
         target_jobs, folders = render_split_targets(split, targets, tiles, dataset.preset, root, dataset.tile_px,
                                                     dataset.pixel_size_m, bars)
-        ranks = rankings(experiment, bank, ensure_heldout_bank(name=split.heldout or "heldout-v1"))
+        ranks = rankings(experiment, bank, ensure_heldout_bank(name=split.heldout or FIRST_HELDOUT))
         update = bars(f"{experiment} {split_name} target roofs", len(target_jobs)) if bars else None
         rows = {way: [] for way in WAYS}
         missing = {way: {kind: 0 for kind in ROOF_CLASS_OF} for way in WAYS}

@@ -67,8 +67,14 @@ def heldout_v2(heldout_v2_bank):
 
 
 @pytest.fixture(scope="module")
-def images(bank, heldout, heldout_v2, heldout_v3):
-    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout, heldout_v2, heldout_v3) for e in b.entries}
+def heldout_v4(heldout_v4_bank):
+    return heldout_v4_bank
+
+
+@pytest.fixture(scope="module")
+def images(bank, heldout, heldout_v2, heldout_v3, heldout_v4):
+    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout, heldout_v2, heldout_v3, heldout_v4)
+            for e in b.entries}
 
 
 def _all_recipes():
@@ -111,17 +117,20 @@ def test_heldout_v2_is_a_second_set_of_new_roofs(bank, heldout, heldout_v2):
     sim = load_similarity(heldout_v2.root / SIMILARITY_TO_DEFAULT_FILE)
     assert sim.rows == tuple(heldout_v2.ids()) and sim.cols == tuple(bank.ids())
     assert heldout_v2.root == heldout_bank_dir(name="heldout-v2") != heldout.root
-    with pytest.raises(MetaSimError, match="unknown held-out set 'heldout-v4'"):
-        ensure_heldout_bank(name="heldout-v4")
+    with pytest.raises(MetaSimError, match="unknown held-out set 'heldout-v9'"):
+        ensure_heldout_bank(name="heldout-v9")
 
 
-def test_heldout_v3_is_a_third_set_of_new_roofs(bank, heldout, heldout_v2, heldout_v3):
-    assert heldout_v3.name == "heldout-v3" and heldout_v3.root == heldout_bank_dir(name="heldout-v3")
-    assert len(heldout_v3.ids("flat")) >= 10 and len(heldout_v3.ids("sloped")) >= 10
-    before = (bank, heldout, heldout_v2)
-    assert not set(heldout_v3.ids()) & {i for b in before for i in b.ids()}
-    assert not {e.sha256 for e in heldout_v3.entries} & {e.sha256 for b in before for e in b.entries}
-    for entry in heldout_v3.entries:
+@pytest.mark.parametrize("name", ["heldout-v3", "heldout-v4"])
+def test_a_later_heldout_set_is_a_new_set_of_roofs(name, bank, heldout, heldout_v2, heldout_v3, heldout_v4):
+    sets = [bank, heldout, heldout_v2, heldout_v3, heldout_v4]
+    later = next(b for b in sets if b.name == name)
+    assert later.root == heldout_bank_dir(name=name)
+    assert len(later.ids("flat")) >= 10 and len(later.ids("sloped")) >= 10
+    before = sets[:sets.index(later)]
+    assert not set(later.ids()) & {i for b in before for i in b.ids()}
+    assert not {e.sha256 for e in later.entries} & {e.sha256 for b in before for e in b.entries}
+    for entry in later.entries:
         assert ID_PATTERN.match(entry.id) and entry.id.startswith(entry.kind + "-")
 
 
@@ -133,12 +142,12 @@ def _nearest(rows: np.ndarray, cols: np.ndarray, same: bool = False) -> np.ndarr
     return sim.max(axis=1)
 
 
-@pytest.mark.parametrize("name", ["heldout-v2", "heldout-v3"])
+@pytest.mark.parametrize("name", ["heldout-v2", "heldout-v3", "heldout-v4"])
 def test_a_later_heldout_set_is_unlike_every_set_before_it_yet_ranks_the_bank(name, bank, heldout, heldout_v2,
-                                                                            heldout_v3, images):
-    """E2's test textures (and the check set after them) must not be the earlier sets' textures in other
-    colours' clothing, nor so far from everything that the HSV ranking of the bank is a tie (a top-10 hit
-    would then be a coin toss).
+                                                                            heldout_v3, heldout_v4, images):
+    """E2's test textures (and the check and validation sets after them) must not be the earlier sets'
+    textures in other colours' clothing, nor so far from everything that the HSV ranking of the bank is a
+    tie (a top-10 hit would then be a coin toss).
 
     Unlike: a typical bank texture (the median) is this close to its nearest bank neighbour of its
     kind; every texture of the set is further than that from everything in the bank and in the held-out
@@ -148,7 +157,8 @@ def test_a_later_heldout_set_is_unlike_every_set_before_it_yet_ranks_the_bank(na
     def hists(b, kind=None):
         return np.stack([hsv_cone_histogram(images[i]) for i in b.ids(kind)])
 
-    sets = {"heldout-v2": (heldout_v2, (bank, heldout)), "heldout-v3": (heldout_v3, (bank, heldout, heldout_v2))}
+    sets = {"heldout-v2": (heldout_v2, (bank, heldout)), "heldout-v3": (heldout_v3, (bank, heldout, heldout_v2)),
+            "heldout-v4": (heldout_v4, (bank, heldout, heldout_v2, heldout_v3))}
     later, before = sets[name]
     known = np.concatenate([hists(b) for b in before])
     for kind in ("flat", "sloped"):
@@ -161,9 +171,9 @@ def test_a_later_heldout_set_is_unlike_every_set_before_it_yet_ranks_the_bank(na
         assert shared.min() >= 10, (kind, dict(zip(later.ids(kind), shared)))
 
 
-def test_heldout_v2_and_v3_build_to_the_same_bytes_twice(heldout_v2, heldout_v3, tmp_path):
-    _assert_same_files(heldout_v2.root, build_default_bank(tmp_path / "again", heldout="heldout-v2").root)
-    _assert_same_files(heldout_v3.root, build_default_bank(tmp_path / "again-v3", heldout="heldout-v3").root)
+def test_heldout_v2_to_v4_build_to_the_same_bytes_twice(heldout_v2, heldout_v3, heldout_v4, tmp_path):
+    for held in (heldout_v2, heldout_v3, heldout_v4):
+        _assert_same_files(held.root, build_default_bank(tmp_path / held.name, heldout=held.name).root)
     with pytest.raises(MetaSimError, match="unknown held-out set"):
         build_default_bank(tmp_path / "bad", size=16, heldout="heldout-v0")
 
@@ -220,9 +230,9 @@ def test_building_twice_gives_byte_identical_files(bank, tmp_path):
     _assert_same_files(bank.root, build_default_bank(tmp_path / "again").root)
 
 
-def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2, heldout_v3):
+def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2, heldout_v3, heldout_v4):
     expected = json.loads(HASHES.read_text())["256"]
-    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2, heldout_v3) for e in b.entries}
+    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2, heldout_v3, heldout_v4) for e in b.entries}
     assert set(expected) == set(actual)
     changed = sorted(i for i in expected if actual.get(i) != expected[i])
     assert not changed, (
@@ -547,7 +557,8 @@ def test_the_cli_builds_either_held_out_set(tmp_path):
 
     from meta_sim.cli import main
 
-    for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2"), (["heldout-v3"], "heldout-v3")):
+    for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2"), (["heldout-v3"], "heldout-v3"),
+                       (["heldout-v4"], "heldout-v4")):
         out = tmp_path / name
         result = CliRunner().invoke(main, ["textures", "build", "--size", "16", "--heldout", *args, "--out", str(out)])
         assert result.exit_code == 0, result.output

@@ -13,7 +13,7 @@ of one repeat of the image in metres (its height scales with the aspect
 ratio). Banks also hold ``similarity.json`` (see ``similarity.py``).
 
 Banks come from three places: the default procedural bank and the held-out
-sets ``heldout-v1`` and ``heldout-v2`` (cached under ``$META_SIM_CACHE`` or ``~/.cache/meta-sim`` and built on
+sets ``heldout-v1`` to ``heldout-v4`` (cached under ``$META_SIM_CACHE`` or ``~/.cache/meta-sim`` and built on
 first use), or a user's folder of photos (``build_bank_from_folder``).
 """
 
@@ -385,7 +385,7 @@ def default_bank_dir(size: int = 256, cache_dir: str | os.PathLike | None = None
 
 def heldout_bank_dir(size: int = 256, cache_dir: str | os.PathLike | None = None,
                      name: str = procedural.FIRST_HELDOUT) -> Path:
-    """The cache folder of the held-out set ``name`` (``heldout-v1`` or ``heldout-v2``)."""
+    """The cache folder of the held-out set ``name`` (a name of ``procedural.HELDOUT_SETS``)."""
     return cache_root(cache_dir) / "banks" / f"{procedural.set_name(_heldout_name(name))}-{size}"
 
 
@@ -418,7 +418,8 @@ def ensure_default_bank(size: int = 256, cache_dir: str | os.PathLike | None = N
 def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = None,
                         name: str = procedural.FIRST_HELDOUT) -> TextureBank:
     """The cached held-out set ``name`` (textures not in the default bank), built on first use:
-    ``heldout-v1`` (E2's validation textures) or ``heldout-v2`` (E2's test textures)."""
+    ``heldout-v4`` (E2's validation textures), ``heldout-v2`` (E2's test textures), ``heldout-v3`` (its check
+    textures) or ``heldout-v1`` (E2's validation textures until 2026-12-03, and a single seed's)."""
     return _ensure(heldout_bank_dir(size, cache_dir, name), lambda d: build_default_bank(d, size, heldout=name))
 
 

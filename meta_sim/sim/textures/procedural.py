@@ -1395,11 +1395,63 @@ HELDOUT_V3_SLOPED_RECIPES: tuple[Recipe, ...] = (
             **_barrel(_p("#6a4aa0", "#64449a", "#7054a8"), gloss=0.3, tone=0.05)),
 )
 
+# The fourth held-out set: E2's validation textures from 2026-12-03 (meta_sim/experiments/splits.py). The
+# first held-out set shares its colours with the bank, so a choice made on it never saw what the test and
+# check splits show, a texture in a colour the bank lacks. This set is made under the same two conditions as
+# `heldout-v2` and `heldout-v3`, now against all four sets before it (tests/sim/textures_test.py), in colours
+# none of them has: olive, chartreuse, burgundy, crimson, fuchsia, amber, gold, spring green, azure, aqua,
+# royal blue and forest green, on the same families.
+HELDOUT_V4_FLAT_RECIPES: tuple[Recipe, ...] = (
+    _flat("deck-olive", "Olive painted metal deck", 6.0, "profiled", **_deck("#7a7a30")),
+    _flat("coating-chartreuse", "Chartreuse roof coating", 8.0, "coating", colour="#b0d030", substrate="#707070",
+          peel=0.35, cracks=0.6, stains=dict(colour="#707868", amount=0.6, size_m=2.0)),
+    _flat("capsheet-burgundy", "Burgundy granulated cap sheet", 8.0, "sheet",
+          **_cap_sheet("#8a2236", _p("#a83a4e", "#4a1420", "#8a8a8a", "#5a5a5a"), fleck_share=0.35)),
+    _flat("capsheet-crimson", "Crimson granulated cap sheet", 8.0, "sheet",
+          **_cap_sheet("#c01840", _p("#d83a5a", "#6a1020", "#8a8a8a", "#5a5a5a"), fleck_share=0.3)),
+    _flat("coating-fuchsia", "Fuchsia sports-court coating", 10.0, "coating", colour="#c8308a", substrate="#5a5a5a",
+          peel=0.3, roller=0.04, cracks=0.6, stains=dict(colour="#606060", amount=0.6, size_m=2.0)),
+    _flat("gravel-amber-glass", "Amber glass gravel", 3.0, "gravel", stone_m=0.03,
+          palette=_p(("#c88a20", 3), ("#a86a10", 2), ("#e0a840", 2), ("#6a6a6a", 1))),
+    _flat("coating-spring-green", "Spring-green roof coating", 8.0, "coating", colour="#30c060", substrate="#707070",
+          peel=0.35, cracks=0.6, stains=dict(colour="#687068", amount=0.6, size_m=2.0)),
+    _flat("coating-gold", "Gold elastomeric coating", 8.0, "coating", colour="#e8a800", substrate="#6a6a66",
+          peel=0.4, cracks=0.8, stains=dict(colour="#7a7a70", amount=0.6, size_m=2.0)),
+    _flat("membrane-azure", "Azure PVC membrane", 12.0, "sheet",
+          **_membrane("#3080e0", sheet_m=2.0, stains=dict(colour="#6a7078", amount=0.7, size_m=2.0, threshold=0.45),
+                      patches=dict(probability=0.6, tone=-0.3, edge=0.3))),
+    _flat("deck-aqua", "Aqua painted metal deck", 6.0, "profiled", **_deck("#40c0c0")),
+)
+
+HELDOUT_V4_SLOPED_RECIPES: tuple[Recipe, ...] = (
+    _sloped("corrugated-olive", "Olive painted corrugated iron", 4.0, "profiled",
+            **_corrugated("#6a7020", rust=dict(amount=0.2, palette=_RUST))),
+    _sloped("shingle-burgundy", "Burgundy architectural shingles", 5.0, "tiles",
+            **_architectural(_p("#7a2a3a", "#862f42", "#6e2434"), _p("#8a8a8a", "#4a4a4a"), fleck_share=0.25,
+                             stains=dict(colour="#606060", amount=0.5, size_m=1.5))),
+    _sloped("seam-royal-blue", "Royal-blue standing-seam metal", 8.0, "profiled", **_seam("#3050d0")),
+    _sloped("clay-glazed-forest", "Glazed forest-green clay tiles", 6.0, "tiles",
+            **_barrel(_p("#2a7a3a", "#247034", "#308440"), gloss=0.3, tone=0.05)),
+    _sloped("corrugated-fuchsia", "Fuchsia painted corrugated iron", 4.0, "profiled",
+            **_corrugated("#c03a90", rust=dict(amount=0.5, palette=_RUST))),
+    _sloped("shingle-spring-green", "Spring-green architectural shingles", 5.0, "tiles",
+            **_architectural(_p("#40b060", "#4aba6a", "#36a656"), _p("#8a8a8a", "#4a4a4a"), fleck_share=0.25,
+                             stains=dict(colour="#606060", amount=0.5, size_m=1.5))),
+    _sloped("seam-azure", "Azure standing-seam metal", 8.0, "profiled", **_seam("#3a88e0")),
+    _sloped("clay-glazed-amber", "Glazed amber clay tiles", 6.0, "tiles",
+            **_barrel(_p("#d08a18", "#c48014", "#da961e"), gloss=0.3, tone=0.05)),
+    _sloped("shakes-painted-chartreuse", "Chartreuse-painted wood shakes", 5.0, "tiles",
+            **_shakes(_p("#a0c030", "#aaca3a", "#96b628"))),
+    _sloped("corrugated-crimson", "Crimson painted corrugated iron", 4.0, "profiled",
+            **_corrugated("#c02040", rust=dict(amount=0.6, palette=_RUST))),
+)
+
 # Held-out sets by name, in the order they were made (a name is not RECIPE_VERSION: see ``set_name``).
 HELDOUT_SETS: dict[str, tuple[tuple[Recipe, ...], tuple[Recipe, ...]]] = {
     "heldout-v1": (HELDOUT_FLAT_RECIPES, HELDOUT_SLOPED_RECIPES),
     "heldout-v2": (HELDOUT_V2_FLAT_RECIPES, HELDOUT_V2_SLOPED_RECIPES),
     "heldout-v3": (HELDOUT_V3_FLAT_RECIPES, HELDOUT_V3_SLOPED_RECIPES),
+    "heldout-v4": (HELDOUT_V4_FLAT_RECIPES, HELDOUT_V4_SLOPED_RECIPES),
 }
 FIRST_HELDOUT = "heldout-v1"
 
