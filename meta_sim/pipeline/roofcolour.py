@@ -367,11 +367,11 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
 # The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), and for
 # targets far from every design (loss, then the same three over the score cone's histograms alone; for models with
 # those histograms), chosen on E1/E2's validation split by `make bench-objective` (docs/design.md, "Roof colour").
-SEARCH_COLOUR = (0.25, 1.0, 100.0)
-SEARCH_FAR = (4.0, 0.4, 1.0, 10.0)
+SEARCH_COLOUR = (0.3, 2.0, 1.0)
+SEARCH_FAR = (10.0, 0.6, 1.0, 10.0)
 # How much worse than the far search's best (as a fraction of it, under the far comparison) the first search's
 # answer for a far target may be and still be kept (``ColourComparison.far_margin``; None: always ranked again).
-SEARCH_FAR_MARGIN: float | None = None
+SEARCH_FAR_MARGIN: float | None = 0.02
 
 
 @functools.lru_cache(maxsize=8)
