@@ -36,6 +36,10 @@ def task():
               help="metres per pixel of real images whose files do not say (GeoTIFF, world file)")
 @click.option("--augment/--no-augment", default=True, show_default=True,
               help="random rotations, flips and colour balance of the crops")
+@click.option("--colour-augment", type=click.Choice(["light", "scene"]), default="light", show_default=True,
+              help="with --augment: light (a small colour balance and exposure change) or scene (that, then the "
+                   "ground recoloured apart from the buildings and another camera's exposure, contrast, gamma, "
+                   "blur and noise, for training on renders)")
 @click.option("--width", type=int, default=16, show_default=True, help="U-Net channels at the first level")
 @click.option("--depth", type=int, default=4, show_default=True, help="U-Net levels")
 @click.option("--encoder", type=click.Path(path_type=Path), default=None,
@@ -43,8 +47,8 @@ def task():
 @click.option("--seed", type=int, default=0, show_default=True, help="weights and crops")
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="the checkpoint to write (.pt)")
 @_torch_threads
-def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, augment, width, depth, encoder, seed,
-                  out):
+def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, augment, colour_augment, width, depth,
+                  encoder, seed, out):
     """Train a building segmenter on real and/or rendered images; deterministic for a seed."""
     from ..task.data import merge, real_pool, tile_pool
     from ..task.train import TrainSettings, parse_mix, train_segmenter
@@ -53,7 +57,8 @@ def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, a
     if not real and not synthetic:
         raise MetaSimError("give --real and/or --synthetic training folders")
     settings = TrainSettings(steps=steps, batch=batch, crop=crop, lr=lr, mix=parse_mix(mix, batch)
-                             if real and synthetic else (batch, 0), pixel_size_m=gsd, augment=augment, seed=seed,
+                             if real and synthetic else (batch, 0), pixel_size_m=gsd, augment=augment,
+                             colour=colour_augment, seed=seed,
                              width=width, depth=depth, encoder=str(encoder) if encoder else None).check()
     writable_dir(out.parent)
     bars = _Bars()

@@ -150,7 +150,7 @@ class RoofLikelihood:
 
 
 # The segmenter (its training recolours the roofs), the segmenter whose training jitters the whole scene's
-# colours too (``roofsegment._jitter_scene``), and the colour likelihood.
+# colours too (``roofsegment.jitter_scene``), and the colour likelihood.
 ROOF_FINDERS = ("segmenter", "colour", "segmenter-jitter")
 SEGMENTER_AUGMENT = {"segmenter": "roofs", "segmenter-jitter": "scene"}
 

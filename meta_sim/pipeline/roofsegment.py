@@ -109,20 +109,38 @@ def _recolour_roofs(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Ge
     return out
 
 
-def _jitter_scene(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-    """(B, 3, H, W) crops, ``SCENE_JITTER`` of them changed: the non-roof pixels (1 - ``shares`` summed) get
-    their own per-channel gain in [0.6, 1.4] and offset in [-0.15, 0.15]; then the whole crop an exposure
-    gain in [0.6, 1.5], a contrast in [0.6, 1.4] about its mean, a gamma in [0.7, 1.4], a Gaussian blur of
-    up to 1.2 pixels (half of them) and noise of up to 0.04."""
+def jitter_scene(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """(B, 3, H, W) crops, ``SCENE_JITTER`` of them changed: the non-roof pixels (1 - ``shares`` (B, K, H, W)
+    summed over its K kinds, e.g. the roof kinds, or one building mask) get
+    their own per-channel gain in [0.6, 1.4] and offset in [-0.15, 0.15]; then the whole crop
+    ``camera_jitter``."""
     b = rgb.shape[0]
     chosen = (torch.rand(b, 1, 1, 1, generator=generator) < SCENE_JITTER).float()
+    ground = (1.0 - shares.sum(1, keepdim=True)).clamp(0.0, 1.0)
+    x = rgb * (1 - ground) + _recolour_ground(rgb, generator) * ground
+    return rgb * (1 - chosen) + camera_jitter(x, generator) * chosen
+
+
+def _uniform(generator: torch.Generator, low: float, high: float, b: int, *shape: int) -> torch.Tensor:
+    return low + (high - low) * torch.rand(b, *shape, generator=generator)
+
+
+def _recolour_ground(rgb: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """(B, 3, H, W) crops with a per-channel gain in [0.6, 1.4] and offset in [-0.15, 0.15] each."""
+    b = rgb.shape[0]
+    return (rgb * _uniform(generator, 0.6, 1.4, b, 3, 1, 1)
+            + _uniform(generator, -0.15, 0.15, b, 3, 1, 1)).clamp(0.0, 1.0)
+
+
+def camera_jitter(x: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """(B, 3, H, W) display-sRGB crops as another camera might have taken them: each an exposure gain in
+    [0.6, 1.5], a contrast in [0.6, 1.4] about its mean, a gamma in [0.7, 1.4], a Gaussian blur of up to 1.2
+    pixels (half of them) and noise of up to 0.04. Every draw comes from ``generator``."""
+    b = x.shape[0]
 
     def uniform(low, high, *shape):
-        return low + (high - low) * torch.rand(b, *shape, generator=generator)
+        return _uniform(generator, low, high, b, *shape)
 
-    ground = (1.0 - shares.sum(1, keepdim=True)).clamp(0.0, 1.0)
-    jittered = (rgb * uniform(0.6, 1.4, 3, 1, 1) + uniform(-0.15, 0.15, 3, 1, 1)).clamp(0.0, 1.0)
-    x = rgb * (1 - ground) + jittered * ground
     x = (x * uniform(0.6, 1.5, 1, 1, 1)).clamp(0.0, 1.0)
     mean = x.mean(dim=(1, 2, 3), keepdim=True)
     x = ((x - mean) * uniform(0.6, 1.4, 1, 1, 1) + mean).clamp(0.0, 1.0)
@@ -138,8 +156,7 @@ def _jitter_scene(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Gene
     channels = nn.functional.conv2d(nn.functional.pad(channels, (0, 0, 3, 3), mode="replicate"),
                                     weights[:, :, :, None], groups=b * 3)
     x = channels.reshape(x.shape)
-    x = (x + uniform(0.0, 0.04, 1, 1, 1) * torch.randn(x.shape, generator=generator)).clamp(0.0, 1.0)
-    return rgb * (1 - chosen) + x * chosen
+    return (x + uniform(0.0, 0.04, 1, 1, 1) * torch.randn(x.shape, generator=generator)).clamp(0.0, 1.0)
 
 
 class RoofSegmenter:
@@ -194,7 +211,7 @@ class RoofSegmenter:
             y = torch.stack(ys).float() / 4.0
             x = _recolour_roofs(x, y, generator)
             if augment == "scene":
-                x = _jitter_scene(x, y, generator)
+                x = jitter_scene(x, y, generator)
             x = x.contiguous(memory_format=MEMORY_FORMAT)
             target = torch.cat([(1.0 - y.sum(1, keepdim=True)).clamp_min(0.0), y], dim=1)
             loss = -(target * torch.log_softmax(net(x * 2.0 - 1.0), dim=1)).sum(1).mean()

@@ -4,8 +4,12 @@ training step draws from them.
 A ``Pool`` is one source of labelled images (a real domain, or a folder of rendered tiles), read
 once through the datasets of ``pipeline.trainsets``. ``Pool.crops`` draws random crops: an image with
 probability proportional to its area (so every ground pixel is equally likely), a position in it,
-then (with ``augment``) one of the 8 rotations and flips of the square and a small per-channel gain
-and offset (a sensor's colour balance and exposure). Images smaller than a crop are padded, and the
+then (with ``augment``) one of the 8 rotations and flips of the square and a colour augmentation
+(``COLOUR_AUGMENTS``): "light", a small per-channel gain and offset (a sensor's colour balance and
+exposure); "scene", that, then for most crops the ground (non-building) pixels recoloured on their own and
+the whole crop seen as another camera might (``pipeline.roofsegment.camera_jitter``: exposure, contrast,
+gamma, blur, noise), so that a segmenter learns buildings by shape more than by the renders' colours.
+Images smaller than a crop are padded, and the
 padding is marked invalid so the loss ignores it. Every draw comes from the ``torch.Generator``
 passed in, so a seed fixes the crops.
 """
@@ -23,6 +27,7 @@ from ..core.progress import Bars
 
 GAIN = 0.1  # per-channel gain within 1 +- GAIN
 OFFSET = 0.04  # brightness offset within +- OFFSET
+COLOUR_AUGMENTS = ("light", "scene")
 
 
 @dataclass
@@ -76,9 +81,11 @@ class Pool:
         return float(sum(m.sum() for m in self.masks) / sum(m.size for m in self.masks))
 
     def crops(self, n: int, size: int, generator: torch.Generator, augment: bool = True,
-              colour: bool = True) -> Batch:
-        """``n`` random crops of ``size`` pixels (see the module's docstring); ``colour`` False keeps
-        the augmentation to rotations and flips."""
+              colour: str | None = "light") -> Batch:
+        """``n`` random crops of ``size`` pixels (see the module's docstring); ``colour`` one of
+        ``COLOUR_AUGMENTS``, or None to keep the augmentation to rotations and flips."""
+        if colour is not None and colour not in COLOUR_AUGMENTS:
+            raise MetaSimError(f"unknown colour augmentation {colour!r}; choose one of {', '.join(COLOUR_AUGMENTS)}")
         picks = torch.multinomial(self.weights, n, replacement=True, generator=generator).tolist()
         images = torch.zeros(n, 3, size, size)
         masks = torch.zeros(n, 1, size, size)
@@ -98,6 +105,10 @@ class Pool:
             gain = 1.0 + GAIN * (2 * torch.rand(n, 3, 1, 1, generator=generator) - 1)
             offset = OFFSET * (2 * torch.rand(n, 1, 1, 1, generator=generator) - 1)
             images = (images * gain + offset).clamp(0.0, 1.0) * valid
+        if augment and colour == "scene":
+            from ..pipeline.roofsegment import jitter_scene
+
+            images = jitter_scene(images, masks, generator) * valid
         return Batch(images, masks, valid)
 
 

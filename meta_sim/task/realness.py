@@ -59,8 +59,8 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     labels = torch.cat([torch.ones(half), torch.zeros(half)])
     net.train()
     for _ in range(settings.steps):
-        images = torch.cat([real_train.crops(half, settings.crop, crops, colour=False).image,
-                            rendered_train.crops(half, settings.crop, crops, colour=False).image])
+        images = torch.cat([real_train.crops(half, settings.crop, crops, colour=None).image,
+                            rendered_train.crops(half, settings.crop, crops, colour=None).image])
         loss = nn.functional.binary_cross_entropy_with_logits(net(images), labels)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()

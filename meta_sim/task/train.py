@@ -19,7 +19,7 @@ from torch import nn
 
 from ..core.errors import MetaSimError
 from ..core.progress import Progress
-from .data import Pool, join
+from .data import COLOUR_AUGMENTS, Pool, join
 from .unet import Segmenter, UNet, UNetConfig, load_encoder
 
 VERSION = 1  # of the training procedure: part of ``TrainSettings.id``
@@ -35,6 +35,7 @@ class TrainSettings:
     mix: tuple[int, int] = (6, 1)  # real : synthetic crops per batch when both are given
     pixel_size_m: float = 0.6  # working pixel size
     augment: bool = True
+    colour: str = "light"  # the colour augmentation (``data.COLOUR_AUGMENTS``) when augmenting
     seed: int = 0
     width: int = 16
     depth: int = 4
@@ -54,6 +55,8 @@ class TrainSettings:
             raise MetaSimError(f"--lr must be in (0, 1], not {self.lr!r}")
         if not (isinstance(self.pixel_size_m, (int, float)) and 0.01 <= self.pixel_size_m <= 100):
             raise MetaSimError(f"--gsd must be between 0.01 and 100 metres, not {self.pixel_size_m!r}")
+        if self.colour not in COLOUR_AUGMENTS:
+            raise MetaSimError(f"--colour-augment must be one of {', '.join(COLOUR_AUGMENTS)}, not {self.colour!r}")
         real, synthetic = self.mix
         if min(real, synthetic) < 0 or real + synthetic != self.batch or real == 0 == synthetic:
             raise MetaSimError(f"the mix {real}:{synthetic} must add up to the batch of {self.batch} crops")
@@ -61,7 +64,10 @@ class TrainSettings:
 
     def id(self, *fingerprints: str) -> str:
         """Names a model trained with these settings on pools with these fingerprints (for caches)."""
-        text = json.dumps({"v": VERSION, **asdict(self), "pools": fingerprints}, sort_keys=True)
+        fields = asdict(self)
+        if fields["colour"] == "light":  # the augmentation before there was a choice keeps its models' names
+            del fields["colour"]
+        text = json.dumps({"v": VERSION, **fields, "pools": fingerprints}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -111,9 +117,9 @@ def train_segmenter(real: Pool | None, synthetic: Pool | None, settings: TrainSe
                 group["lr"] = settings.lr / 10
         parts = []
         if n_real:
-            parts.append(real.crops(n_real, settings.crop, crops, settings.augment))
+            parts.append(real.crops(n_real, settings.crop, crops, settings.augment, settings.colour))
         if n_synthetic:
-            parts.append(synthetic.crops(n_synthetic, settings.crop, crops, settings.augment))
+            parts.append(synthetic.crops(n_synthetic, settings.crop, crops, settings.augment, settings.colour))
         batch = join(parts)
         logits = model(batch.image.contiguous(memory_format=torch.channels_last))
         loss = segmentation_loss(logits, batch.mask, batch.valid)

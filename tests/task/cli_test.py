@@ -69,6 +69,11 @@ def test_train_then_eval_on_real_and_rendered_folders(tmp_path):
                                    "--steps", "1", "--encoder", str(tmp_path / "a.pt"),
                                    "--out", str(tmp_path / "c.pt")])
     assert plugged.exit_code == 0, plugged.output
+    # the scene colour augmentation, for training on renders, is recorded with the model
+    scene = runner.invoke(main, ["task", "train", "--synthetic", str(rendered), *TINY, "--steps", "2",
+                                 "--colour-augment", "scene", "--out", str(tmp_path / "d.pt")])
+    assert scene.exit_code == 0, scene.output
+    assert load_segmenter(tmp_path / "d.pt").training["colour"] == "scene" and a.training["colour"] == "light"
 
 
 def test_bad_task_command_lines_fail_cleanly(tmp_path):
@@ -82,6 +87,8 @@ def test_bad_task_command_lines_fail_cleanly(tmp_path):
         (["task", "train", "--real", str(real), "--synthetic", str(real), "--mix", "x",
           "--out", str(tmp_path / "x.pt")], "--mix"),
         (["task", "eval", str(tmp_path / "none.pt"), str(real), "--out", str(tmp_path / "e")], "not a file"),
+        (["task", "train", "--real", str(real), "--colour-augment", "heavy", "--out", str(tmp_path / "x.pt")],
+         "--colour-augment"),
     ]
     for args, message in cases:
         result = runner.invoke(main, args)

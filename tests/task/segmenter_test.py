@@ -126,3 +126,47 @@ def test_real_versus_rendered_accuracy_is_high_for_unlike_images_and_chance_for_
     assert 0.3 < alike < 0.7
     first = realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(steps=5, crop=32, width=8))
     assert first == realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(steps=5, crop=32, width=8))
+
+
+def test_scene_colour_augmentation_recolours_the_ground_apart_and_is_seeded():
+    """"scene" changes the crops beyond "light" and, in most crops, the ground's colour apart from the buildings'
+    (the difference of their mean colours), which "light" keeps within its gain; the same for a seed; an unknown
+    augmentation is refused."""
+    pool = _pool("p", n=8, px=64)
+    crops = {colour: pool.crops(64, 48, torch.Generator().manual_seed(1), colour=colour)
+             for colour in (None, "light", "scene")}
+    again = pool.crops(64, 48, torch.Generator().manual_seed(1), colour="scene")
+    assert torch.equal(again.image, crops["scene"].image) and torch.equal(crops["scene"].mask, crops[None].mask)
+    mask = crops[None].mask
+    both = (mask.sum(dim=(1, 2, 3)) > 50) & ((1 - mask).sum(dim=(1, 2, 3)) > 50)
+
+    def contrast(images):  # (N, 3) the ground's mean colour minus the buildings'
+        ground, building = 1 - mask, mask
+        return ((images * ground).sum(dim=(2, 3)) / ground.sum(dim=(2, 3)).clamp_min(1)
+                - (images * building).sum(dim=(2, 3)) / building.sum(dim=(2, 3)).clamp_min(1))[both]
+
+    base = contrast(crops[None].image)
+
+    def moved(colour):
+        return (contrast(crops[colour].image) - base).norm(dim=1) / base.norm(dim=1)
+
+    assert (crops["light"].image - crops[None].image).abs().mean() < 0.1 < (
+        crops["scene"].image - crops[None].image).abs().mean()
+    assert moved("light").max() < 0.2 and (moved("scene") > 0.3).float().mean() > 0.5
+    with pytest.raises(MetaSimError, match="colour augmentation"):
+        pool.crops(4, 32, torch.Generator(), colour="heavy")
+    with pytest.raises(MetaSimError, match="--colour-augment"):
+        TrainSettings(**SMALL, colour="heavy").check()
+    assert TrainSettings(**SMALL).id("a") != TrainSettings(**SMALL, colour="scene").id("a")
+
+
+def test_scene_colour_augmentation_carries_to_another_ground_and_camera():
+    """Trained on red roofs on green ground, scored on the same roofs on tan ground seen darker: the segmenter
+    trained with "scene" finds them better than the one trained with "light"."""
+    train = _pool("train", n=8, px=64)
+    test = _pool("test", n=6, px=64, seed=7, ground=(0.55, 0.45, 0.3))
+    test.images = [(0.7 * image).astype(np.float32) for image in test.images]
+    settings = {**SMALL, "steps": 120, "mix": (0, 4)}
+    light = train_segmenter(None, train, TrainSettings(**settings))
+    scene = train_segmenter(None, train, TrainSettings(**settings, colour="scene"))
+    assert count(scene, test.images, test.masks)[0].iou() > count(light, test.images, test.masks)[0].iou() + 0.1
