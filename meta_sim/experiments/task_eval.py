@@ -202,6 +202,8 @@ def trained(h: Harness, real: Pool | None, synthetic: Pool | None, seed: int, la
     from ..task.unet import load_segmenter, save_segmenter
 
     settings = replace(h.settings.train, seed=seed)
+    if synthetic is None:  # the rendered crops' colour augmentation does not touch a model of real images
+        settings = replace(settings, colour="light")
     if real is None or synthetic is None:
         settings = replace(settings, mix=(settings.batch, 0) if synthetic is None else (0, settings.batch))
     key = settings.id(*(p.fingerprint() if p is not None else "-" for p in (real, synthetic)))
@@ -385,7 +387,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "other_real": _mean_iou(real[0]), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
-                        "ground": ground, "space": space.name,
+                        "ground": ground, "space": space.name, "colour_augment": s.train.colour,
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
@@ -567,6 +569,9 @@ def realism_runs(variants=REALISM_VARIANTS, spaces=None) -> list[str]:
 # Design spaces whose NAMS model infers each domain's look as well as its roofs (trained like the default
 # model, on a training set of that space twice the default's size: more parameters to learn).
 REALISM_SPACES = ("overhead-v1",)
+# A space's run with this suffix (e.g. "overhead-v2+scene") trains the segmenters on renders with the
+# "scene" colour augmentation (``task.data.COLOUR_AUGMENTS``) instead of the light one.
+SCENE_AUGMENTED = "+scene"
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -580,7 +585,8 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     lacks adds that space's run. MetaSimError for an unknown name."""
     import time
 
-    spaces = (*spaces, *sorted(set(only or ()) & set(builtin_spaces()) - set(spaces)))
+    augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
+    spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
@@ -596,15 +602,23 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         h = make_harness(dataset, models_settings, settings, root, realdata, bars)
         models[dataset.space] = h.methods.nams.model_id
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
-    for space in spaces:
+    for run in spaces:
+        space, scene = run.removesuffix(SCENE_AUGMENTED), run.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
-        other = make_harness(wider, models_settings, settings, root, realdata, bars)
+        run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
+        other = make_harness(wider, models_settings, run_settings, root, realdata, bars)
         models[space] = other.methods.nams.model_id
-        result["runs"][space] = run_sim_only(other, out, True)["domains"]
+        result["runs"][run] = run_sim_only(other, out, True)["domains"]
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
                   seconds=time.perf_counter() - started, nams_models=models,
                   **({"nams_model": models[dataset.space]} if dataset.space in models else {}))
     return result
+
+
+def _space_cell(row: dict) -> str:
+    """A realism row's design space, and the segmenters' colour augmentation when it is not the light one."""
+    augment = row.get("colour_augment", "light")
+    return row.get("space", "rooftops-v1") + ("" if augment == "light" else f", {augment} augmentation")
 
 
 def _g(value) -> str:
@@ -634,7 +648,7 @@ def realism_markdown(result: dict) -> str:
     for domain, row in rows:
         r, o = row["rendered_only"], row["other_real"]
         acc = row.get("realness")
-        lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
+        lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                      f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                      f"{100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | {_iou_cell(row.get('uniform_designs'))} | "
                      f"{100 * o['iou']:.1f} +- "
@@ -650,7 +664,7 @@ def realism_markdown(result: dict) -> str:
                   "| other real domains | all building |", "|---|---|---|---|---|---|---|---|---|"]
         for domain, row in checked:
             v = row["validation"]
-            lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
+            lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                          f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                          f"{_iou_cell(v['rendered_only'])} | {_iou_cell(v['uniform_designs'])} | "
                          f"{_iou_cell(v['other_real'])} | {100 * v['all_building']:.1f} |")
@@ -665,7 +679,7 @@ def realism_markdown(result: dict) -> str:
             real, rendered = row["colour"]["real"], row["colour"]["rendered"]
             cells = [f"{real[part][key]:.2f} / {rendered[part][key]:.2f}" if part in real and part in rendered
                      else "-" for part in ("building", "ground") for key in ("brightness", "saturation")]
-            lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | {row['sensor']} | "
+            lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                          f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                          + " | ".join(cells) + " |")
     found = [(domain, row) for domain, row in rows if "roof_finder" in row]
@@ -681,7 +695,7 @@ def realism_markdown(result: dict) -> str:
 
             def pair(key, v=v, t=t):
                 return f"{100 * v[key]:.1f} / {100 * t[key]:.1f}"
-            lines.append(f"| {domain} | {row.get('space', 'rooftops-v1')} | "
+            lines.append(f"| {domain} | {_space_cell(row)} | "
                          f"{100 * v['roof_pixels']['flat']:.1f} / {100 * t['roof_pixels']['flat']:.1f} | "
                          f"{100 * v['roof_pixels']['sloped']:.1f} / {100 * t['roof_pixels']['sloped']:.1f} | "
                          + " | ".join(pair(k) for k in ("building_share", "iou", "precision", "recall")) + " |")

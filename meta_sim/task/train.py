@@ -35,7 +35,7 @@ class TrainSettings:
     mix: tuple[int, int] = (6, 1)  # real : synthetic crops per batch when both are given
     pixel_size_m: float = 0.6  # working pixel size
     augment: bool = True
-    colour: str = "light"  # the colour augmentation (``data.COLOUR_AUGMENTS``) when augmenting
+    colour: str = "light"  # the rendered crops' colour augmentation (``data.COLOUR_AUGMENTS``); real ones: light
     seed: int = 0
     width: int = 16
     depth: int = 4
@@ -117,7 +117,7 @@ def train_segmenter(real: Pool | None, synthetic: Pool | None, settings: TrainSe
                 group["lr"] = settings.lr / 10
         parts = []
         if n_real:
-            parts.append(real.crops(n_real, settings.crop, crops, settings.augment, settings.colour))
+            parts.append(real.crops(n_real, settings.crop, crops, settings.augment))
         if n_synthetic:
             parts.append(synthetic.crops(n_synthetic, settings.crop, crops, settings.augment, settings.colour))
         batch = join(parts)

@@ -155,6 +155,51 @@ def test_a_built_in_space_named_in_the_runs_adds_its_realism_run_without_joining
     assert "overhead-v2" not in task_eval.realism_runs() and task_eval.REALISM_SPACES == ("overhead-v1",)
 
 
+def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the_scene_augmentation(
+        tmp_path, monkeypatch):
+    """"overhead-v2+scene": the overhead-v2 model and renders, the rendered crops augmented with "scene" (a model
+    of real images alone keeps the light augmentation, so it is the run without the suffix's); the table says so."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    seen = []
+
+    def harness(dataset, models_settings, settings, *args):
+        seen.append((dataset.space, settings.train.colour))
+        return SimpleNamespace(dataset=dataset, settings=settings,
+                               methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
+
+    monkeypatch.setattr(task_eval, "make_harness", harness)
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness: {"domains": {"banepa": {
+        "space": h.dataset.space, "colour_augment": h.settings.train.colour}}})
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={"overhead-v2+scene"})
+    assert seen == [("overhead-v2", "scene")] and set(result["runs"]) == {"overhead-v2+scene"}
+    row = {"space": "overhead-v2", "colour_augment": "scene"}
+    assert task_eval._space_cell(row) == "overhead-v2, scene augmentation"
+    assert task_eval._space_cell({"space": "overhead-v2"}) == "overhead-v2"
+    with pytest.raises(MetaSimError, match="unknown realism run"):
+        task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                              only={"overhead-v9+scene"})
+
+    # the segmenter of real images alone is the same model whatever the rendered crops' augmentation
+    trained = []
+    monkeypatch.setattr("meta_sim.task.train.train_segmenter",
+                        lambda real, synthetic, settings, progress=None: trained.append(settings) or settings)
+    monkeypatch.setattr("meta_sim.task.unet.save_segmenter", lambda path, segmenter: None)
+    pool = SimpleNamespace(fingerprint=lambda: "f")
+    for colour in ("light", "scene"):
+        h = SimpleNamespace(settings=task_eval.TaskEvalSettings(train=task_eval.TrainSettings(colour=colour)),
+                            trained={}, root=tmp_path, bars=None)
+        task_eval.trained(h, pool, None, 0, "real")
+        task_eval.trained(h, None, pool, 0, "rendered")
+    assert [s.colour for s in trained] == ["light", "light", "light", "scene"]
+    assert trained[0].id("f", "-") == trained[2].id("f", "-")
+
+
 def test_bench_realism_runs_option_replaces_its_rows_and_keeps_the_others(tmp_path, monkeypatch):
     from meta_sim.cli import main
     from meta_sim.experiments import task_eval
