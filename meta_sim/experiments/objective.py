@@ -12,16 +12,18 @@ targets:
 * then, on the best of those with the score cone, every far-target comparison of a second grid
   (``far_grid``: a target whose best loss exceeds a threshold is searched again by the score cone's histograms
   alone, ``ColourComparison.far``, and ranked by that search unless the first answer is within a margin of its
-  best, ``ColourComparison.far_margin``);
+  best, ``ColourComparison.far_margin``) and every roof match of a third (``match_grid``: such a target ranked
+  by its roof colours under the score's own measure instead, ``nams.RoofMatch``, with a weight on the textures'
+  own colours);
 * the setting with the best mean of the four figures issue 20 sets targets on (E1 top-1 and E2 top-10, flat
-  and sloped) is chosen, the default (``pipeline.roofcolour.SEARCH_COLOUR`` and ``SEARCH_FAR`` on the default
+  and sloped) is chosen, the default (``pipeline.roofcolour.SEARCH_COLOUR`` and ``SEARCH_MATCH`` on the default
   model, itself this bench's choice) winning ties;
-* on the test split only the default, the chosen setting, the default without its far-target search, the
-  plain comparison (exponent 0.5, no blur) and that on the model without the score cone (the default before
-  2026-12-02) are scored, for the report;
+* on the test split only the default, the chosen setting, the default without its far-target search, with the
+  far comparison (``SEARCH_FAR``, the default before the roof match), the plain comparison (exponent 0.5, no
+  blur) and that on the model without the score cone (the default before 2026-12-02) are scored, for the report;
 * on the check split (``splits.py``: fresh seeds, E2 on ``heldout-v3``) the default, the chosen setting, the
-  default without its far-target search and the default before the score cone, to confirm on targets no choice
-  looked at.
+  default without its far-target search, with the far comparison, and the default before the score cone, to
+  confirm on targets no choice looked at.
 
 ``make bench-objective`` writes ``benchmarks/objective.json`` and its table in docs/benchmarks.md.
 """
@@ -31,8 +33,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from ..core.errors import MetaSimError
 from ..core.progress import Bars
-from ..pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR, SEARCH_FAR_MARGIN
+from ..pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR, SEARCH_FAR_MARGIN, SEARCH_MATCH
 from .evaluate import bootstrap_intervals, mean_scores, score
 from .splits import get_split
 
@@ -43,6 +46,9 @@ FAR_LOSSES = (3.0, 4.0, 6.0, 10.0)  # in the search's loss units (MSE in units o
 FAR_EXPONENTS = (0.4, 0.5, 0.6)
 FAR_WEIGHTS = (0.0, 10.0, 30.0)  # blurred by 1 bin
 FAR_MARGINS = (None, 0.02, 0.05, 0.1, 0.2)  # None: a far target is always ranked again
+MATCH_LOSSES = (5.0, 10.0, 20.0)  # far targets ranked by the roof match (``pipeline.roofcolour.roof_match``)
+MATCH_WEIGHTS = (0.0, 0.3, 0.5, 0.7, 1.0)  # its swatch weight
+MATCH_MARGINS = (None, 0.02, 0.05)  # in match loss
 CRITERION = ("e1", "flat_top1"), ("e1", "sloped_top1"), ("e2", "flat_top10"), ("e2", "sloped_top10")
 SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top10", "sloped_closeness")
 
@@ -63,33 +69,55 @@ class Setting:
     far_sigma: float = 1.0
     far_weight: float = 10.0
     far_margin: float | None = None
+    match_weight: float | None = None  # far targets ranked by the roof match with this swatch weight instead
+
+    @property
+    def matches(self) -> bool:
+        """Whether far targets are ranked by the roof match (else by the far comparison ``far``, if any)."""
+        return self.far_loss is not None and self.match_weight is not None
 
     @property
     def far(self) -> tuple[float, float, float, float] | None:
-        return (None if self.far_loss is None
+        return (None if self.far_loss is None or self.matches
                 else (self.far_loss, self.far_exponent, self.far_sigma, self.far_weight))
 
     @property
     def name(self) -> str:
         blur = f", blur {self.sigma:g} bins x {self.weight:g}" if self.weight else ", no blur"
         name = f"exponent {self.exponent:g}{blur}" + ("" if self.score_cone else ", no score cone")
-        if self.far:
+        if self.matches:
+            name += f"; beyond {self.far_loss:g}: roof match, swatch weight {self.match_weight:g}"
+            if self.far_margin is not None:
+                name += f", unless the first answer is within {self.far_margin:.0%}"
+        elif self.far:
             far_blur = f", blur {self.far_sigma:g} x {self.far_weight:g}" if self.far_weight else ", no blur"
             name += f"; beyond {self.far_loss:g}: score cone, exponent {self.far_exponent:g}{far_blur}"
             if self.far_margin is not None:
                 name += f", unless the first answer is within {self.far_margin:.0%}"
         return name
 
-    def comparison(self, blocks: tuple[int, ...] = (488,)):
-        """The ``nams.ColourComparison`` for a model with the roof-colour histograms ``blocks``."""
-        from ..pipeline.roofcolour import colour_comparison
+    def comparison(self, blocks: tuple[int, ...] = (488,), ckpt=None):
+        """The ``nams.ColourComparison`` for a model with the roof-colour histograms ``blocks`` (with a
+        ``match_weight``, the checkpoint ``ckpt`` whose roof match it builds)."""
+        from ..pipeline.roofcolour import checkpoint_match, colour_comparison
 
+        if self.matches:
+            match = checkpoint_match(ckpt, self.match_weight) if ckpt is not None else None
+            if match is None:
+                raise MetaSimError(f"setting {self.name!r} needs a checkpoint whose features end in the score "
+                                   "cone's histograms and whose space chooses roof materials")
+            return colour_comparison(self.exponent, self.sigma, self.weight, blocks, far_margin=self.far_margin,
+                                     match=match, match_loss=self.far_loss)
         return colour_comparison(self.exponent, self.sigma, self.weight, blocks, far=self.far,
                                  far_margin=self.far_margin if self.far else None)
 
 
-# The search's default (pipeline.roofcolour.search_colour) on the default model.
-DEFAULT = Setting(*SEARCH_COLOUR, True, *SEARCH_FAR, SEARCH_FAR_MARGIN)
+# The search's default (pipeline.roofcolour.search_colour) on the default model, and its far comparison (the default
+# before the roof match, 2026-12-03).
+FAR_DEFAULT = Setting(*SEARCH_COLOUR, True, *SEARCH_FAR, SEARCH_FAR_MARGIN)
+DEFAULT = (FAR_DEFAULT if SEARCH_MATCH is None else
+           Setting(*SEARCH_COLOUR, True, far_loss=SEARCH_MATCH[0], far_margin=SEARCH_MATCH[2],
+                   match_weight=SEARCH_MATCH[1]))
 WITHOUT_FAR = Setting(*SEARCH_COLOUR, True)  # the far fields at their defaults: one setting, one name
 PLAIN = Setting()  # the plain geometric mean
 WITHOUT_SCORE_CONE = Setting(score_cone=False)  # the default before the score cone and the blur
@@ -110,6 +138,12 @@ def far_grid(main: Setting, losses=FAR_LOSSES, exponents=FAR_EXPONENTS, weights=
     """``main`` (a setting with the score cone) with every far-target comparison of the grid."""
     return [replace(main, far_loss=loss, far_exponent=e, far_sigma=1.0, far_weight=w, far_margin=m)
             for loss in losses for e in exponents for w in weights for m in margins]
+
+
+def match_grid(main: Setting, losses=MATCH_LOSSES, weights=MATCH_WEIGHTS, margins=MATCH_MARGINS) -> list[Setting]:
+    """``main`` (a setting with the score cone) with far targets ranked by every roof match of the grid."""
+    return [replace(main, far_loss=loss, match_weight=w, far_margin=m) for loss in losses for w in weights
+            for m in margins]
 
 
 def criterion(metrics: dict) -> float:
@@ -150,10 +184,10 @@ def _score(setting: Setting, data: dict, intervals: bool = False) -> dict:
 
     out, comparisons = {}, {}  # one blur per histogram layout (the experiments share the default model's)
     for experiment, (ckpt, normed, truth, ranks) in data[setting.score_cone].items():
-        blocks = ckpt.feature_norm.hist_blocks
-        if blocks not in comparisons:
-            comparisons[blocks] = setting.comparison(blocks)
-        found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=comparisons[blocks])
+        key = (ckpt.feature_norm.hist_blocks, ckpt.model_id)
+        if key not in comparisons:
+            comparisons[key] = setting.comparison(key[0], ckpt)
+        found = exhaustive_search(ckpt.model, normed, ckpt.space, colour=comparisons[key])
         rows = [{**score(r.design, t, ranks, ckpt.space), "far": float(r.far)} for r, t in zip(found, truth)]
         out[experiment] = {k: round(v, 4) for k, v in mean_scores(rows).items()}
         if intervals:
@@ -184,9 +218,11 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
 
     for setting in settings:
         scored(setting)
-    # The far-target comparisons, on the best setting with the score cone and without a far search of its own.
+    # The far-target comparisons and roof matches, on the best setting with the score cone and without a far search
+    # of its own, and the far comparison that was the default before the match.
     main = choose([r for r in rows if r["setting"]["score_cone"] and r["setting"].get("far_loss") is None])
-    fars = [s for s in far_grid(Setting(**main["setting"])) if s.name not in {r["name"] for r in rows}]
+    fars = far_grid(Setting(**main["setting"])) + match_grid(Setting(**main["setting"])) + [FAR_DEFAULT]
+    fars = [s for k, s in enumerate(fars) if s.name not in {r["name"] for r in rows} | {f.name for f in fars[:k]}]
     if update and fars:
         update = bars("far-target comparisons (validation)", len(fars))
     for setting in fars:
@@ -196,7 +232,7 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
     reported = {}
     named = {r["name"]: r for r in rows}
     for label, row in (("default", rows[0]), ("chosen", chosen), ("without far search", named[WITHOUT_FAR.name]),
-                       ("plain comparison", named[PLAIN.name]),
+                       ("far comparison", named[FAR_DEFAULT.name]), ("plain comparison", named[PLAIN.name]),
                        ("without score cone", named[WITHOUT_SCORE_CONE.name])):
         reported[label] = _reported(row, test)
     # The check split (targets no choice looked at, E2 on heldout-v3): the default and the chosen setting against
@@ -204,7 +240,7 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
     check = _targets("check", targets, root, bars)
     checked = {label: _reported(row, check) for label, row in (
         ("default", rows[0]), ("chosen", chosen), ("without far search", named[WITHOUT_FAR.name]),
-        ("without score cone", named[WITHOUT_SCORE_CONE.name]))}
+        ("far comparison", named[FAR_DEFAULT.name]), ("without score cone", named[WITHOUT_SCORE_CONE.name]))}
     return {"criterion": [f"{e} {k}" for e, k in CRITERION], "targets_per_seed": targets,
             "validation": rows, "chosen": chosen["setting"], "test": reported, "check": checked,
             "splits": {name: {e: get_split(e, name).to_dict() for e in ("e1", "e2")}
@@ -239,7 +275,8 @@ def format_objective_table(result: dict, best: int = 5) -> str:
         return " | ".join(out)
 
     by_name = {r["name"]: r for r in result["validation"]}
-    for label in ("default", "chosen", "without far search", "plain comparison", "without score cone"):
+    for label in ("default", "chosen", "without far search", "far comparison", "plain comparison",
+                  "without score cone"):
         row = result["test"].get(label)  # a result from before the score cone lacks the last two
         if row is None:
             continue
@@ -265,6 +302,8 @@ def format_objective_table(result: dict, best: int = 5) -> str:
                  f"`{seeds['check']['e2']['heldout']}`, targets no choice looked at" if "check" in seeds else "")
               + ". "
               f"{len(result['validation'])} settings scored on validation; the test split scores only the default, "
-              f"the chosen one, the default without its far-target search, the plain comparison (exponent 0.5, "
-              f"no blur) and that on the model without the score cone (the default before 2026-12-02)."]
+              f"the chosen one, the default without its far-target search, with far targets searched again by the "
+              f"far comparison instead of the roof match (the default before 2026-12-03), the plain comparison "
+              f"(exponent 0.5, no blur) and that on the model without the score cone (the default before "
+              f"2026-12-02)."]
     return "\n".join(lines)

@@ -138,6 +138,7 @@ MEASURED_DEFAULTS = {
     "search colour comparison": ("meta_sim.pipeline.roofcolour:SEARCH_COLOUR", VALIDATION),
     "far-target search": ("meta_sim.pipeline.roofcolour:SEARCH_FAR", VALIDATION),
     "far-target margin": ("meta_sim.pipeline.roofcolour:SEARCH_FAR_MARGIN", VALIDATION),
+    "far-target roof match": ("meta_sim.pipeline.roofcolour:SEARCH_MATCH", VALIDATION),
     "exhaustive search": ("meta_sim.nams.search:resolve_method", VALIDATION_V1),
     "CONTINUOUS_SEARCH": ("meta_sim.experiments.evaluate:CONTINUOUS_SEARCH", VALIDATION_V1),
     "fastest_adjoint_keeping_e1": ("meta_sim.experiments.bench:fastest_adjoint", VALIDATION),

@@ -19,6 +19,7 @@ from .nre import NREConfig, NRETrainConfig, RatioClassifier, nre_predict, train_
 from .search import (
     PLAIN_COLOUR,
     ColourComparison,
+    RoofMatch,
     SearchResult,
     adjoint_search,
     design_losses,
@@ -34,7 +35,8 @@ from .train import EpochReport, Fit, TrainConfig, train_dr, train_nams
 __all__ = [
     "ARCHITECTURES", "DEFAULT_ARCHITECTURE", "architecture_options", "Checkpoint", "ColourComparison", "DRConfig",
     "DirectRegression", "EpochReport", "FeatureNorm", "Fit", "MS2Config", "NAMS", "NAMSConfig", "NREConfig",
-    "NRETrainConfig", "PLAIN_COLOUR", "RatioClassifier", "SearchResult", "TrainConfig", "adjoint_search", "build_model",
+    "NRETrainConfig", "PLAIN_COLOUR", "RatioClassifier", "RoofMatch", "SearchResult", "TrainConfig", "adjoint_search",
+    "build_model",
     "design_losses", "design_table", "dr_predict", "exhaustive_search", "load_checkpoint", "model_id", "ms2_search",
     "nre_predict", "save_checkpoint", "search", "time_search", "train_dr", "train_nams", "train_nre", "uniform_predict",
 ]

@@ -159,6 +159,96 @@ GEOMETRIC_MEAN_FLOOR = 1e-30
 
 
 @dataclass(frozen=True, eq=False)
+class RoofMatch:
+    """How a target far from every design is ranked: by its roof colours, under the E1/E2 score's own measure
+    (the histogram intersection, ``sim.textures.similarity``).
+
+    Per roof kind ``i``: ``blocks[i]`` = (offset among the features' colour values, width) of the kind's
+    histogram in the score's colour cone (square roots of a histogram, as ``FeatureNorm`` leaves them), whose
+    material the categorical parameter ``params[i]`` chooses; ``swatches[i]`` (choices, width) each choice's
+    texture's own histogram in that cone (rows summing to 1; None: no texture to compare with), and
+    ``shifts[i]`` (width, width, columns summing to at most 1) what a rendered roof's histogram says its
+    texture's is (the renders' roofs are brighter than their textures' images).
+
+    A design's match loss is 1 minus the mean over the kinds of ``(1 - swatch_weight)`` x the intersection of
+    the target's histogram with the one the model predicts for the design, plus ``swatch_weight`` x the
+    intersection of the target's histogram mapped by ``shifts[i]`` with the design's texture's own: 0 when
+    every kind's colours are exactly its design's. The first part ranks the designs as they render; the second
+    as the score ranks textures. ``pipeline.roofcolour.roof_match`` builds one for a checkpoint; the reasoning
+    is in docs/design.md ("Roof colour").
+    """
+
+    blocks: tuple[tuple[int, int], ...]
+    params: tuple[str, ...]
+    swatches: tuple[torch.Tensor | None, ...]
+    shifts: tuple[torch.Tensor, ...]
+    swatch_weight: float = 0.5
+
+    def __post_init__(self):
+        n = len(self.blocks)
+        if not n or not (len(self.params) == len(self.swatches) == len(self.shifts) == n):
+            raise MetaSimError("a roof match needs, per roof kind, a histogram block, a parameter, swatches (or "
+                               "None) and a shift")
+        if not (isinstance(self.swatch_weight, (int, float)) and 0.0 <= self.swatch_weight <= 1.0):
+            raise MetaSimError(f"the roof match's swatch weight must be between 0 and 1, not {self.swatch_weight!r}")
+        for (offset, width), swatches, shift in zip(self.blocks, self.swatches, self.shifts):
+            if offset < 0 or width < 1:
+                raise MetaSimError(f"a roof match's histogram block ({offset}, {width}) is not a block")
+            if (shift.shape != (width, width) or not torch.isfinite(shift).all() or (shift < 0).any()
+                    or (shift.double().sum(dim=0) > 1 + 1e-6).any()):
+                raise MetaSimError(f"a roof match's shift must be a ({width}, {width}) non-negative matrix whose "
+                                   "columns sum to at most 1")
+            if swatches is not None and (swatches.ndim != 2 or swatches.shape[1] != width
+                                         or not torch.isfinite(swatches).all() or (swatches < 0).any()):
+                raise MetaSimError(f"a roof match's swatches must be (choices, {width}) non-negative histograms")
+
+    def check(self, colour_dims: int, space: DesignSpace) -> None:
+        """MetaSimError when the blocks do not fit a model's ``colour_dims`` or the parameters ``space``."""
+        for (offset, width), name, swatches in zip(self.blocks, self.params, self.swatches):
+            if offset + width > colour_dims:
+                raise MetaSimError(f"the roof match's histogram block ({offset}, {width}) does not fit the model's "
+                                   f"{colour_dims} histogram values")
+            param = next((p for p in space.parameters if p.name == name), None)
+            if not isinstance(param, Categorical):
+                raise MetaSimError(f"the roof match compares the choices of {name!r}, which design space "
+                                   f"{space.name!r} has no categorical parameter for")
+            if swatches is not None and len(swatches) != param.width:
+                raise MetaSimError(f"the roof match has {len(swatches)} swatches for {name!r}; it has "
+                                   f"{param.width} choices")
+
+    def to_dict(self) -> dict:
+        """What a report says about the match."""
+        return {"kinds": len(self.blocks), "params": list(self.params), "swatch_weight": self.swatch_weight,
+                "swatches": [s is not None for s in self.swatches]}
+
+    def losses(self, space: DesignSpace, vectors: torch.Tensor, predicted: torch.Tensor,
+               targets: torch.Tensor, chunk: int = 8) -> torch.Tensor:
+        """(T, N) float64 match loss of each of N designs (encoded ``vectors``, with ``predicted`` (N,
+        colour values), the model's colour values for them) for each of T targets (``targets``, (T, colour
+        values)); both in the features' own units (``FeatureNorm``'s, not ``feature_scale``'s)."""
+        slices = {p.name: sl for p, sl in space.blocks()}
+        total = torch.zeros(len(targets), len(vectors), dtype=torch.float64)
+        for (offset, width), name, swatches, shift in zip(self.blocks, self.params, self.swatches, self.shifts):
+            mine, theirs = (_histograms(v[:, offset:offset + width]) for v in (targets, predicted))
+            weight = self.swatch_weight if swatches is not None else 0.0
+            if weight < 1.0:
+                rendered = torch.cat([torch.minimum(mine[i:i + chunk, None, :], theirs[None]).sum(dim=-1)
+                                      for i in range(0, len(mine), chunk)])
+                total += (1.0 - weight) * rendered
+            if weight > 0.0:
+                expected = mine @ shift.double().T
+                own = torch.minimum(expected[:, None, :], swatches.double()[None]).sum(dim=-1)  # (T, choices)
+                total += weight * own[:, vectors[:, slices[name]].argmax(dim=1)]
+        return 1.0 - total / len(self.blocks)
+
+
+def _histograms(values: torch.Tensor) -> torch.Tensor:
+    """Square-rooted histograms (a prediction may dip below 0: counted as 0) -> histograms summing to 1."""
+    h = values.double().clamp_min(0.0).square()
+    return h / h.sum(dim=-1, keepdim=True).clamp_min(1e-300)
+
+
+@dataclass(frozen=True, eq=False)
 class ColourComparison:
     """How the search compares a model's roof-colour histograms (the features' last ``colour_dims``).
 
@@ -182,6 +272,10 @@ class ColourComparison:
     best. A bank texture in a city unlike the training cities is far, yet the first search usually names it
     right; a texture the bank lacks is far, and the first search's answer for it is not what its roof
     colours say.
+
+    ``match`` (instead of ``far``): far targets ranked by a ``RoofMatch`` (roof colours under the score's own
+    measure), the margin then in match loss. The adjoint search ranks the match's roof parameters with the
+    first answer's other parameters held.
     """
 
     exponent: float = 0.5
@@ -191,6 +285,7 @@ class ColourComparison:
     far: ColourComparison | None = None
     far_loss: float = math.inf
     far_margin: float | None = None
+    match: RoofMatch | None = None
 
     def __post_init__(self):
         if not (isinstance(self.exponent, (int, float)) and 0.0 < self.exponent < 1.0):
@@ -211,6 +306,9 @@ class ColourComparison:
         if self.far is not None and (not isinstance(self.far, ColourComparison) or self.far.far is not None):
             raise MetaSimError("the far-target comparison must be a ColourComparison without a far comparison "
                                "of its own")
+        if self.match is not None and (not isinstance(self.match, RoofMatch) or self.far is not None):
+            raise MetaSimError("a colour comparison ranks far targets by a far comparison or by a roof match, "
+                               "not both")
         if self.far_margin is not None and not (isinstance(self.far_margin, (int, float))
                                                 and math.isfinite(self.far_margin) and self.far_margin >= 0):
             raise MetaSimError(f"the far-target margin must be a finite number of at least 0 (or None), not "
@@ -224,7 +322,7 @@ class ColourComparison:
     @property
     def searches_far(self) -> bool:
         """Whether targets far from every design are searched again (with ``far``)."""
-        return self.far is not None and math.isfinite(self.far_loss)
+        return (self.far is not None or self.match is not None) and math.isfinite(self.far_loss)
 
     def check(self, colour_dims: int) -> None:
         """MetaSimError when the blur or the mask does not fit a model's ``colour_dims`` histogram values."""
@@ -236,6 +334,8 @@ class ColourComparison:
                                f"{colour_dims}")
         if self.far is not None:
             self.far.check(colour_dims)
+        if self.match is not None and not colour_dims:
+            raise MetaSimError("a roof match compares roof-colour histograms; the model has none")
 
     def to_dict(self) -> dict:
         """What a report says about the comparison (the blur matrix and the mask by their sizes)."""
@@ -244,7 +344,7 @@ class ColourComparison:
             out["kept_values"] = int(self.keep.sum())
         if self.searches_far:
             out["far_loss"] = self.far_loss
-            out["far"] = self.far.to_dict()
+            out["far"] = self.far.to_dict() if self.far is not None else {"match": self.match.to_dict()}
             if self.far_margin is not None:
                 out["far_margin"] = self.far_margin
         return out
@@ -380,12 +480,19 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     _check_common(S, r)
     _check_adjoint(M, k, S, iterations, lr, boundary_weight)
     colour.check(model.config.colour_dims)
+    if colour.match is not None:
+        colour.match.check(model.config.colour_dims, space)
     targets = _targets(targets, model.config.feature_dim)
 
     results = _adjoint_pass(model, targets, space, M, k, S, iterations, lr, generator, dtype, bars, max_rows,
                             boundary_weight, colour)
     far = [t for t, result in enumerate(results) if colour.searches_far and result.best_loss > colour.far_loss]
-    if far:
+    if far and colour.match is not None:
+        for t in far:
+            matched = _match_roofs(model, space, results[t], targets[t], colour.match, colour.far_margin, S)
+            if matched is not None:
+                results[t] = matched
+    elif far:
         found = _adjoint_pass(model, targets[far], space, M, k, S, iterations, lr, generator, dtype, bars, max_rows,
                               boundary_weight, colour.far)
         ranked_far = [True] * len(far)
@@ -400,6 +507,36 @@ def adjoint_search(model: NAMS, targets, space: DesignSpace, M: int = 1000, k: f
     return _diversify(results, space, r, generator)
 
 
+def _match_roofs(model: NAMS, space: DesignSpace, first: SearchResult, target: torch.Tensor, match: RoofMatch,
+                 margin: float | None, S: int) -> SearchResult | None:
+    """The far target ``target``'s design by ``match``: every combination of the match's roof parameters with
+    ``first``'s other parameters, the best by match loss (None when ``first`` is within ``margin`` of it)."""
+    base = torch.from_numpy(space.encode(first.design)).double()
+    slices = {p.name: (p, sl) for p, sl in space.blocks()}
+    names = list(dict.fromkeys(match.params))
+    choices = torch.cartesian_prod(*[torch.arange(slices[n][0].width) for n in names]).reshape(-1, len(names))
+    vectors = base.repeat(len(choices), 1)
+    for column, name in enumerate(names):
+        sl = slices[name][1]
+        vectors[:, sl] = torch.nn.functional.one_hot(choices[:, column], sl.stop - sl.start).double()
+    lead = model.config.feature_dim - model.config.colour_dims
+    scale = model.feature_scale.double()[lead:]
+    predicted = predicted_features(model, vectors.float(), 4096).double()[:, lead:] * scale
+    target = target.double()[None, lead:]
+    losses = match.losses(space, vectors, predicted, target)[0]
+    order = torch.argsort(losses, stable=True)
+    if margin is not None:
+        mine = losses[(vectors == base).all(dim=1)]
+        if len(mine) and float(mine[0]) <= (1 + margin) * float(losses[order[0]]):
+            return None
+    kept = order[:min(S, len(order))]
+    (design, shares), = _vote(space, vectors[kept][None])
+    ranked = [(space.decode(vectors[i].numpy()), float(losses[i])) for i in kept[:10].tolist()]
+    return SearchResult(design=dict(ranked[0][0]), votes=shares, best_loss=ranked[0][1],
+                        mean_loss=float(losses[kept].mean()), method=first.method, searched_design=dict(ranked[0][0]),
+                        ranked=ranked, far=True)
+
+
 def design_losses(model: NAMS, space: DesignSpace, designs: list[dict], targets,
                   colour: ColourComparison = PLAIN_COLOUR) -> torch.Tensor:
     """(T,) the search's loss (float64, in units of ``feature_scale``, under ``colour``) of ``designs[t]`` for
@@ -411,7 +548,7 @@ def design_losses(model: NAMS, space: DesignSpace, designs: list[dict], targets,
         raise MetaSimError(f"{len(designs)} designs for {len(targets)} targets")
     colour.check(model.config.colour_dims)
     vectors = torch.from_numpy(np.stack([space.encode(d) for d in designs]))
-    pred = _predicted_features(model, vectors, len(vectors)).double()
+    pred = predicted_features(model, vectors, len(vectors)).double()
     return _combined(*_block_mse(pred - targets, model.config.colour_dims, pred, targets, colour),
                      exponent=colour.exponent)
 
@@ -531,7 +668,7 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
     if cached is not None:
         return cached
     designs = design_grid(space)
-    features = _predicted_features(model, designs, batch)
+    features = predicted_features(model, designs, batch)
     if not torch.isfinite(features).all():
         raise MetaSimError("the model predicts NaN/Inf features for some designs; the checkpoint is unusable")
     lead = model.config.feature_dim - model.config.colour_dims
@@ -542,7 +679,7 @@ def design_table(model: NAMS, space: DesignSpace, limit: int = MAX_EXHAUSTIVE_DE
     return table
 
 
-def _predicted_features(model: NAMS, vectors: torch.Tensor, batch: int) -> torch.Tensor:
+def predicted_features(model: NAMS, vectors: torch.Tensor, batch: int) -> torch.Tensor:
     """(N, F) the model's features for encoded designs (their encodings' means), in units of ``feature_scale``,
     computed in eval mode ``batch`` designs at a time; the model is left in the mode it was in."""
     was_training = model.training
@@ -657,6 +794,8 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     if top < 1:
         raise MetaSimError(f"top must be at least 1, not {top}")
     colour.check(model.config.colour_dims)
+    if colour.match is not None:
+        colour.match.check(model.config.colour_dims, space)
     table = design_table(model, space)
     targets = _targets(targets, model.config.feature_dim).double() / model.feature_scale.double()
     n = len(table.designs)
@@ -665,7 +804,13 @@ def exhaustive_search(model: NAMS, targets, space: DesignSpace, S: int = 50, top
     if colour.searches_far:
         far = losses.min(dim=1).values > colour.far_loss
         if far.any():
-            far_losses = _table_losses(model, space, table, targets[far], colour.far, batch)
+            if colour.match is not None:
+                lead = model.config.feature_dim - model.config.colour_dims
+                scale = model.feature_scale.double()[lead:]
+                far_losses = colour.match.losses(space, table.designs, table.features[:, lead:].double() * scale,
+                                                 targets[far][:, lead:] * scale)
+            else:
+                far_losses = _table_losses(model, space, table, targets[far], colour.far, batch)
             if colour.far_margin is not None:  # the first answer kept where the far comparison finds it plausible
                 first = far_losses.gather(1, losses[far].argmin(dim=1, keepdim=True))[:, 0]
                 ranked_far = first > (1 + colour.far_margin) * far_losses.min(dim=1).values

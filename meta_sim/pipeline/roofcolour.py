@@ -50,6 +50,7 @@ stores it, so inference needs no labels. The reasoning is in docs/design.md
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import math
@@ -331,7 +332,7 @@ def colour_blur(sigma: float, blocks: tuple[int, ...] = (488,)) -> torch.Tensor:
 
 def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weight: float = 0.0,
                       blocks: tuple[int, ...] = (488,), far: tuple[float, float, float, float] | None = None,
-                      far_margin: float | None = None):
+                      far_margin: float | None = None, match=None, match_loss: float = math.inf):
     """A ``nams.ColourComparison`` for models with the roof-colour histograms ``blocks``
     (``FeatureNorm.hist_blocks``): the colour error's exponent, and with ``blur_sigma`` > 0 and
     ``blur_weight`` > 0 the histograms also compared blurred by ``colour_blur(blur_sigma, blocks)``. The
@@ -341,12 +342,20 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
     searched again comparing only the histograms in the score's cone (``score_cone_bins``), with that
     exponent and blur (``ColourComparison.far``), unless the first search's answer is within ``far_margin`` of
     the far search's best (``ColourComparison.far_margin``; None: no such gate). MetaSimError when ``blocks`` has
-    no such histograms."""
+    no such histograms.
+
+    ``match`` (a ``nams.RoofMatch``, instead of ``far``): a target whose best loss exceeds ``match_loss`` is
+    ranked by it, with the same ``far_margin``."""
     from ..nams import ColourComparison
 
     blocks = tuple(blocks)
     blurred = blur_sigma > 0 and blur_weight > 0
     blur = colour_blur(blur_sigma, blocks) if blurred else None
+    if match is not None:
+        if far is not None:
+            raise MetaSimError("far targets are ranked by a far comparison or by a roof match, not both")
+        return ColourComparison(exponent, blur, blur_weight if blurred else 0.0, far_loss=match_loss,
+                                far_margin=far_margin, match=match)
     if far is None:
         return ColourComparison(exponent, blur, blur_weight if blurred else 0.0)
     far_loss, far_exponent, far_sigma, far_weight = far
@@ -364,6 +373,101 @@ def colour_comparison(exponent: float = 0.5, blur_sigma: float = 0.0, blur_weigh
                             far_loss=far_loss, far_margin=far_margin)
 
 
+# --- far targets ranked by roof colour under the score's own measure ---------------------------------------
+SHIFTS = tuple(np.arange(-16, 9) / 8.0)  # value shifts tried (bins of the score's cone; negative: darker)
+MATCH_DESIGNS = 4096  # designs whose predicted histograms fit the shifts (all of a discrete space up to this)
+
+
+def value_shift(delta: float) -> torch.Tensor:
+    """(220, 220) the score cone's histograms moved ``delta`` bins along the value axis (linear between
+    bins, the ends held), restricted to its reachable bins: column j is where bin j's mass goes, summing to 1
+    less what lands in unreachable bins."""
+    keep = score_cone_bins()
+    grid = torch.arange(SCORE_BINS ** 3)
+    level, rest = grid % SCORE_BINS, grid - grid % SCORE_BINS
+    low = math.floor(delta)
+    out = torch.zeros(SCORE_BINS ** 3, SCORE_BINS ** 3, dtype=torch.float64)
+    for step, share in ((low, 1.0 - (delta - low)), (low + 1, delta - low)):
+        if share > 0:
+            out[rest + (level + step).clamp(0, SCORE_BINS - 1), grid] += share
+    return out[keep][:, keep]
+
+
+@functools.lru_cache(maxsize=4)
+def swatch_histograms(texture_ids: tuple[str, ...]) -> torch.Tensor | None:
+    """(textures, 220) each texture's own histogram in the score's cone (``sim.textures.similarity``, what
+    E1/E2 rank textures by), read from the default bank the training sets are rendered with; None when one of
+    them is not in it."""
+    from ..sim.imageio import read_rgb8
+    from ..sim.textures import ensure_default_bank
+    from ..sim.textures.similarity import hsv_cone_histogram
+
+    bank = ensure_default_bank()
+    if not set(texture_ids) <= set(bank.ids()):
+        return None
+    hists = np.stack([hsv_cone_histogram(read_rgb8(bank.image_path(t))) for t in texture_ids])
+    return torch.from_numpy(hists)[:, score_cone_bins()]
+
+
+def _match_designs(space) -> torch.Tensor:
+    """Encoded designs to fit a match's shifts on: every design of a small discrete space, else
+    ``MATCH_DESIGNS`` uniform draws (seeded)."""
+    from ..nams.search import count_designs, design_grid, uniform_predict
+
+    n = count_designs(space)
+    if n is not None and n <= MATCH_DESIGNS:
+        return design_grid(space).double()
+    draws = uniform_predict(space, MATCH_DESIGNS, torch.Generator().manual_seed(0))
+    return torch.from_numpy(np.stack([space.encode(d) for d in draws])).double()
+
+
+def roof_match(ckpt, swatch_weight: float):
+    """A ``nams.RoofMatch`` for a checkpoint whose features end in the score cone's histograms (None for one
+    without, or without a roof-material parameter): per roof kind the parameter whose ``texture_kind`` it is,
+    its choices' own histograms (``swatch_histograms``) and the value shift (of ``SHIFTS``) that brings the
+    histograms the model predicts for each choice (mean over ``_match_designs``) nearest, by intersection, to
+    the choice's own. MetaSimError for a swatch weight outside [0, 1]."""
+    from ..nams import RoofMatch
+    from ..nams.search import predicted_features
+    from ..sim.design import Categorical
+
+    blocks = tuple(ckpt.feature_norm.hist_blocks)
+    width = int(score_cone_bins().sum())
+    offsets = [sum(blocks[:i]) for i, b in enumerate(blocks) if b == width]
+    params = {p.texture_kind: p for p in ckpt.space.parameters
+              if isinstance(p, Categorical) and getattr(p, "texture_kind", None)}
+    kinds = [(kind, offset) for kind, offset in zip(KINDS, offsets) if kind in params]
+    if len(offsets) != len(KINDS) or not kinds:
+        return None
+    vectors = _match_designs(ckpt.space)
+    model = ckpt.model
+    lead = model.config.feature_dim - model.config.colour_dims
+    predicted = (predicted_features(model, vectors.float(), 4096).double()[:, lead:]
+                 * model.feature_scale.double()[lead:])
+    slices = {p.name: sl for p, sl in ckpt.space.blocks()}
+    out = {"blocks": [], "params": [], "swatches": [], "shifts": []}
+    for kind, offset in kinds:
+        param = params[kind]
+        swatches = swatch_histograms(tuple(param.choices))
+        shift = torch.eye(width, dtype=torch.float64)
+        if swatches is not None:
+            hists = predicted[:, offset:offset + width].clamp_min(0).square()
+            hists = hists / hists.sum(dim=1, keepdim=True).clamp_min(1e-300)
+            choice = vectors[:, slices[param.name]].argmax(dim=1)
+            seen = torch.bincount(choice, minlength=param.width) > 0
+            means = torch.zeros(param.width, width, dtype=torch.float64).index_add_(0, choice, hists)
+            means = means[seen] / torch.bincount(choice, minlength=param.width)[seen, None]
+            own = swatches[seen].double()
+            agreement = [float(torch.minimum(means @ value_shift(d).T, own).sum(dim=1).mean()) for d in SHIFTS]
+            shift = value_shift(SHIFTS[int(np.argmax(agreement))])  # the first of equals
+        out["blocks"].append((offset, width))
+        out["params"].append(param.name)
+        out["swatches"].append(swatches)
+        out["shifts"].append(shift)
+    return RoofMatch(tuple(out["blocks"]), tuple(out["params"]), tuple(out["swatches"]), tuple(out["shifts"]),
+                     swatch_weight)
+
+
 # The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), and for
 # targets far from every design (loss, then the same three over the score cone's histograms alone; for models with
 # those histograms), chosen on E1/E2's validation split by `make bench-objective` (docs/design.md, "Roof colour").
@@ -372,6 +476,10 @@ SEARCH_FAR = (10.0, 0.6, 1.0, 10.0)
 # How much worse than the far search's best (as a fraction of it, under the far comparison) the first search's
 # answer for a far target may be and still be kept (``ColourComparison.far_margin``; None: always ranked again).
 SEARCH_FAR_MARGIN: float | None = 0.02
+# For a model whose space chooses roof materials: far targets (loss beyond the first) ranked by the roof match
+# instead (``roof_match``) with that swatch weight, the first answer kept within the margin (None: never) of the
+# match's best. Chosen on the validation split by `make bench-objective`; None: the far comparison above.
+SEARCH_MATCH: tuple[float, float, float | None] | None = (10.0, 0.7, None)
 
 
 @functools.lru_cache(maxsize=8)
@@ -380,15 +488,38 @@ def _search_colour(blocks: tuple[int, ...]):
     return colour_comparison(*SEARCH_COLOUR, blocks, far=far, far_margin=SEARCH_FAR_MARGIN if far else None)
 
 
+_MATCHES: dict = {}  # (model id, swatch weight) -> RoofMatch or None, the most recent few
+
+
+def checkpoint_match(ckpt, swatch_weight: float):
+    """``roof_match(ckpt, swatch_weight)``, built once per checkpoint and weight (a few kept)."""
+    key = (ckpt.model_id, float(swatch_weight))
+    if key not in _MATCHES:
+        while len(_MATCHES) >= 4:
+            _MATCHES.pop(next(iter(_MATCHES)))
+        _MATCHES[key] = roof_match(ckpt, swatch_weight)
+    return _MATCHES[key]
+
+
 def search_colour(ckpt):
     """How the search compares a checkpoint's roof-colour histograms: ``SEARCH_COLOUR`` over its histogram
-    blocks (with ``SEARCH_FAR`` when it has the score cone's), or the plain comparison for a model without
-    them. One object per layout, so that the
-    exhaustive search blurs a model's design table once."""
+    blocks; for a model with the score cone's, far targets ranked by the roof match ``SEARCH_MATCH`` when its
+    space chooses roof materials, else searched again with ``SEARCH_FAR``; the plain comparison for a model
+    without histograms. The blur is one object per layout, so that the exhaustive search blurs a model's design
+    table once."""
     from ..nams import PLAIN_COLOUR
 
     blocks = tuple(ckpt.feature_norm.hist_blocks)
-    return _search_colour(blocks) if blocks else PLAIN_COLOUR
+    if not blocks:
+        return PLAIN_COLOUR
+    base = _search_colour(blocks)
+    if SEARCH_MATCH is None or not base.searches_far:
+        return base
+    loss, weight, margin = SEARCH_MATCH
+    match = checkpoint_match(ckpt, weight)
+    if match is None:
+        return base
+    return dataclasses.replace(base, far=None, far_loss=loss, far_margin=margin, match=match)
 
 
 def roof_evidence(features: torch.Tensor, extractor) -> dict | None:

@@ -1,7 +1,11 @@
 """bench-objective's protocol: the grid, the choice on validation (the default wins ties) and its table."""
 
+import pytest
+
+from meta_sim.core.errors import MetaSimError
 from meta_sim.experiments.objective import (
     DEFAULT,
+    FAR_DEFAULT,
     PLAIN,
     WITHOUT_FAR,
     WITHOUT_SCORE_CONE,
@@ -11,8 +15,9 @@ from meta_sim.experiments.objective import (
     far_grid,
     format_objective_table,
     grid,
+    match_grid,
 )
-from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR
+from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR, SEARCH_FAR_MARGIN, SEARCH_MATCH
 
 
 def _metrics(e1: float, e2: float) -> dict:
@@ -23,8 +28,10 @@ def _metrics(e1: float, e2: float) -> dict:
 def test_the_grid_starts_with_the_default_and_names_each_setting_once():
     settings = grid()
     assert settings[0] == DEFAULT and (DEFAULT.exponent, DEFAULT.sigma, DEFAULT.weight) == SEARCH_COLOUR
-    assert DEFAULT.far == SEARCH_FAR and settings[1] == WITHOUT_FAR and WITHOUT_FAR.far is None
-    assert all(s.far is None for s in settings[1:])  # the far-target comparisons are far_grid's
+    assert (DEFAULT.far_loss, DEFAULT.match_weight, DEFAULT.far_margin) == SEARCH_MATCH and DEFAULT.matches
+    assert DEFAULT.far is None and settings[1] == WITHOUT_FAR and WITHOUT_FAR.far is None
+    assert FAR_DEFAULT.far == SEARCH_FAR and FAR_DEFAULT.far_margin == SEARCH_FAR_MARGIN and not FAR_DEFAULT.matches
+    assert all(s.far_loss is None for s in settings[1:])  # the far-target searches are far_grid's and match_grid's
     assert PLAIN in settings and PLAIN.comparison().blur is None and PLAIN.score_cone
     assert len({s.name for s in settings}) == len(settings)
     assert Setting(0.3, 1.5, 30.0).name == "exponent 0.3, blur 1.5 bins x 30"
@@ -53,6 +60,20 @@ def test_the_far_grid_adds_every_far_comparison_to_one_setting():
     assert gated[1].comparison((488, 488, 220, 220)).far_margin == 0.1
     assert gated[0].comparison((488, 488, 220, 220)).far_margin is None
     assert Setting(0.3, far_margin=0.1).comparison().far_margin is None  # no far search, no margin
+
+
+def test_the_match_grid_ranks_far_targets_by_every_roof_match():
+    main = Setting(0.3, 1.0, 30.0)
+    matches = match_grid(main, losses=(10.0,), weights=(0.0, 0.7), margins=(None, 0.05))
+    assert [(s.far_loss, s.match_weight, s.far_margin) for s in matches] == \
+        [(10.0, 0.0, None), (10.0, 0.0, 0.05), (10.0, 0.7, None), (10.0, 0.7, 0.05)]
+    assert all(s.matches and s.far is None and (s.exponent, s.sigma, s.weight) == (0.3, 1.0, 30.0) for s in matches)
+    assert matches[3].name == ("exponent 0.3, blur 1 bins x 30; beyond 10: roof match, swatch weight 0.7, unless the "
+                               "first answer is within 5%")
+    assert len({s.name for s in match_grid(main)} | {s.name for s in far_grid(main)}) == \
+        len(match_grid(main)) + len(far_grid(main))
+    with pytest.raises(MetaSimError, match="needs a checkpoint"):
+        matches[0].comparison((488, 488, 220, 220))
 
 
 def test_the_choice_is_the_best_mean_of_the_four_targets_and_the_default_wins_ties():

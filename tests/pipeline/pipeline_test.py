@@ -271,15 +271,16 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert report["architecture"] == "additive"
     assert "(additive NAMS)" in (tmp_path / "inferred" / "report.md").read_text()
     assert set(report["groups"][0]["roof_pixels"]) == {"flat", "sloped"}
-    # How the search compared the roof colours: the default (roofcolour.SEARCH_COLOUR), blurred, and for a target
-    # far from every design the score cone's histograms alone (SEARCH_FAR); which groups were searched so.
-    # A margin, when the default has one, keeps the first answer of a far target the far comparison finds close.
-    from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR, SEARCH_FAR_MARGIN
+    # How the search compared the roof colours: the default (roofcolour.SEARCH_COLOUR), blurred, and a target far
+    # from every design ranked by its roof colours (the roof match, SEARCH_MATCH: the space chooses roof materials);
+    # which groups were searched so. A margin, when the default has one, keeps the first answer the match finds close.
+    from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, SEARCH_MATCH
 
     assert report["colour_comparison"] == {
-        "exponent": SEARCH_COLOUR[0], "blurred": True, "blur_weight": SEARCH_COLOUR[2], "far_loss": SEARCH_FAR[0],
-        "far": {"exponent": SEARCH_FAR[1], "blurred": True, "blur_weight": SEARCH_FAR[3], "kept_values": 440},
-        **({"far_margin": SEARCH_FAR_MARGIN} if SEARCH_FAR_MARGIN is not None else {})}
+        "exponent": SEARCH_COLOUR[0], "blurred": True, "blur_weight": SEARCH_COLOUR[2], "far_loss": SEARCH_MATCH[0],
+        "far": {"match": {"kinds": 2, "params": ["flat_roof", "sloped_roof"], "swatch_weight": SEARCH_MATCH[1],
+                          "swatches": [True, True]}},
+        **({"far_margin": SEARCH_MATCH[2]} if SEARCH_MATCH[2] is not None else {})}
     assert report["groups_far_from_every_design"] == sum(g["far"] for g in report["groups"])
     assert ("(far):" in (tmp_path / "inferred" / "report.md").read_text()) == bool(
         report["groups_far_from_every_design"])

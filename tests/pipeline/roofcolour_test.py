@@ -532,8 +532,9 @@ def test_the_search_colour_is_the_chosen_comparison_for_a_model_with_roof_colour
     from meta_sim.nams import PLAIN_COLOUR
     from meta_sim.pipeline.roofcolour import SEARCH_COLOUR, search_colour
 
-    class Ckpt:
+    class Ckpt:  # a space without roof materials: no roof match
         feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4), hist_blocks=(488, 488, 220, 220))
+        space, model_id = toy_space(2, 2), "no-roofs"
 
     colour = search_colour(Ckpt())
     assert (colour.exponent, colour.blur_weight) == (SEARCH_COLOUR[0], SEARCH_COLOUR[2])
@@ -676,8 +677,9 @@ def test_the_far_comparison_keeps_the_score_cones_histograms_and_shares_the_blur
 def test_the_search_colour_searches_far_targets_only_for_a_model_with_the_score_cone():
     from meta_sim.pipeline.roofcolour import SEARCH_FAR, search_colour
 
-    class Ckpt:
+    class Ckpt:  # a space without roof materials: no roof match
         feature_norm = FeatureNorm(torch.zeros(4), torch.ones(4), hist_blocks=(488, 488, 220, 220))
+        space, model_id = toy_space(2, 2), "no-roofs"
 
     colour = search_colour(Ckpt())
     assert colour.searches_far and (colour.far_loss, colour.far.exponent, colour.far.blur_weight) == \
