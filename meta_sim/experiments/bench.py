@@ -235,20 +235,29 @@ def _nams_rows(split, targets: int, tiles: int, adjoint_targets: int, sweep, dat
         breakdown = error_breakdown(detail, ctx.ranks, method, other_roof)
     if "sbi_nre" in rows:
         rows["sbi_nre"]["train_seconds"] = round(ctx.sbi.extra["seconds"], 1)
-    rows.update(_adjoint_rows(few, seed, sweep))
+    rows.update(_adjoint_rows(few, seed, sweep, bars))
     return rows, breakdown
 
 
-def _adjoint_rows(few, seed: int, sweep) -> dict:
-    """The neural-adjoint search's row for each (starts, iterations) of ``sweep`` on the targets of ``few``."""
+def _adjoint_rows(few, seed: int, sweep, bars: Bars | None = None) -> dict:
+    """The neural-adjoint search's row for each (starts, iterations) of ``sweep`` on the targets of ``few`` (with
+    ``bars``, a progress bar of each setting's steps)."""
     from .evaluate import method_runs, score_method
 
     rows = {}
     for starts, iterations in sweep:
-        run = method_runs(few, seed, {"M": starts, "iterations": iterations, "S": min(50, starts)})["nams_adjoint"]
+        settings = {"M": starts, "iterations": iterations, "S": min(50, starts)}
+        if bars is not None:
+            settings["bars"] = _labelled(bars, f"adjoint M={starts} x {iterations} steps, {len(few.jobs)} groups")
+        run = method_runs(few, seed, settings)["nams_adjoint"]
         row, _ = score_method(few, run)
         rows[f"nams_adjoint_M{starts}_it{iterations}"] = {**row, "targets": len(few.jobs)}
     return rows
+
+
+def _labelled(bars: Bars, label: str) -> Bars:
+    """``bars`` with every stage it opens named ``label``."""
+    return lambda _label, total: bars(label, total)
 
 
 def _split_contexts(dataset, settings, targets: int, tiles: int, root: Path, bars: Bars | None):
@@ -288,7 +297,7 @@ def bench_adjoint(targets: int = 100, adjoint_targets: int = 20, root: Path | No
     for split_name, experiment, split, ctx in _split_contexts(dataset, settings, targets, tiles, root, bars):
         few = ctx.subset(spread(len(split.seeds), targets, adjoint_targets))
         seed = split.seeds[0]  # of the searches' random starts, as in bench_nams
-        rows = {"nams_exhaustive": _exhaustive_row(few, seed), **_adjoint_rows(few, seed, sweep)}
+        rows = {"nams_exhaustive": _exhaustive_row(few, seed), **_adjoint_rows(few, seed, sweep, bars)}
         part = result["splits"].setdefault(split_name, {"settings": {}, "experiments": {}})
         part["settings"][experiment], part["experiments"][experiment] = split.to_dict(), rows
     result["fastest_adjoint_keeping_e1"] = fastest_adjoint(result["splits"]["validation"]["experiments"]["e1"],

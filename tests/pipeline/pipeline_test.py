@@ -133,8 +133,17 @@ def test_bench_adjoint_sweeps_the_settings_on_a_few_of_the_same_targets_and_choo
 
     dataset = DatasetConfig(designs=16, tiles=1, cities=2, tile_px=96, pixel_size_m=1.2)
     settings = ModelSettings(nams={"hidden": [64, 128]}, train={"max_epochs": 40})
+    stages = []
+
+    def bars(label, total):
+        stages.append((label, total))
+        return lambda n=1: None
+
     result = bench_adjoint(targets=1, adjoint_targets=2, root=tiny_env, dataset=dataset, settings=settings, tiles=2,
-                           sweep=((16, 5), (4, 5)))
+                           sweep=((16, 5), (4, 5)), bars=bars)
+    # A progress bar per adjoint setting and split, named by its setting.
+    assert [s for s in stages if s[0].startswith("adjoint")] == \
+        [("adjoint M=16 x 5 steps, 2 groups", 5), ("adjoint M=4 x 5 steps, 2 groups", 5)] * 4
     assert list(result["splits"]) == ["validation", "test"] and result["sweep"] == [[16, 5], [4, 5]]
     for part in result["splits"].values():
         for rows in part["experiments"].values():
