@@ -479,7 +479,7 @@ SEARCH_FAR_MARGIN: float | None = 0.02
 # For a model whose space chooses roof materials: far targets (loss beyond the first) ranked by the roof match
 # instead (``roof_match``) with that swatch weight, the first answer kept within the margin (None: never) of the
 # match's best. Chosen on the validation split by `make bench-objective`; None: the far comparison above.
-SEARCH_MATCH: tuple[float, float, float | None] | None = (10.0, 0.7, None)
+SEARCH_MATCH: tuple[float, float, float | None] | None = (20.0, 0.7, None)
 
 
 @functools.lru_cache(maxsize=8)
