@@ -84,35 +84,6 @@ def _toy_match(swatch_weight=0.5, roll_p0=0):
                      (eye, eye), swatch_weight)
 
 
-@pytest.fixture(scope="module")
-def coloured():
-    """A 6 x 7 space whose features are 12 linear ones plus two 8-bin histograms, peaked at each parameter's
-    choice; NAMS trained on them (as in roofcolour_test)."""
-    space = toy_space(6, 7)
-    generator = torch.Generator().manual_seed(0)
-    weights = torch.randn(space.dim, 12, generator=generator)
-
-    def simulate(designs):
-        encoded = torch.stack([torch.from_numpy(space.encode(d)) for d in designs])
-        hists = []
-        for d in designs:
-            for index in (0, 1):
-                h = torch.full((8,), 0.02)
-                h[space.parameters[index].choices.index(d[f"p{index}"])] = 1.0
-                hists.append(h)
-        colour = torch.stack(hists).reshape(len(designs), 16) * (0.5 + torch.rand(len(designs), 1, generator=generator))
-        lead = encoded @ weights + 0.05 * torch.randn(len(designs), 12, generator=generator)
-        return encoded, torch.cat([lead, colour], 1)
-
-    rng = np.random.default_rng(0)
-    designs, features = simulate(space.sample(rng, 800))
-    fit = train_nams(designs, features, NAMSConfig(space.dim, 28, hidden=(64, 128)),
-                     TrainConfig(max_epochs=60, patience=10, lr=3e-3, whiten=0), hist_blocks=(8, 8))
-    truth = space.sample(rng, 30)
-    _, targets = simulate(truth)
-    return {"space": space, "fit": fit, "truth": truth, "targets": targets}
-
-
 def test_far_targets_are_ranked_by_the_roof_match_in_both_searches(coloured):
     space, fit = coloured["space"], coloured["fit"]
     model, targets, truth = fit.model, _far_targets(coloured), coloured["truth"][:10] * 2
