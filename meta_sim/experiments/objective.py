@@ -49,6 +49,7 @@ FAR_MARGINS = (None, 0.02, 0.05, 0.1, 0.2)  # None: a far target is always ranke
 MATCH_LOSSES = (5.0, 10.0, 20.0)  # far targets ranked by the roof match (``pipeline.roofcolour.roof_match``)
 MATCH_WEIGHTS = (0.0, 0.3, 0.5, 0.7, 1.0)  # its swatch weight
 MATCH_MARGINS = (None, 0.02, 0.05)  # in match loss
+MATCH_UNMIXES = (0.0, 0.25, 0.5)  # the other roof kind's histogram taken off (``nams.RoofMatch.unmix``)
 CRITERION = ("e1", "flat_top1"), ("e1", "sloped_top1"), ("e2", "flat_top10"), ("e2", "sloped_top10")
 SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top10", "sloped_closeness")
 
@@ -70,6 +71,7 @@ class Setting:
     far_weight: float = 10.0
     far_margin: float | None = None
     match_weight: float | None = None  # far targets ranked by the roof match with this swatch weight instead
+    match_unmix: float = 0.0  # and this unmixing
 
     @property
     def matches(self) -> bool:
@@ -87,6 +89,8 @@ class Setting:
         name = f"exponent {self.exponent:g}{blur}" + ("" if self.score_cone else ", no score cone")
         if self.matches:
             name += f"; beyond {self.far_loss:g}: roof match, swatch weight {self.match_weight:g}"
+            if self.match_unmix:
+                name += f", unmixed x {self.match_unmix:g}"
             if self.far_margin is not None:
                 name += f", unless the first answer is within {self.far_margin:.0%}"
         elif self.far:
@@ -102,7 +106,7 @@ class Setting:
         from ..pipeline.roofcolour import checkpoint_match, colour_comparison
 
         if self.matches:
-            match = checkpoint_match(ckpt, self.match_weight) if ckpt is not None else None
+            match = checkpoint_match(ckpt, self.match_weight, self.match_unmix) if ckpt is not None else None
             if match is None:
                 raise MetaSimError(f"setting {self.name!r} needs a checkpoint whose features end in the score "
                                    "cone's histograms and whose space chooses roof materials")
@@ -117,7 +121,7 @@ class Setting:
 FAR_DEFAULT = Setting(*SEARCH_COLOUR, True, *SEARCH_FAR, SEARCH_FAR_MARGIN)
 DEFAULT = (FAR_DEFAULT if SEARCH_MATCH is None else
            Setting(*SEARCH_COLOUR, True, far_loss=SEARCH_MATCH[0], far_margin=SEARCH_MATCH[2],
-                   match_weight=SEARCH_MATCH[1]))
+                   match_weight=SEARCH_MATCH[1], match_unmix=SEARCH_MATCH[3]))
 WITHOUT_FAR = Setting(*SEARCH_COLOUR, True)  # the far fields at their defaults: one setting, one name
 PLAIN = Setting()  # the plain geometric mean
 WITHOUT_SCORE_CONE = Setting(score_cone=False)  # the default before the score cone and the blur
@@ -140,10 +144,12 @@ def far_grid(main: Setting, losses=FAR_LOSSES, exponents=FAR_EXPONENTS, weights=
             for loss in losses for e in exponents for w in weights for m in margins]
 
 
-def match_grid(main: Setting, losses=MATCH_LOSSES, weights=MATCH_WEIGHTS, margins=MATCH_MARGINS) -> list[Setting]:
-    """``main`` (a setting with the score cone) with far targets ranked by every roof match of the grid."""
-    return [replace(main, far_loss=loss, match_weight=w, far_margin=m) for loss in losses for w in weights
-            for m in margins]
+def match_grid(main: Setting, losses=MATCH_LOSSES, weights=MATCH_WEIGHTS, margins=MATCH_MARGINS,
+               unmixes=MATCH_UNMIXES) -> list[Setting]:
+    """``main`` (a setting with the score cone) with far targets ranked by every roof match of the grid (no
+    unmixing without the swatches, where it does nothing)."""
+    return [replace(main, far_loss=loss, match_weight=w, far_margin=m, match_unmix=u) for loss in losses
+            for w in weights for u in unmixes if w > 0 or u == 0 for m in margins]
 
 
 def criterion(metrics: dict) -> float:

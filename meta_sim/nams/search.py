@@ -176,6 +176,10 @@ class RoofMatch:
     every kind's colours are exactly its design's. The first part ranks the designs as they render; the second
     as the score ranks textures. ``pipeline.roofcolour.roof_match`` builds one for a checkpoint; the reasoning
     is in docs/design.md ("Roof colour").
+
+    ``unmix``: before the second part, each kind's histogram less ``unmix`` times the mean of the other kinds'
+    (negative bins cut to 0): the roof finder counts some of a tile's other roofs as roofs of this kind, and a
+    texture with their colours is the other roof's, not this one's.
     """
 
     blocks: tuple[tuple[int, int], ...]
@@ -183,6 +187,7 @@ class RoofMatch:
     swatches: tuple[torch.Tensor | None, ...]
     shifts: tuple[torch.Tensor, ...]
     swatch_weight: float = 0.5
+    unmix: float = 0.0
 
     def __post_init__(self):
         n = len(self.blocks)
@@ -191,6 +196,10 @@ class RoofMatch:
                                "None) and a shift")
         if not (isinstance(self.swatch_weight, (int, float)) and 0.0 <= self.swatch_weight <= 1.0):
             raise MetaSimError(f"the roof match's swatch weight must be between 0 and 1, not {self.swatch_weight!r}")
+        if not (isinstance(self.unmix, (int, float)) and 0.0 <= self.unmix <= 1.0):
+            raise MetaSimError(f"the roof match's unmixing must be between 0 and 1, not {self.unmix!r}")
+        if self.unmix and len({width for _, width in self.blocks}) > 1:
+            raise MetaSimError("a roof match unmixes histogram blocks of one width only")
         for (offset, width), swatches, shift in zip(self.blocks, self.swatches, self.shifts):
             if offset < 0 or width < 1:
                 raise MetaSimError(f"a roof match's histogram block ({offset}, {width}) is not a block")
@@ -218,8 +227,11 @@ class RoofMatch:
 
     def to_dict(self) -> dict:
         """What a report says about the match."""
-        return {"kinds": len(self.blocks), "params": list(self.params), "swatch_weight": self.swatch_weight,
-                "swatches": [s is not None for s in self.swatches]}
+        out = {"kinds": len(self.blocks), "params": list(self.params), "swatch_weight": self.swatch_weight,
+               "swatches": [s is not None for s in self.swatches]}
+        if self.unmix:
+            out["unmix"] = self.unmix
+        return out
 
     def losses(self, space: DesignSpace, vectors: torch.Tensor, predicted: torch.Tensor,
                targets: torch.Tensor, chunk: int = 8) -> torch.Tensor:
@@ -228,14 +240,19 @@ class RoofMatch:
         values)); both in the features' own units (``FeatureNorm``'s, not ``feature_scale``'s)."""
         slices = {p.name: sl for p, sl in space.blocks()}
         total = torch.zeros(len(targets), len(vectors), dtype=torch.float64)
-        for (offset, width), name, swatches, shift in zip(self.blocks, self.params, self.swatches, self.shifts):
-            mine, theirs = (_histograms(v[:, offset:offset + width]) for v in (targets, predicted))
+        hists = [_histograms(targets[:, offset:offset + width]) for offset, width in self.blocks]
+        for k, ((offset, width), name, swatches, shift) in enumerate(zip(self.blocks, self.params, self.swatches,
+                                                                         self.shifts)):
+            mine, theirs = hists[k], _histograms(predicted[:, offset:offset + width])
             weight = self.swatch_weight if swatches is not None else 0.0
             if weight < 1.0:
                 rendered = torch.cat([torch.minimum(mine[i:i + chunk, None, :], theirs[None]).sum(dim=-1)
                                       for i in range(0, len(mine), chunk)])
                 total += (1.0 - weight) * rendered
             if weight > 0.0:
+                if self.unmix and len(hists) > 1:
+                    others = torch.stack([h for j, h in enumerate(hists) if j != k]).mean(dim=0)
+                    mine = _histograms((mine - self.unmix * others).clamp_min(0.0).sqrt())
                 expected = mine @ shift.double().T
                 own = torch.minimum(expected[:, None, :], swatches.double()[None]).sum(dim=-1)  # (T, choices)
                 total += weight * own[:, vectors[:, slices[name]].argmax(dim=1)]

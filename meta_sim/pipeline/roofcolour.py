@@ -421,12 +421,13 @@ def _match_designs(space) -> torch.Tensor:
     return torch.from_numpy(np.stack([space.encode(d) for d in draws])).double()
 
 
-def roof_match(ckpt, swatch_weight: float):
+def roof_match(ckpt, swatch_weight: float, unmix: float = 0.0):
     """A ``nams.RoofMatch`` for a checkpoint whose features end in the score cone's histograms (None for one
     without, or without a roof-material parameter): per roof kind the parameter whose ``texture_kind`` it is,
     its choices' own histograms (``swatch_histograms``) and the value shift (of ``SHIFTS``) that brings the
     histograms the model predicts for each choice (mean over ``_match_designs``) nearest, by intersection, to
-    the choice's own. MetaSimError for a swatch weight outside [0, 1]."""
+    the choice's own; ``unmix`` as ``nams.RoofMatch``'s. MetaSimError for a swatch weight or an unmixing outside
+    [0, 1]."""
     from ..nams import RoofMatch
     from ..nams.search import predicted_features
     from ..sim.design import Categorical
@@ -465,7 +466,7 @@ def roof_match(ckpt, swatch_weight: float):
         out["swatches"].append(swatches)
         out["shifts"].append(shift)
     return RoofMatch(tuple(out["blocks"]), tuple(out["params"]), tuple(out["swatches"]), tuple(out["shifts"]),
-                     swatch_weight)
+                     swatch_weight, unmix)
 
 
 # The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), and for
@@ -478,8 +479,9 @@ SEARCH_FAR = (10.0, 0.6, 1.0, 10.0)
 SEARCH_FAR_MARGIN: float | None = 0.02
 # For a model whose space chooses roof materials: far targets (loss beyond the first) ranked by the roof match
 # instead (``roof_match``) with that swatch weight, the first answer kept within the margin (None: never) of the
-# match's best. Chosen on the validation split by `make bench-objective`; None: the far comparison above.
-SEARCH_MATCH: tuple[float, float, float | None] | None = (20.0, 0.7, None)
+# match's best, and that unmixing. Chosen on the validation split by `make bench-objective`; None: the far
+# comparison above.
+SEARCH_MATCH: tuple[float, float, float | None, float] | None = (20.0, 0.7, None, 0.0)
 
 
 @functools.lru_cache(maxsize=8)
@@ -491,13 +493,13 @@ def _search_colour(blocks: tuple[int, ...]):
 _MATCHES: dict = {}  # (model id, swatch weight) -> RoofMatch or None, the most recent few
 
 
-def checkpoint_match(ckpt, swatch_weight: float):
-    """``roof_match(ckpt, swatch_weight)``, built once per checkpoint and weight (a few kept)."""
-    key = (ckpt.model_id, float(swatch_weight))
+def checkpoint_match(ckpt, swatch_weight: float, unmix: float = 0.0):
+    """``roof_match(ckpt, swatch_weight, unmix)``, built once per checkpoint and setting (a few kept)."""
+    key = (ckpt.model_id, float(swatch_weight), float(unmix))
     if key not in _MATCHES:
         while len(_MATCHES) >= 4:
             _MATCHES.pop(next(iter(_MATCHES)))
-        _MATCHES[key] = roof_match(ckpt, swatch_weight)
+        _MATCHES[key] = roof_match(ckpt, swatch_weight, unmix)
     return _MATCHES[key]
 
 
@@ -515,8 +517,8 @@ def search_colour(ckpt):
     base = _search_colour(blocks)
     if SEARCH_MATCH is None or not base.searches_far:
         return base
-    loss, weight, margin = SEARCH_MATCH
-    match = checkpoint_match(ckpt, weight)
+    loss, weight, margin, unmix = SEARCH_MATCH
+    match = checkpoint_match(ckpt, weight, unmix)
     if match is None:
         return base
     return dataclasses.replace(base, far=None, far_loss=loss, far_margin=margin, match=match)

@@ -62,6 +62,14 @@ def test_the_match_loss_is_one_minus_the_mean_intersection():
             sloped = torch.minimum(hist(target[0, 4:]), hist(predicted[n, 4:])).sum()  # no swatches: rendered only
             expected = 1 - ((1 - weight) * flat + weight * own + sloped) / 2
             assert abs(float(got[0, n]) - float(expected)) < 1e-12
+    # Unmixed: before the swatch part, the histogram less a share of the other kind's (cut at 0).
+    match = RoofMatch(((0, 4), (4, 4)), ("p0", "p1"), (swatches, None), (roll, torch.eye(4)), 1.0, unmix=0.5)
+    got = match.losses(space, vectors, predicted, target)
+    rest = (hist(target[0, :4]) - 0.5 * hist(target[0, 4:])).clamp_min(0)
+    for n in range(6):
+        own = torch.minimum((rest / rest.sum()) @ roll.T, swatches[n // 2]).sum()
+        sloped = torch.minimum(hist(target[0, 4:]), hist(predicted[n, 4:])).sum()
+        assert abs(float(got[0, n]) - float(1 - (own + sloped) / 2)) < 1e-12
     # A target whose colours are exactly a design's scores 0 for it.
     match = RoofMatch(((0, 4), (4, 4)), ("p0", "p1"), (None, None), (torch.eye(4), torch.eye(4)))
     assert float(match.losses(space, vectors, predicted, predicted[3:4])[0, 3]) < 1e-12
@@ -131,10 +139,12 @@ def test_a_margin_keeps_the_first_answer_the_match_finds_plausible(coloured):
     ({"shifts": (torch.eye(8), torch.eye(7))}, "non-negative matrix"),
     ({"shifts": (torch.eye(8), 2 * torch.eye(8))}, "sum to at most 1"),
     ({"swatches": (-torch.eye(8)[:6], None)}, "non-negative histograms"),
+    ({"unmix": -0.1}, "unmixing"), ({"unmix": 2.0}, "unmixing"),
+    ({"unmix": 0.5, "blocks": ((0, 8), (8, 7)), "shifts": (torch.eye(8), torch.eye(7))}, "one width"),
 ])
 def test_bad_roof_matches_are_refused(kwargs, message):
     fields = {"blocks": ((0, 8), (8, 8)), "params": ("p0", "p1"), "swatches": (torch.eye(8)[:6], None),
-              "shifts": (torch.eye(8), torch.eye(8)), "swatch_weight": 0.5, **kwargs}
+              "shifts": (torch.eye(8), torch.eye(8)), "swatch_weight": 0.5, "unmix": 0.0, **kwargs}
     with pytest.raises(MetaSimError, match=message):
         RoofMatch(**fields)
 
