@@ -240,10 +240,10 @@ class RoofMatch:
         values)); both in the features' own units (``FeatureNorm``'s, not ``feature_scale``'s)."""
         slices = {p.name: sl for p, sl in space.blocks()}
         total = torch.zeros(len(targets), len(vectors), dtype=torch.float64)
-        hists = [_histograms(targets[:, offset:offset + width]) for offset, width in self.blocks]
+        hists = [root_histograms(targets[:, offset:offset + width]) for offset, width in self.blocks]
         for k, ((offset, width), name, swatches, shift) in enumerate(zip(self.blocks, self.params, self.swatches,
                                                                          self.shifts)):
-            mine, theirs = hists[k], _histograms(predicted[:, offset:offset + width])
+            mine, theirs = hists[k], root_histograms(predicted[:, offset:offset + width])
             weight = self.swatch_weight if swatches is not None else 0.0
             if weight < 1.0:
                 rendered = torch.cat([torch.minimum(mine[i:i + chunk, None, :], theirs[None]).sum(dim=-1)
@@ -252,14 +252,15 @@ class RoofMatch:
             if weight > 0.0:
                 if self.unmix and len(hists) > 1:
                     others = torch.stack([h for j, h in enumerate(hists) if j != k]).mean(dim=0)
-                    mine = _histograms((mine - self.unmix * others).clamp_min(0.0).sqrt())
+                    rest = (mine - self.unmix * others).clamp_min(0.0)
+                    mine = rest / rest.sum(dim=-1, keepdim=True).clamp_min(1e-300)
                 expected = mine @ shift.double().T
                 own = torch.minimum(expected[:, None, :], swatches.double()[None]).sum(dim=-1)  # (T, choices)
                 total += weight * own[:, vectors[:, slices[name]].argmax(dim=1)]
         return 1.0 - total / len(self.blocks)
 
 
-def _histograms(values: torch.Tensor) -> torch.Tensor:
+def root_histograms(values: torch.Tensor) -> torch.Tensor:
     """Square-rooted histograms (a prediction may dip below 0: counted as 0) -> histograms summing to 1."""
     h = values.double().clamp_min(0.0).square()
     return h / h.sum(dim=-1, keepdim=True).clamp_min(1e-300)

@@ -429,7 +429,7 @@ def roof_match(ckpt, swatch_weight: float, unmix: float = 0.0):
     the choice's own; ``unmix`` as ``nams.RoofMatch``'s. MetaSimError for a swatch weight or an unmixing outside
     [0, 1]."""
     from ..nams import RoofMatch
-    from ..nams.search import predicted_features
+    from ..nams.search import predicted_features, root_histograms
     from ..sim.design import Categorical
 
     blocks = tuple(ckpt.feature_norm.hist_blocks)
@@ -452,8 +452,7 @@ def roof_match(ckpt, swatch_weight: float, unmix: float = 0.0):
         swatches = swatch_histograms(tuple(param.choices))
         shift = torch.eye(width, dtype=torch.float64)
         if swatches is not None:
-            hists = predicted[:, offset:offset + width].clamp_min(0).square()
-            hists = hists / hists.sum(dim=1, keepdim=True).clamp_min(1e-300)
+            hists = root_histograms(predicted[:, offset:offset + width])
             choice = vectors[:, slices[param.name]].argmax(dim=1)
             seen = torch.bincount(choice, minlength=param.width) > 0
             means = torch.zeros(param.width, width, dtype=torch.float64).index_add_(0, choice, hists)
