@@ -59,9 +59,10 @@ bench-render: setup
 # Every knob that costs time against E1 accuracy, and the fast/balanced/paper profiles (long: the paper
 # profile renders 15,300 tiles). Reads benchmarks/render.json (render cost), benchmarks/nams.json (the search
 # methods' rows), benchmarks/adjoint.json (the adjoint's settings) and benchmarks/ablations.json (the variants'):
-# run bench-render, bench-nams, bench-adjoint and bench-ablations first.
+# run bench-render, bench-nams, bench-adjoint and bench-ablations first. The paper profile's adjoint search runs on
+# 10 target groups per split, as bench-adjoint's (about a minute per group on 2 CPUs).
 bench-tradeoff: setup
-	$(BIN)/meta-sim bench tradeoff --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png
+	$(BIN)/meta-sim bench tradeoff --adjoint-targets 10 --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png
 
 bench-farm: setup
 	$(BIN)/meta-sim bench farm --out benchmarks/farm.json

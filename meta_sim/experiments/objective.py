@@ -49,7 +49,7 @@ FAR_MARGINS = (None, 0.02, 0.05, 0.1, 0.2)  # None: a far target is always ranke
 MATCH_LOSSES = (5.0, 10.0, 20.0)  # far targets ranked by the roof match (``pipeline.roofcolour.roof_match``)
 MATCH_WEIGHTS = (0.0, 0.3, 0.5, 0.7, 1.0)  # its swatch weight
 MATCH_MARGINS = (None, 0.02, 0.05)  # in match loss
-MATCH_UNMIXES = (0.0, 0.25, 0.5)  # the other roof kind's histogram taken off (``nams.RoofMatch.unmix``)
+MATCH_UNMIXES = (0.0, 0.25, 0.5, 0.75, 1.0)  # the other roof kind's histogram taken off (``nams.RoofMatch.unmix``)
 CRITERION = ("e1", "flat_top1"), ("e1", "sloped_top1"), ("e2", "flat_top10"), ("e2", "sloped_top10")
 SHOWN = ("flat_top1", "flat_top10", "flat_closeness", "sloped_top1", "sloped_top10", "sloped_closeness")
 
