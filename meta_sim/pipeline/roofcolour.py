@@ -480,7 +480,7 @@ SEARCH_FAR_MARGIN: float | None = 0.02
 # instead (``roof_match``) with that swatch weight, the first answer kept within the margin (None: never) of the
 # match's best, and that unmixing. Chosen on the validation split by `make bench-objective`; None: the far
 # comparison above.
-SEARCH_MATCH: tuple[float, float, float | None, float] | None = (20.0, 0.7, None, 0.0)
+SEARCH_MATCH: tuple[float, float, float | None, float] | None = (10.0, 1.0, None, 0.5)
 
 
 @functools.lru_cache(maxsize=8)
