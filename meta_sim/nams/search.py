@@ -180,6 +180,12 @@ class RoofMatch:
     ``unmix``: before the second part, each kind's histogram less ``unmix`` times the mean of the other kinds'
     (negative bins cut to 0): the roof finder counts some of a tile's other roofs as roofs of this kind, and a
     texture with their colours is the other roof's, not this one's.
+
+    ``renders[i]`` (choices, width; rows summing to 1, or None) each choice's histogram as it renders: the
+    model's predictions averaged over designs with that choice. With ``render_share`` r the second part is
+    ``(1 - r)`` x the shifted comparison with the texture's own histogram plus r x the intersection of the
+    (unmixed, unshifted) target's histogram with the choice's rendered one: what a texture's colours become in
+    a render is learnt from the renders, where the shift only moves them along the value axis.
     """
 
     blocks: tuple[tuple[int, int], ...]
@@ -188,6 +194,8 @@ class RoofMatch:
     shifts: tuple[torch.Tensor, ...]
     swatch_weight: float = 0.5
     unmix: float = 0.0
+    renders: tuple[torch.Tensor | None, ...] | None = None
+    render_share: float = 0.0
 
     def __post_init__(self):
         n = len(self.blocks)
@@ -200,6 +208,16 @@ class RoofMatch:
             raise MetaSimError(f"the roof match's unmixing must be between 0 and 1, not {self.unmix!r}")
         if self.unmix and len({width for _, width in self.blocks}) > 1:
             raise MetaSimError("a roof match unmixes histogram blocks of one width only")
+        if not (isinstance(self.render_share, (int, float)) and 0.0 <= self.render_share <= 1.0):
+            raise MetaSimError(f"the roof match's render share must be between 0 and 1, not {self.render_share!r}")
+        if self.render_share and (self.renders is None or len(self.renders) != n):
+            raise MetaSimError("a roof match with a render share needs, per roof kind, its choices' rendered "
+                               "histograms (or None)")
+        for (_, width), swatches, renders in zip(self.blocks, self.swatches, self.renders or (None,) * n):
+            if renders is not None and (swatches is None or renders.shape != swatches.shape
+                                        or not torch.isfinite(renders).all() or (renders < 0).any()):
+                raise MetaSimError(f"a roof match's rendered histograms must be (choices, {width}) non-negative "
+                                   "histograms, one per swatch")
         for (offset, width), swatches, shift in zip(self.blocks, self.swatches, self.shifts):
             if offset < 0 or width < 1:
                 raise MetaSimError(f"a roof match's histogram block ({offset}, {width}) is not a block")
@@ -231,6 +249,8 @@ class RoofMatch:
                "swatches": [s is not None for s in self.swatches]}
         if self.unmix:
             out["unmix"] = self.unmix
+        if self.render_share:
+            out["render_share"] = self.render_share
         return out
 
     def losses(self, space: DesignSpace, vectors: torch.Tensor, predicted: torch.Tensor,
@@ -241,6 +261,7 @@ class RoofMatch:
         slices = {p.name: sl for p, sl in space.blocks()}
         total = torch.zeros(len(targets), len(vectors), dtype=torch.float64)
         hists = [root_histograms(targets[:, offset:offset + width]) for offset, width in self.blocks]
+        renders = self.renders or (None,) * len(self.blocks)
         for k, ((offset, width), name, swatches, shift) in enumerate(zip(self.blocks, self.params, self.swatches,
                                                                          self.shifts)):
             mine, theirs = hists[k], root_histograms(predicted[:, offset:offset + width])
@@ -256,6 +277,10 @@ class RoofMatch:
                     mine = rest / rest.sum(dim=-1, keepdim=True).clamp_min(1e-300)
                 expected = mine @ shift.double().T
                 own = torch.minimum(expected[:, None, :], swatches.double()[None]).sum(dim=-1)  # (T, choices)
+                share = self.render_share if renders[k] is not None else 0.0
+                if share:
+                    as_rendered = torch.minimum(mine[:, None, :], renders[k].double()[None]).sum(dim=-1)
+                    own = (1.0 - share) * own + share * as_rendered
                 total += weight * own[:, vectors[:, slices[name]].argmax(dim=1)]
         return 1.0 - total / len(self.blocks)
 

@@ -421,13 +421,14 @@ def _match_designs(space) -> torch.Tensor:
     return torch.from_numpy(np.stack([space.encode(d) for d in draws])).double()
 
 
-def roof_match(ckpt, swatch_weight: float, unmix: float = 0.0):
+def roof_match(ckpt, swatch_weight: float, unmix: float = 0.0, render_share: float = 0.0):
     """A ``nams.RoofMatch`` for a checkpoint whose features end in the score cone's histograms (None for one
     without, or without a roof-material parameter): per roof kind the parameter whose ``texture_kind`` it is,
-    its choices' own histograms (``swatch_histograms``) and the value shift (of ``SHIFTS``) that brings the
-    histograms the model predicts for each choice (mean over ``_match_designs``) nearest, by intersection, to
-    the choice's own; ``unmix`` as ``nams.RoofMatch``'s. MetaSimError for a swatch weight or an unmixing outside
-    [0, 1]."""
+    its choices' own histograms (``swatch_histograms``), the histograms the model predicts for each choice
+    (mean over ``_match_designs``; a choice none of them has: its own histogram moved back by the shift) and
+    the value shift (of ``SHIFTS``) that brings those nearest, by intersection, to the choice's own; ``unmix``
+    and ``render_share`` as ``nams.RoofMatch``'s. MetaSimError for a swatch weight, an unmixing or a render
+    share outside [0, 1]."""
     from ..nams import RoofMatch
     from ..nams.search import predicted_features, root_histograms
     from ..sim.design import Categorical
@@ -446,26 +447,32 @@ def roof_match(ckpt, swatch_weight: float, unmix: float = 0.0):
     predicted = (predicted_features(model, vectors.float(), 4096).double()[:, lead:]
                  * model.feature_scale.double()[lead:])
     slices = {p.name: sl for p, sl in ckpt.space.blocks()}
-    out = {"blocks": [], "params": [], "swatches": [], "shifts": []}
+    out = {"blocks": [], "params": [], "swatches": [], "shifts": [], "renders": []}
     for kind, offset in kinds:
         param = params[kind]
         swatches = swatch_histograms(tuple(param.choices))
-        shift = torch.eye(width, dtype=torch.float64)
+        shift, renders = torch.eye(width, dtype=torch.float64), None
         if swatches is not None:
             hists = root_histograms(predicted[:, offset:offset + width])
             choice = vectors[:, slices[param.name]].argmax(dim=1)
-            seen = torch.bincount(choice, minlength=param.width) > 0
+            counts = torch.bincount(choice, minlength=param.width)
+            seen = counts > 0
             means = torch.zeros(param.width, width, dtype=torch.float64).index_add_(0, choice, hists)
-            means = means[seen] / torch.bincount(choice, minlength=param.width)[seen, None]
+            means = means[seen] / counts[seen, None]
             own = swatches[seen].double()
             agreement = [float(torch.minimum(means @ value_shift(d).T, own).sum(dim=1).mean()) for d in SHIFTS]
-            shift = value_shift(SHIFTS[int(np.argmax(agreement))])  # the first of equals
+            delta = SHIFTS[int(np.argmax(agreement))]  # the first of equals
+            shift = value_shift(delta)
+            renders = swatches.double() @ value_shift(-delta).T
+            renders = renders / renders.sum(dim=1, keepdim=True).clamp_min(1e-300)
+            renders[seen] = means
         out["blocks"].append((offset, width))
         out["params"].append(param.name)
         out["swatches"].append(swatches)
         out["shifts"].append(shift)
+        out["renders"].append(renders)
     return RoofMatch(tuple(out["blocks"]), tuple(out["params"]), tuple(out["swatches"]), tuple(out["shifts"]),
-                     swatch_weight, unmix)
+                     swatch_weight, unmix, tuple(out["renders"]), render_share)
 
 
 # The search's roof-colour comparison (exponent, blur sigma in bins, blur weight; ``colour_comparison``), and for
@@ -478,9 +485,9 @@ SEARCH_FAR = (10.0, 0.6, 1.0, 10.0)
 SEARCH_FAR_MARGIN: float | None = 0.02
 # For a model whose space chooses roof materials: far targets (loss beyond the first) ranked by the roof match
 # instead (``roof_match``) with that swatch weight, the first answer kept within the margin (None: never) of the
-# match's best, and that unmixing. Chosen on the validation split by `make bench-objective`; None: the far
-# comparison above.
-SEARCH_MATCH: tuple[float, float, float | None, float] | None = (10.0, 1.0, None, 0.5)
+# match's best, that unmixing and that render share. Chosen on the validation split by `make bench-objective`;
+# None: the far comparison above.
+SEARCH_MATCH: tuple[float, float, float | None, float, float] | None = (10.0, 1.0, None, 0.5, 0.0)
 
 
 @functools.lru_cache(maxsize=8)
@@ -489,16 +496,17 @@ def _search_colour(blocks: tuple[int, ...]):
     return colour_comparison(*SEARCH_COLOUR, blocks, far=far, far_margin=SEARCH_FAR_MARGIN if far else None)
 
 
-_MATCHES: dict = {}  # (model id, swatch weight) -> RoofMatch or None, the most recent few
+_MATCHES: dict = {}  # (model id, swatch weight, unmixing, render share) -> RoofMatch or None, the latest few
 
 
-def checkpoint_match(ckpt, swatch_weight: float, unmix: float = 0.0):
-    """``roof_match(ckpt, swatch_weight, unmix)``, built once per checkpoint and setting (a few kept)."""
-    key = (ckpt.model_id, float(swatch_weight), float(unmix))
+def checkpoint_match(ckpt, swatch_weight: float, unmix: float = 0.0, render_share: float = 0.0):
+    """``roof_match(ckpt, swatch_weight, unmix, render_share)``, built once per checkpoint and setting (a few
+    kept)."""
+    key = (ckpt.model_id, float(swatch_weight), float(unmix), float(render_share))
     if key not in _MATCHES:
         while len(_MATCHES) >= 4:
             _MATCHES.pop(next(iter(_MATCHES)))
-        _MATCHES[key] = roof_match(ckpt, swatch_weight, unmix)
+        _MATCHES[key] = roof_match(ckpt, swatch_weight, unmix, render_share)
     return _MATCHES[key]
 
 
@@ -516,8 +524,8 @@ def search_colour(ckpt):
     base = _search_colour(blocks)
     if SEARCH_MATCH is None or not base.searches_far:
         return base
-    loss, weight, margin, unmix = SEARCH_MATCH
-    match = checkpoint_match(ckpt, weight, unmix)
+    loss, weight, margin, unmix, render_share = SEARCH_MATCH
+    match = checkpoint_match(ckpt, weight, unmix, render_share)
     if match is None:
         return base
     return dataclasses.replace(base, far=None, far_loss=loss, far_margin=margin, match=match)

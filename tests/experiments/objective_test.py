@@ -28,7 +28,8 @@ def _metrics(e1: float, e2: float) -> dict:
 def test_the_grid_starts_with_the_default_and_names_each_setting_once():
     settings = grid()
     assert settings[0] == DEFAULT and (DEFAULT.exponent, DEFAULT.sigma, DEFAULT.weight) == SEARCH_COLOUR
-    assert (DEFAULT.far_loss, DEFAULT.match_weight, DEFAULT.far_margin, DEFAULT.match_unmix) == SEARCH_MATCH
+    assert (DEFAULT.far_loss, DEFAULT.match_weight, DEFAULT.far_margin, DEFAULT.match_unmix,
+            DEFAULT.match_rendered) == SEARCH_MATCH
     assert DEFAULT.matches
     assert DEFAULT.far is None and settings[1] == WITHOUT_FAR and WITHOUT_FAR.far is None
     assert FAR_DEFAULT.far == SEARCH_FAR and FAR_DEFAULT.far_margin == SEARCH_FAR_MARGIN and not FAR_DEFAULT.matches
@@ -65,7 +66,8 @@ def test_the_far_grid_adds_every_far_comparison_to_one_setting():
 
 def test_the_match_grid_ranks_far_targets_by_every_roof_match():
     main = Setting(0.3, 1.0, 30.0)
-    matches = match_grid(main, losses=(10.0,), weights=(0.0, 0.7), margins=(None, 0.05), unmixes=(0.0,))
+    matches = match_grid(main, losses=(10.0,), weights=(0.0, 0.7), margins=(None, 0.05), unmixes=(0.0,),
+                         rendered=(0.0,))
     assert [(s.far_loss, s.match_weight, s.far_margin) for s in matches] == \
         [(10.0, 0.0, None), (10.0, 0.0, 0.05), (10.0, 0.7, None), (10.0, 0.7, 0.05)]
     assert all(s.matches and s.far is None and (s.exponent, s.sigma, s.weight) == (0.3, 1.0, 30.0) for s in matches)
@@ -74,9 +76,15 @@ def test_the_match_grid_ranks_far_targets_by_every_roof_match():
     assert len({s.name for s in match_grid(main)} | {s.name for s in far_grid(main)}) == \
         len(match_grid(main)) + len(far_grid(main))
     # Unmixing only where the swatches count (it acts on their part alone).
-    unmixed = match_grid(main, losses=(10.0,), weights=(0.0, 0.7), margins=(None,), unmixes=(0.0, 0.5))
+    unmixed = match_grid(main, losses=(10.0,), weights=(0.0, 0.7), margins=(None,), unmixes=(0.0, 0.5),
+                         rendered=(0.0,))
     assert [(s.match_weight, s.match_unmix) for s in unmixed] == [(0.0, 0.0), (0.7, 0.0), (0.7, 0.5)]
     assert unmixed[2].name.endswith("roof match, swatch weight 0.7, unmixed x 0.5")
+    # Render shares likewise.
+    shared = match_grid(main, losses=(10.0,), weights=(0.0, 1.0), margins=(None,), unmixes=(0.5,),
+                        rendered=(0.0, 0.25))
+    assert [(s.match_weight, s.match_unmix, s.match_rendered) for s in shared] == [(1.0, 0.5, 0.0), (1.0, 0.5, 0.25)]
+    assert shared[1].name.endswith("swatch weight 1, unmixed x 0.5, 0.25 as rendered")
     with pytest.raises(MetaSimError, match="needs a checkpoint"):
         matches[0].comparison((488, 488, 220, 220))
 

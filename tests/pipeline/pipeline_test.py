@@ -288,7 +288,8 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert report["colour_comparison"] == {
         "exponent": SEARCH_COLOUR[0], "blurred": True, "blur_weight": SEARCH_COLOUR[2], "far_loss": SEARCH_MATCH[0],
         "far": {"match": {"kinds": 2, "params": ["flat_roof", "sloped_roof"], "swatch_weight": SEARCH_MATCH[1],
-                          "swatches": [True, True], **({"unmix": SEARCH_MATCH[3]} if SEARCH_MATCH[3] else {})}},
+                          "swatches": [True, True], **({"unmix": SEARCH_MATCH[3]} if SEARCH_MATCH[3] else {}),
+                          **({"render_share": SEARCH_MATCH[4]} if SEARCH_MATCH[4] else {})}},
         **({"far_margin": SEARCH_MATCH[2]} if SEARCH_MATCH[2] is not None else {})}
     assert report["groups_far_from_every_design"] == sum(g["far"] for g in report["groups"])
     assert ("(far):" in (tmp_path / "inferred" / "report.md").read_text()) == bool(

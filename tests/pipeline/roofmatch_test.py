@@ -70,6 +70,22 @@ def test_the_match_loss_is_one_minus_the_mean_intersection():
         own = torch.minimum((rest / rest.sum()) @ roll.T, swatches[n // 2]).sum()
         sloped = torch.minimum(hist(target[0, 4:]), hist(predicted[n, 4:])).sum()
         assert abs(float(got[0, n]) - float(1 - (own + sloped) / 2)) < 1e-12
+    # With a render share, that share of the swatch part compares the unmixed, unshifted histogram with each
+    # choice's rendered one.
+    renders = torch.rand(3, 4, generator=generator, dtype=torch.float64)
+    renders /= renders.sum(dim=1, keepdim=True)
+    match = RoofMatch(((0, 4), (4, 4)), ("p0", "p1"), (swatches, None), (roll, torch.eye(4)), 0.8, unmix=0.5,
+                      renders=(renders, None), render_share=0.3)
+    got = match.losses(space, vectors, predicted, target)
+    unmixed = rest / rest.sum()
+    for n in range(6):
+        flat = torch.minimum(hist(target[0, :4]), hist(predicted[n, :4])).sum()
+        own = torch.minimum(unmixed @ roll.T, swatches[n // 2]).sum()
+        as_rendered = torch.minimum(unmixed, renders[n // 2]).sum()
+        sloped = torch.minimum(hist(target[0, 4:]), hist(predicted[n, 4:])).sum()
+        expected = 1 - (0.2 * flat + 0.8 * (0.7 * own + 0.3 * as_rendered) + sloped) / 2
+        assert abs(float(got[0, n]) - float(expected)) < 1e-12
+    assert match.to_dict()["render_share"] == 0.3
     # A target whose colours are exactly a design's scores 0 for it.
     match = RoofMatch(((0, 4), (4, 4)), ("p0", "p1"), (None, None), (torch.eye(4), torch.eye(4)))
     assert float(match.losses(space, vectors, predicted, predicted[3:4])[0, 3]) < 1e-12
@@ -141,6 +157,12 @@ def test_a_margin_keeps_the_first_answer_the_match_finds_plausible(coloured):
     ({"swatches": (-torch.eye(8)[:6], None)}, "non-negative histograms"),
     ({"unmix": -0.1}, "unmixing"), ({"unmix": 2.0}, "unmixing"),
     ({"unmix": 0.5, "blocks": ((0, 8), (8, 7)), "shifts": (torch.eye(8), torch.eye(7))}, "one width"),
+    ({"render_share": 1.5, "renders": (torch.eye(8)[:6], None)}, "render share"),
+    ({"render_share": 0.5}, "rendered histograms"),
+    ({"render_share": 0.5, "renders": (torch.eye(8)[:6],)}, "rendered histograms"),
+    ({"render_share": 0.5, "renders": (torch.eye(8)[:5], None)}, "one per swatch"),
+    ({"render_share": 0.5, "renders": (None, torch.eye(8)[:6])}, "one per swatch"),
+    ({"render_share": 0.5, "renders": (-torch.eye(8)[:6], None)}, "non-negative"),
 ])
 def test_bad_roof_matches_are_refused(kwargs, message):
     fields = {"blocks": ((0, 8), (8, 8)), "params": ("p0", "p1"), "swatches": (torch.eye(8)[:6], None),
@@ -214,11 +236,18 @@ def test_a_roof_match_is_fitted_for_a_checkpoint_whose_space_chooses_roof_materi
     assert match.params == ("flat_roof", "sloped_roof") and match.blocks == ((0, WIDTH), (WIDTH, WIDTH))
     assert match.swatch_weight == 0.6 and all(torch.equal(a, b) for a, b in zip(match.swatches, swatches.values()))
     assert all(torch.equal(shift, value_shift(-1.0)) for shift in match.shifts)  # the renders' brightening undone
+    # Each choice's rendered histogram: the model's predictions for its designs, about its texture a bin brighter.
+    for renders, own in zip(match.renders, swatches.values()):
+        assert renders.shape == own.shape
+        assert torch.allclose(renders.sum(dim=1), torch.ones(len(own), dtype=torch.float64))
+        brightened = own.double() @ brighter.T.double()
+        assert (torch.minimum(renders, brightened).sum(dim=1) > 0.8).all()
     # A far target with one texture's colours (rendered) and others far off is named by them.
     target = torch.cat([torch.full((1, 4), 500.0), features[:1, 4:]], dim=1)
-    found = exhaustive_search(fit.model, fit.norm.apply(target), space,
-                              colour=ColourComparison(far_loss=1e-9, match=match))
-    assert found[0].far and found[0].design == designs[0]
+    for as_rendered in (0.0, 1.0):  # by the textures' own colours, or as they render
+        found = exhaustive_search(fit.model, fit.norm.apply(target), space,
+                                  colour=ColourComparison(far_loss=1e-9, match=roof_match(ckpt, 1.0, 0.0, as_rendered)))
+        assert found[0].far and found[0].design == designs[0]
     # The search's default uses the match for such a model, the far comparison for one whose space has no roofs.
     colour = search_colour(ckpt)
     assert colour.match is not None and colour.far is None and search_colour(ckpt).match is colour.match
