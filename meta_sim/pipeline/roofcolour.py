@@ -487,7 +487,7 @@ SEARCH_FAR_MARGIN: float | None = 0.02
 # instead (``roof_match``) with that swatch weight, the first answer kept within the margin (None: never) of the
 # match's best, that unmixing and that render share. Chosen on the validation split by `make bench-objective`;
 # None: the far comparison above.
-SEARCH_MATCH: tuple[float, float, float | None, float, float] | None = (10.0, 1.0, None, 0.5, 0.0)
+SEARCH_MATCH: tuple[float, float, float | None, float, float] | None = (10.0, 1.0, None, 0.75, 0.5)
 
 
 @functools.lru_cache(maxsize=8)
