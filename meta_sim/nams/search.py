@@ -264,9 +264,10 @@ class RoofMatch:
         renders = self.renders or (None,) * len(self.blocks)
         for k, ((offset, width), name, swatches, shift) in enumerate(zip(self.blocks, self.params, self.swatches,
                                                                          self.shifts)):
-            mine, theirs = hists[k], root_histograms(predicted[:, offset:offset + width])
+            mine = hists[k]
             weight = self.swatch_weight if swatches is not None else 0.0
-            if weight < 1.0:
+            if weight < 1.0:  # the designs' predicted histograms, only where they count
+                theirs = root_histograms(predicted[:, offset:offset + width])
                 rendered = torch.cat([torch.minimum(mine[i:i + chunk, None, :], theirs[None]).sum(dim=-1)
                                       for i in range(0, len(mine), chunk)])
                 total += (1.0 - weight) * rendered
