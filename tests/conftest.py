@@ -50,3 +50,10 @@ def heldout_v4_bank():
     from meta_sim.sim.textures import ensure_heldout_bank
 
     return ensure_heldout_bank(name="heldout-v4")
+
+
+@pytest.fixture(scope="session")
+def heldout_v5_bank():
+    from meta_sim.sim.textures import ensure_heldout_bank
+
+    return ensure_heldout_bank(name="heldout-v5")

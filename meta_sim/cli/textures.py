@@ -25,7 +25,8 @@ def textures():
               default=None,
               help="build a held-out set (design-gap textures) instead: heldout-v1 (the set `--heldout` "
                    "alone builds; a single seed's E2), heldout-v2 (E2 test), heldout-v3 (a check on textures "
-                   "no choice looked at) or heldout-v4 (E2 validation)")
+                   "no choice looked at), heldout-v4 (E2 validation for a day) or heldout-v5 (E2 validation: "
+                   "heldout-v4 and 20 + 20 drawn textures)")
 @click.option("--size", type=int, default=256, show_default=True, help="texture size in pixels")
 @click.option("--repeat-m", type=float, default=8.0, show_default=True,
               help="with --from: physical size of one photo repeat in metres")

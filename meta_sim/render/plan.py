@@ -60,8 +60,9 @@ def plan(options: dict):
     else:
         space = DesignSpace.load()
     heldout = ensure_heldout_banks()
-    extra = {p.name: [t for bank in heldout for t in bank.ids(p.texture_kind)] for p in space.parameters
-             if getattr(p, "texture_kind", None)}
+    # Held-out textures a design may name (heldout-v5 holds heldout-v4's: each once).
+    extra = {p.name: list(dict.fromkeys(t for bank in heldout for t in bank.ids(p.texture_kind)))
+             for p in space.parameters if getattr(p, "texture_kind", None)}
     if options.get("design") is not None:
         jobs = [single_job(space, space.parse(options["design"], extra), options["seed"])]
     elif options.get("population") is not None:

@@ -186,7 +186,7 @@ def test_bench_nams_table_gives_each_splits_breakdown_after_the_accuracy_table()
               "feature_seconds_per_group": 0.2, "fastest_adjoint_keeping_e1": {"M": 250, "iterations": 200}}
     table = format_nams_table(result)
     test = table.index("#### E2, test (heldout-v2): where nams_exhaustive's top-10 misses come from")
-    validation = table.index("#### E2, validation (heldout-v4): where nams_exhaustive's top-10 misses come from")
+    validation = table.index("#### E2, validation (heldout-v5): where nams_exhaustive's top-10 misses come from")
     assert table.index("| E2 | nams_exhaustive | test |") < test < validation  # test first, as in the table above
     assert table.count("| flat | flat-held-1 | 3 | 0.333 | 0.333 | 2.0 | 1.0 (0.7) |") == 2
     del result["splits"]["test"]["breakdown"]  # a result from before the breakdown

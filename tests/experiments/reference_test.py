@@ -81,7 +81,7 @@ def test_bench_reference_on_a_small_rendered_training_set(bank, heldout_bank, tm
                 assert row["targets"] == 6 and row["seeds"] == seeds
                 assert all(0.0 <= row[f"{kind}_top{n}"] <= 1.0 for kind in ("flat", "sloped") for n in (1, 10))
         assert result["splits"][split]["experiments"]["e2"]["roof_colour_reference"]["heldout"] == (
-            "heldout-v2" if split == "test" else "heldout-v4")
+            "heldout-v2" if split == "test" else "heldout-v5")
     table = format_reference_table(result)
     assert table.count("\n") == 9 and "| E2 | test | labels |" in table and "| E2 | test | finder |" in table
     assert result["roof_finder"] == {"finder": "segmenter", "weight_power": 4.0}

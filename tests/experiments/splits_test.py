@@ -30,7 +30,7 @@ def test_validation_holds_the_seed_choices_were_made_on_and_test_is_disjoint_fro
         assert len(test.seeds) >= 3 and not set(test.seeds) & set(validation.seeds)
         assert test.touches_test and not validation.touches_test
     assert get_split("e1", "test").heldout is None
-    assert (get_split("e2", "validation").heldout, get_split("e2", "test").heldout) == ("heldout-v4", "heldout-v2")
+    assert (get_split("e2", "validation").heldout, get_split("e2", "test").heldout) == ("heldout-v5", "heldout-v2")
     assert set(SPLITS) == {(e, s) for e in ("e1", "e2") for s in ("validation", "test", "check")}
     assert get_split("e2", "check").heldout == "heldout-v3" and get_split("e1", "check").touches_test
     assert not set(get_split("e1", "check").seeds) & (set(get_split("e1", "test").seeds)
@@ -76,8 +76,9 @@ def test_a_single_seed_says_which_split_it_belongs_to():
     assert single_seed("e1", 31).name == "seed 31, of the check split"
     assert single_seed("e2", 5, "heldout-v3").touches_test  # the check textures, whatever the seed
     assert single_seed("e2", 1).heldout == "heldout-v1" and single_seed("e1", 1).heldout is None
-    assert single_seed("e2", 1).name == "seed 1"  # heldout-v1 is no split's set since validation moved to v4
-    assert single_seed("e2", 1, "heldout-v4").name == "seed 1, of the validation split"
+    assert single_seed("e2", 1).name == "seed 1"  # heldout-v1 is no split's set since validation moved on
+    assert single_seed("e2", 1, "heldout-v5").name == "seed 1, of the validation split"
+    assert single_seed("e2", 1, "heldout-v4").name == "seed 1"  # the validation set of one day, part of v5
     for bad in (-1, 1.5, True):
         with pytest.raises(MetaSimError, match="target seed"):
             single_seed("e1", bad)

@@ -113,7 +113,7 @@ def test_bench_nams_reports_the_test_split_beside_validation(evaluated, tiny_env
     for split, seeds in (("validation", [1, 2, 7]), ("test", [21, 22, 23])):
         settings_of = result["splits"][split]["settings"]
         assert settings_of["e1"]["seeds"] == settings_of["e2"]["seeds"] == seeds
-        assert settings_of["e2"]["heldout"] == ("heldout-v4" if split == "validation" else "heldout-v2")
+        assert settings_of["e2"]["heldout"] == ("heldout-v5" if split == "validation" else "heldout-v2")
         for rows in result["splits"][split]["experiments"].values():
             assert rows["nams_exhaustive"]["targets"] == 3 and rows["nams_adjoint_M16_it5"]["targets"] == 2
             assert set(rows["nams_exhaustive"]["intervals"]) == {

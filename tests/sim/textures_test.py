@@ -40,8 +40,9 @@ from meta_sim.sim.textures import (
     write_png,
     write_similarity,
 )
+from meta_sim.sim.textures.bank import drawn_heldout
 from meta_sim.sim.textures.pngio import encode_png
-from meta_sim.sim.textures.procedural import HELDOUT_SETS
+from meta_sim.sim.textures.procedural import HELDOUT_SETS, HELDOUT_V5_DRAWN, drawn_recipe
 
 HASHES = Path(__file__).parent / "data" / "texture_hashes.json"
 ID_PATTERN = re.compile(r"^(flat|sloped)-[a-z0-9]+(-[a-z0-9]+)*$")
@@ -72,13 +73,19 @@ def heldout_v4(heldout_v4_bank):
 
 
 @pytest.fixture(scope="module")
-def images(bank, heldout, heldout_v2, heldout_v3, heldout_v4):
-    return {e.id: read_rgb8(b.image_path(e.id)) for b in (bank, heldout, heldout_v2, heldout_v3, heldout_v4)
-            for e in b.entries}
+def heldout_v5(heldout_v5_bank):
+    return heldout_v5_bank
+
+
+@pytest.fixture(scope="module")
+def images(bank, heldout, heldout_v2, heldout_v3, heldout_v4, heldout_v5):
+    return {e.id: read_rgb8(b.image_path(e.id))
+            for b in (bank, heldout, heldout_v2, heldout_v3, heldout_v4, heldout_v5) for e in b.entries}
 
 
 def _all_recipes():
-    return recipes() + sum((recipes(heldout=name) for name in HELDOUT_SETS), ())
+    """Every recipe once (heldout-v5 holds heldout-v4's)."""
+    return tuple({r.id: r for r in recipes() + sum((recipes(heldout=name) for name in HELDOUT_SETS), ())}.values())
 
 
 # --- recipes and generated images -------------------------------------------
@@ -134,6 +141,30 @@ def test_a_later_heldout_set_is_a_new_set_of_roofs(name, bank, heldout, heldout_
         assert ID_PATTERN.match(entry.id) and entry.id.startswith(entry.kind + "-")
 
 
+def test_heldout_v5_is_heldout_v4_and_the_first_drawn_candidates_meeting_the_conditions(
+        bank, heldout, heldout_v2, heldout_v3, heldout_v4, heldout_v5, images):
+    """E2's validation set: the fourth set's textures and, per kind, 20 drawn ones, exactly the first candidates
+    of ``drawn_recipe`` that meet the held-out conditions against every set before it (and the ones kept
+    before them): nothing picked by hand, nothing left out after a look."""
+    assert heldout_v5.root == heldout_bank_dir(name="heldout-v5")
+    before = (bank, heldout, heldout_v2, heldout_v3, heldout_v4)
+    for kind in ("flat", "sloped"):
+        ids = heldout_v5.ids(kind)
+        assert ids[:len(heldout_v4.ids(kind))] == heldout_v4.ids(kind) and len(ids) == 30
+        drawn = [drawn_recipe(kind, i) for i in HELDOUT_V5_DRAWN[kind]]
+        assert ids[10:] == [r.id for r in drawn] and all(ID_PATTERN.match(i) for i in ids[10:])
+        assert not set(ids[10:]) & {i for b in before for i in b.ids()}
+        known = [np.stack([hsv_cone_histogram(images[i]) for i in b.ids()]) for b in before]
+        bank_kind = np.stack([hsv_cone_histogram(images[i]) for i in bank.ids(kind)])
+        assert drawn_heldout(kind, 20, known, bank_kind) == HELDOUT_V5_DRAWN[kind]
+    assert drawn_recipe("flat", 3) == drawn_recipe("flat", 3) != drawn_recipe("flat", 3, seed=6)
+    with pytest.raises(ValueError, match="kind must be one of"):
+        drawn_recipe("pitched", 0)
+    with pytest.raises(MetaSimError, match="only 0 of 2 drawn flat candidates"):
+        drawn_heldout("flat", 1, [np.stack([hsv_cone_histogram(images[i]) for i in bank.ids()])],
+                      np.stack([hsv_cone_histogram(images[i]) for i in bank.ids("flat")][:5]), limit=2)
+
+
 def _nearest(rows: np.ndarray, cols: np.ndarray, same: bool = False) -> np.ndarray:
     """Each row's highest similarity to a column (not itself when rows and columns are one set)."""
     sim = similarity_matrix(rows, cols)
@@ -142,9 +173,10 @@ def _nearest(rows: np.ndarray, cols: np.ndarray, same: bool = False) -> np.ndarr
     return sim.max(axis=1)
 
 
-@pytest.mark.parametrize("name", ["heldout-v2", "heldout-v3", "heldout-v4"])
+@pytest.mark.parametrize("name", ["heldout-v2", "heldout-v3", "heldout-v4", "heldout-v5"])
 def test_a_later_heldout_set_is_unlike_every_set_before_it_yet_ranks_the_bank(name, bank, heldout, heldout_v2,
-                                                                            heldout_v3, heldout_v4, images):
+                                                                            heldout_v3, heldout_v4, heldout_v5,
+                                                                            images):
     """E2's test textures (and the check and validation sets after them) must not be the earlier sets'
     textures in other colours' clothing, nor so far from everything that the HSV ranking of the bank is a
     tie (a top-10 hit would then be a coin toss).
@@ -158,12 +190,14 @@ def test_a_later_heldout_set_is_unlike_every_set_before_it_yet_ranks_the_bank(na
         return np.stack([hsv_cone_histogram(images[i]) for i in b.ids(kind)])
 
     sets = {"heldout-v2": (heldout_v2, (bank, heldout)), "heldout-v3": (heldout_v3, (bank, heldout, heldout_v2)),
-            "heldout-v4": (heldout_v4, (bank, heldout, heldout_v2, heldout_v3))}
+            "heldout-v4": (heldout_v4, (bank, heldout, heldout_v2, heldout_v3)),
+            "heldout-v5": (heldout_v5, (bank, heldout, heldout_v2, heldout_v3, heldout_v4))}
     later, before = sets[name]
     known = np.concatenate([hists(b) for b in before])
     for kind in ("flat", "sloped"):
         typical = np.median(_nearest(hists(bank, kind), hists(bank, kind), same=True))
-        new = hists(later, kind)
+        new = np.stack([hsv_cone_histogram(images[i]) for i in later.ids(kind) if not heldout_v4.contains(i)]
+                       if name == "heldout-v5" else hists(later, kind))  # v5's own: its drawn textures
         nearest_known = _nearest(new, known)
         assert nearest_known.max() < typical, (kind, nearest_known.max(), typical)
         assert np.median(nearest_known) < np.median(_nearest(hists(heldout, kind), hists(bank))), kind
@@ -230,9 +264,10 @@ def test_building_twice_gives_byte_identical_files(bank, tmp_path):
     _assert_same_files(bank.root, build_default_bank(tmp_path / "again").root)
 
 
-def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2, heldout_v3, heldout_v4):
+def test_pixels_match_the_committed_hashes(bank, heldout, heldout_v2, heldout_v3, heldout_v4, heldout_v5):
     expected = json.loads(HASHES.read_text())["256"]
-    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2, heldout_v3, heldout_v4) for e in b.entries}
+    actual = {e.id: e.sha256 for b in (bank, heldout, heldout_v2, heldout_v3, heldout_v4, heldout_v5)
+              for e in b.entries}
     assert set(expected) == set(actual)
     changed = sorted(i for i in expected if actual.get(i) != expected[i])
     assert not changed, (
@@ -558,7 +593,7 @@ def test_the_cli_builds_either_held_out_set(tmp_path):
     from meta_sim.cli import main
 
     for args, name in (([], "heldout-v1"), (["heldout-v2"], "heldout-v2"), (["heldout-v3"], "heldout-v3"),
-                       (["heldout-v4"], "heldout-v4")):
+                       (["heldout-v4"], "heldout-v4"), (["heldout-v5"], "heldout-v5")):
         out = tmp_path / name
         result = CliRunner().invoke(main, ["textures", "build", "--size", "16", "--heldout", *args, "--out", str(out)])
         assert result.exit_code == 0, result.output

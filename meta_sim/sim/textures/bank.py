@@ -13,7 +13,7 @@ of one repeat of the image in metres (its height scales with the aspect
 ratio). Banks also hold ``similarity.json`` (see ``similarity.py``).
 
 Banks come from three places: the default procedural bank and the held-out
-sets ``heldout-v1`` to ``heldout-v4`` (cached under ``$META_SIM_CACHE`` or ``~/.cache/meta-sim`` and built on
+sets ``heldout-v1`` to ``heldout-v5`` (cached under ``$META_SIM_CACHE`` or ``~/.cache/meta-sim`` and built on
 first use), or a user's folder of photos (``build_bank_from_folder``).
 """
 
@@ -232,6 +232,28 @@ def _write_bank(out_dir: Path, name: str, textures, repeat_source) -> TextureBan
 
 def _histograms(images) -> np.ndarray:
     return np.stack([hsv_cone_histogram(img) for img in images])
+
+
+def drawn_heldout(kind: str, count: int, before: list[np.ndarray], bank_kind: np.ndarray,
+                  seed: int = procedural.DRAWN_SEED, size: int = 256, limit: int = 1000) -> tuple[int, ...]:
+    """The first ``count`` candidates of ``procedural.drawn_recipe(kind, i, seed)`` that meet the held-out
+    conditions (tests/sim/textures_test.py), kept in turn: further from every texture known (the HSV-cone
+    histograms ``before``, of every set before and of the candidates kept so far) than a typical bank texture
+    of the kind is from its nearest bank neighbour, yet sharing some colour (similarity above 0.01) with at
+    least 10 bank textures of the kind (``bank_kind``, their histograms). MetaSimError if ``limit``
+    candidates do not give ``count``."""
+    within = similarity_matrix(bank_kind, bank_kind)
+    np.fill_diagonal(within, -1.0)
+    typical = float(np.median(within.max(axis=1)))
+    known, kept = np.concatenate(before), []
+    for index in range(limit):
+        hist = _histograms([procedural.generate(procedural.drawn_recipe(kind, index, seed), size)])
+        if similarity_matrix(hist, known).max() < typical and (similarity_matrix(hist, bank_kind) > 0.01).sum() >= 10:
+            kept.append(index)
+            known = np.concatenate([known, hist])
+            if len(kept) == count:
+                return tuple(kept)
+    raise MetaSimError(f"only {len(kept)} of {limit} drawn {kind} candidates meet the held-out conditions, not {count}")
 
 
 MIN_SIZE, MAX_SIZE = 8, 4096
