@@ -105,6 +105,8 @@ def format_render_table(result: dict) -> str:
 
 # Adjoint settings swept by bench_adjoint, paper first: (starts M, iterations).
 ADJOINT_SWEEP = ((1000, 200), (250, 200), (250, 100), (64, 100), (64, 50), (16, 50))
+# What E2's intervals resample (evaluate.texture_clusters); a result without the key resampled its groups.
+E2_INTERVALS = "held-out textures"
 # bench_nams's one adjoint setting: the continuous spaces' default (evaluate.CONTINUOUS_SEARCH).
 NAMS_ADJOINT = ((64, 100),)
 
@@ -116,7 +118,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
 
     Uses the default training set and model (``dataset`` and ``settings``: others), built or reused
     from the cache. Each split has ``targets`` groups of ``tiles`` tiles (9, as in the paper) per
-    target seed; every rate comes with a 95% interval from resampling the groups. The neural-adjoint
+    target seed; every rate comes with a 95% interval from resampling the groups (E2: the held-out textures,
+    ``evaluate.texture_clusters``). The neural-adjoint
     settings of ``sweep`` (the continuous spaces' default) run on ``adjoint_targets`` groups only, spread over
     the seeds: a group costs seconds, not milliseconds. On the same targets, ``bench_adjoint`` sweeps the
     adjoint's settings from the paper's down and ``bench_ablations`` scores the other architectures and the
@@ -141,7 +144,8 @@ def bench_nams(targets: int = 100, adjoint_targets: int = 20, root: Path | None 
               "architecture": settings.architecture,
               "roof_finder": settings.roof_finder,
               "roof_weight_power": settings.roof_weight_power,
-              "targets_per_seed": targets, "adjoint_targets": adjoint_targets, "tiles_per_target": tiles,
+              "targets_per_seed": targets, "e2_intervals": E2_INTERVALS, "adjoint_targets": adjoint_targets,
+              "tiles_per_target": tiles,
               "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}, "splits": {}}
     for split_name in SPLIT_NAMES:
         experiments, seeds, breakdowns = {}, {}, {}
@@ -291,7 +295,8 @@ def bench_adjoint(targets: int = 100, adjoint_targets: int = 20, root: Path | No
     root = Path(root or cache_root())
     dataset, settings = dataset or DatasetConfig(), settings or ModelSettings()
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
-              "architecture": settings.architecture, "targets_per_seed": targets, "adjoint_targets": adjoint_targets,
+              "architecture": settings.architecture, "targets_per_seed": targets, "e2_intervals": E2_INTERVALS,
+              "adjoint_targets": adjoint_targets,
               "tiles_per_target": tiles, "sweep": [list(si) for si in sweep],
               "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads()}, "splits": {}}
     for split_name, experiment, split, ctx in _split_contexts(dataset, settings, targets, tiles, root, bars):
@@ -305,13 +310,21 @@ def bench_adjoint(targets: int = 100, adjoint_targets: int = 20, root: Path | No
     return result
 
 
+def _interval_note(result: dict) -> str:
+    """What the tables' 95% intervals resample, as the result says."""
+    if result.get("e2_intervals") == E2_INTERVALS:
+        return ("[95% interval] from resampling the target groups (E1) or the held-out textures of the roof kind "
+                "(E2: a texture's groups hit or miss together), 2,000 draws.")
+    return "[95% interval] from resampling the groups (2,000 draws)."
+
+
 def format_adjoint_table(result: dict) -> str:
     """``bench_adjoint``'s result as the Markdown of docs/benchmarks.md: the accuracy table (test first) and
     the chosen setting."""
     f = result["fastest_adjoint_keeping_e1"]
     note = (f"{result['adjoint_targets']} target groups of {result['tiles_per_target']} tiles per split and "
             f"experiment, spread over the seeds of bench-nams' targets ({result['targets_per_seed']} groups per "
-            "seed); `nams_exhaustive` on the same groups. [95% interval] from resampling the groups (2,000 draws). "
+            f"seed); `nams_exhaustive` on the same groups. {_interval_note(result)} "
             f"{result['machine']['cpus']} CPUs, torch on {result['machine']['torch_threads']} thread(s). Fastest "
             "setting within 0.05 of the paper setting's E1 top-1 on the validation split: "
             f"M={f['M']}, {f['iterations']} iterations.")
@@ -402,7 +415,8 @@ def bench_ablations(targets: int = 100, root: Path | None = None, bars: Bars | N
                   for name, variant in own.items()}
     result = {"dataset": {"designs": dataset.designs, "tiles": dataset.tiles, "preset": dataset.preset},
               "architecture": settings.architecture, "roof_finder": settings.roof_finder,
-              "roof_weight_power": settings.roof_weight_power, "targets_per_seed": targets, "tiles_per_target": tiles,
+              "roof_weight_power": settings.roof_weight_power, "targets_per_seed": targets,
+              "e2_intervals": E2_INTERVALS, "tiles_per_target": tiles,
               "train_seconds": {name: round(ckpt.extra["seconds"], 1)
                                 for name, ckpt in {**others, **own_models}.items()},
               "roof_segmenter_seconds": _finder_seconds(dataset, {"default": settings, **same, **own}, root),
@@ -473,8 +487,8 @@ def format_nams_table(result: dict) -> str:
                           for split, s in ((n, splits[n]) for n in order))
     notes = [f"Splits ({described}); {result['targets_per_seed']} target groups of {result['tiles_per_target']} "
              "tiles per seed in unseen cities, the neural-adjoint rows on "
-             f"{result['adjoint_targets']} of them spread over the seeds; [95% interval] from resampling the groups "
-             "(2,000 draws). Choices are made on the validation rows only."
+             f"{result['adjoint_targets']} of them spread over the seeds; {_interval_note(result)} "
+             "Choices are made on the validation rows only."
              + (f" {result['machine']['cpus']} CPUs, torch on {result['machine']['torch_threads']} thread(s)."
                 if "machine" in result else ""),
              f"Training set {result['dataset']['designs']} designs x {result['dataset']['tiles']} tiles "
@@ -555,7 +569,7 @@ def format_ablations_table(result: dict) -> str:
             f"{result['dataset']['preset']}) and scored with the exhaustive search on bench-nams' targets "
             f"({result['targets_per_seed']} groups of {result['tiles_per_target']} tiles per seed): {described}. "
             f"Training (when each cached model was trained): {trained}. The defaults were chosen on the validation "
-            "rows; [95% interval] from resampling the groups (2,000 draws).")
+            f"rows; {_interval_note(result)}")
     return "\n".join([*_accuracy_table(splits), "", note])
 
 

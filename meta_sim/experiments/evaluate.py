@@ -116,15 +116,45 @@ def mean_scores(rows: list[dict]) -> dict:
     return {key: float(np.mean([r[key] for r in rows])) for key in rows[0]} if rows else {}
 
 
-def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0) -> dict:
+def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0,
+                        clusters: dict[str, list] | None = None) -> dict:
     """Per metric of the score rows (one per target group): a 95% interval of its mean, resampling the
-    rows with replacement (the same draws for every metric)."""
-    draws = np.random.default_rng(seed).integers(0, len(rows), (resamples, len(rows)))
+    rows with replacement (the same draws for every metric).
+
+    ``clusters`` (roof kind -> a label per row, e.g. each group's true texture of that kind): a metric of that
+    kind (``flat_top10``) resamples the labels instead, each drawn label bringing all its rows (a cluster
+    bootstrap). E2's groups share a few held-out textures, and a texture's groups miss or hit together: what
+    varies from one set of textures to the next is the textures, and resampling groups hides it."""
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, len(rows), (resamples, len(rows)))
+    by_kind = {}
+    for kind, labels in (clusters or {}).items():
+        if len(labels) != len(rows):
+            raise ValueError(f"{len(labels)} {kind} cluster labels for {len(rows)} rows")
+        names, index = np.unique(np.asarray(labels, dtype=object).astype(str), return_inverse=True)
+        by_kind[kind] = (index, len(names), rng.integers(0, len(names), (resamples, len(names))))
     out = {}
     for key in rows[0]:
-        means = np.array([r[key] for r in rows], dtype=np.float64)[draws].mean(axis=1)
+        values = np.array([r[key] for r in rows], dtype=np.float64)
+        kind = key.split("_", 1)[0]
+        if kind in by_kind:
+            index, n, picks = by_kind[kind]
+            sums, counts = np.bincount(index, values, n), np.bincount(index, minlength=n).astype(np.float64)
+            means = sums[picks].sum(axis=1) / counts[picks].sum(axis=1)
+        else:
+            means = values[draws].mean(axis=1)
         out[key] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
     return out
+
+
+def texture_clusters(experiment: str, designs: list[dict]) -> dict[str, list] | None:
+    """E2's cluster labels for ``bootstrap_intervals``: each target group's true texture per roof kind (from
+    its true design). None for E1, whose targets are the bank's own textures (the set a user infers from, not
+    a sample of it)."""
+    if experiment != "e2":
+        return None
+    return {kind: [design[param] for design in designs] for param, kind in KIND_OF.items()
+            if designs and param in designs[0]}
 
 
 def results_markdown(results: dict) -> str:
@@ -134,7 +164,8 @@ def results_markdown(results: dict) -> str:
     split = f", {results['split']['name']}" if "split" in results else ""
     lines = [f"### {experiment}: rate of inferring one of the n nearest textures "
              f"({results['targets']} target groups of {results['tiles_per_target']} tiles{split}; "
-             "95% intervals from resampling the groups)", "",
+             "95% intervals from resampling the " + ("held-out textures" if results["experiment"] == "e2" else "groups")
+             + ")", "",
              "| method | flat top-1 | flat top-10 | sloped top-1 | sloped top-10 | s per target |",
              "|---|---|---|---|---|---|"]
     for name, m in results["methods"].items():
@@ -519,7 +550,8 @@ def score_other_model(ctx: EvalContext, checkpoint, seed: int, S: int = 50) -> d
 
 def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
     """Mean top-1/top-10 rates and seconds per target of one method, and ``intervals``: each rate's
-    95% interval from resampling the target groups (``bootstrap_intervals``).
+    95% interval from resampling the target groups, in E2 the held-out textures (``bootstrap_intervals``,
+    ``texture_clusters``).
 
     In E1 also ``unseen``: the rates over the targets whose design is not one
     of the training set's (``unseen_targets`` of them). A method that only
@@ -531,7 +563,9 @@ def score_method(ctx: EvalContext, run) -> tuple[dict, list[dict]]:
     designs = run()
     seconds = (time.perf_counter() - started) / len(ctx.jobs)
     rows = [score(p, job.design, ctx.ranks, ctx.nams.space) for p, job in zip(designs, ctx.jobs)]
-    metrics = {**mean_scores(rows), "seconds_per_target": seconds, "intervals": bootstrap_intervals(rows)}
+    metrics = {**mean_scores(rows), "seconds_per_target": seconds,
+               "intervals": bootstrap_intervals(rows, clusters=texture_clusters(ctx.experiment,
+                                                                                 [j.design for j in ctx.jobs]))}
     if ctx.training_designs:
         unseen = unseen_rows(rows, ctx.jobs, ctx.training_designs)
         metrics.update(unseen=mean_scores(unseen), unseen_targets=len(unseen))

@@ -82,7 +82,7 @@ def test_e1_scores_the_targets_the_training_set_lacks_apart():
     seen = {"flat_roof": flat[0], "sloped_roof": sloped[0]}
     unseen = {"flat_roof": flat[1], "sloped_roof": sloped[1]}
     wrong = {"flat_roof": flat[2], "sloped_roof": sloped[2]}
-    ctx = SimpleNamespace(jobs=[Job(seen, 1, "a"), Job(unseen, 2, "b")],
+    ctx = SimpleNamespace(experiment="e1", jobs=[Job(seen, 1, "a"), Job(unseen, 2, "b")],
                           ranks=rankings("e1", bank, ensure_heldout_bank()), training_designs=[seen],
                           nams=SimpleNamespace(space=None))
     metrics, _ = score_method(ctx, lambda: [seen, wrong])  # recalls the seen design, misses the other
@@ -151,6 +151,28 @@ def test_bootstrap_intervals_hold_the_mean_and_narrow_with_more_groups():
             assert low < np.mean([r[key] for r in rows]) < high
     assert np.diff(bootstrap_intervals(many)["hit"]) < 0.5 * np.diff(bootstrap_intervals(few)["hit"])
     assert bootstrap_intervals([{"hit": 1.0}] * 5) == {"hit": [1.0, 1.0]}
+
+
+def test_e2_intervals_resample_the_held_out_textures_not_the_groups():
+    """Two textures, one always hit and one always missed, 50 groups each: resampling the groups says the
+    rate is 0.5 give or take 0.1; resampling the textures says it could be anything from 0 to 1, which is what
+    another draw of two textures would show. The other kind's metric keeps its own clusters; E1 has none."""
+    import numpy as np
+
+    from meta_sim.experiments.evaluate import bootstrap_intervals, texture_clusters
+
+    designs = [{"flat_roof": "flat-a" if i < 50 else "flat-b", "sloped_roof": f"sloped-{i % 25}"} for i in range(100)]
+    rows = [{"flat_top10": float(i < 50), "sloped_top10": float(i % 25 % 2)} for i in range(100)]
+    clusters = texture_clusters("e2", designs)
+    assert clusters["flat"][:2] == ["flat-a", "flat-a"] and len(clusters["sloped"]) == 100
+    assert texture_clusters("e1", designs) is None
+    groups, textures = bootstrap_intervals(rows), bootstrap_intervals(rows, clusters=clusters)
+    assert 0.35 < groups["flat_top10"][0] < 0.5 < groups["flat_top10"][1] < 0.65
+    assert textures["flat_top10"] == [0.0, 1.0]
+    width = {name: np.diff(result["sloped_top10"])[0] for name, result in (("groups", groups), ("textures", textures))}
+    assert width["textures"] > 1.7 * width["groups"]  # 25 textures, every other one hit
+    with pytest.raises(ValueError, match="3 flat cluster labels for 100 rows"):
+        bootstrap_intervals(rows, clusters={"flat": ["a", "b", "c"]})
 
 
 def test_tables_give_the_sbi_baselines_training_time():

@@ -336,4 +336,7 @@ def test_the_fastest_adjoint_setting_is_chosen_on_validation_rows_and_the_table_
     assert "| 0.900 [0.850, 0.950] |" in rows[0]
     assert "E2 seeds 21, 22, 23 with heldout-v2" in table and "E2 seeds 1, 2, 7 with heldout-v5" in table
     assert "on the validation split: M=64, 100 iterations" in table
+    assert "from resampling the groups (2,000 draws)" in table  # a result from before the texture intervals
+    result["e2_intervals"] = "held-out textures"
+    assert "or the held-out textures of the roof kind" in format_nams_table(result)
     assert "stage (E4)" not in table  # no training timed: no stage times
