@@ -42,7 +42,7 @@ from ..sim.appearance import TREE_COLOUR, foliage_tint, ground_colours, vegetati
 from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.furniture import SURFACES, roof_furniture
 from ..sim.ground import ground_image
-from ..sim.quality import RenderPreset
+from ..sim.quality import RenderPreset, sun_studio_light
 
 LABEL_ATTRIBUTE = "label"
 UV_NAME = "UVMap"
@@ -303,6 +303,9 @@ class CityScene:
         self._azimuth = float(rng.uniform(0.0, 2.0 * math.pi))
         if self.sun_elevation_deg is not None:  # a design's sun; the azimuth stays the city's
             self._elevation = math.radians(float(self.sun_elevation_deg))
+        # The fast preset lights a city of the richer scene with its sun and sky (``quality.sun_studio_light``).
+        self.sun_lit = bool(layout.params.richer_scene)
+        self._studio_light = None
         self._build(shadow_margin_m)
         self._add_camera_and_sun()
 
@@ -604,6 +607,9 @@ class CityScene:
             scene.render.engine = "BLENDER_WORKBENCH"
             shading = scene.display.shading
             shading.light = "STUDIO"
+            shading.use_world_space_lighting = self.sun_lit
+            shading.studiolight_rotate_z = 0.0
+            shading.studio_light = self._sun_studio_light() if self.sun_lit else "Default"
             shading.color_type = "TEXTURE"
             shading.show_shadows = preset.shadows
             shading.shadow_intensity = 0.55
@@ -628,8 +634,22 @@ class CityScene:
             # and its preview would not be the farm's pixels.
             cycles.sampling_pattern = "TABULATED_SOBOL"
 
+    def _sun_studio_light(self) -> str:
+        """The name of this city's studio light of its sun and sky, loaded into the session on first use (a
+        studio light is read from a file; ``close`` unloads it again)."""
+        if self._studio_light is None:
+            path = os.path.join(self._tmp, f"meta-sim-sun-{os.path.basename(self._tmp)}.sl")
+            with open(path, "w", encoding="ascii") as handle:
+                handle.write(sun_studio_light(self._elevation, self._azimuth))
+            self._studio_light = bpy.context.preferences.studio_lights.load(path, "STUDIO")
+        return self._studio_light.name
+
     def close(self) -> None:
-        """Remove the temporary files (the city itself stays; `remove_city` deletes it)."""
+        """Remove the temporary files and this city's studio light (the city itself stays; `remove_city`
+        deletes it)."""
+        if self._studio_light is not None:
+            bpy.context.preferences.studio_lights.remove(self._studio_light)
+            self._studio_light = None
         for name in os.listdir(self._tmp):
             os.remove(os.path.join(self._tmp, name))
         os.rmdir(self._tmp)

@@ -67,8 +67,9 @@ LAYOUT_VERSION = 1
 # What a city of the richer scene (a style other than the suburban grid, or roof furniture) shows, beyond
 # its layout: tile headers and training-set keys of such cities carry it, so their caches are rendered and
 # trained again when it changes (``scene_version``). 2: water tanks on flat roofs and kerbs and sidewalks
-# along the roads between style regions.
-SCENE_VERSION = 2
+# along the roads between style regions. 3: the fast preset lights such a city with its own sun and sky
+# (``quality.sun_studio_light``), so sloped roofs show a sunlit and a shaded side.
+SCENE_VERSION = 3
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
 
 KINDS = ("residential", "apartment", "office", "industrial", "highrise")
@@ -313,6 +314,12 @@ class LayoutParams:
             raise MetaSimError(f"LayoutParams.block_size_m must be (min, max) with min <= max, got {block!r}")
         object.__setattr__(self, "block_size_m", (lo, hi))
         object.__setattr__(self, "style", style_mix(self.style))
+
+    @property
+    def richer_scene(self) -> bool:
+        """Whether a city with these parameters is of the richer scene (a style other than the suburban grid,
+        or roof furniture): what ``scene_version`` keys and the fast preset lights with the sun."""
+        return self.roof_furniture > 0.0 or self.style != DEFAULT_STYLE
 
     def to_dict(self) -> dict[str, Any]:
         out = {

@@ -5,6 +5,7 @@ Pure data, shared by the renderer, the CLI and the add-on.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,6 +65,42 @@ FAST_EXPOSURE = 6.0
 # preset's exposure and the path-traced sun, white roofs render at a linear 1.0-1.8; without the curve
 # most of their pixels clip (docs/design.md, "A tone curve in every preset").
 TONE = (0.6, 0.95)
+
+
+# A city of the richer scene (``layout.LayoutParams.richer_scene``) is lit in the fast preset by a studio light of
+# its own instead of Workbench's: its sun (a directional light from the city's sun direction, in world space)
+# and the sky (an even ambient light), so a sloped roof shows a sunlit and a shaded side as from the air,
+# where the studio light, fixed to the camera, lit every roof alike from one side. The two are scaled so that
+# a flat surface is as bright as under the studio light, whatever the sun's elevation (a camera's automatic
+# exposure): FAST_EXPOSURE still brings it to the path-traced presets' brightness. SKY_SHARE is the sky's
+# share of the light on a flat surface: clear-sky diffuse light is some 10-25% of the total at these
+# elevations; not fitted to any target (docs/design.md, "The sun in the fast preset").
+SKY_SHARE = 0.2
+# Blender facts, measured by tests/render/render_test.py on a flat plane: a flat surface's brightness per unit
+# albedo under Workbench's default studio light seen from above, and Workbench's diffuse response to a
+# studio light of unit colour at normal incidence.
+STUDIO_FLAT = 0.4216
+WORKBENCH_DIFFUSE = 0.931
+
+
+def sun_studio_light(elevation: float, azimuth: float) -> str:
+    """The text of a Workbench studio light (a ``.sl`` file) of a sun at ``elevation`` and ``azimuth``
+    (radians; azimuth 0 is a sun in the south, the scene's convention) and the sky, for world-space
+    lighting. A studio light's directions have y up and z towards the south: world (x, y, z) is (x, z, -y)."""
+    if not 0.0 < elevation <= math.pi / 2:
+        raise MetaSimError(f"the sun's elevation must be above the horizon, not {math.degrees(elevation):g} degrees")
+    to_sun = (math.cos(elevation) * math.sin(azimuth), -math.cos(elevation) * math.cos(azimuth), math.sin(elevation))
+    vec = (to_sun[0], to_sun[2], -to_sun[1])
+    sun = (1.0 - SKY_SHARE) * STUDIO_FLAT / (WORKBENCH_DIFFUSE * math.sin(elevation))
+    sky = SKY_SHARE * STUDIO_FLAT
+    lines = ["version 1", *(f"light_ambient.{c} {sky:.6f}" for c in "xyz")]
+    for i in range(4):  # a studio light has four; the sun is the first, the others are off
+        on = i == 0
+        lines += [f"light[{i}].flag {int(on)}", f"light[{i}].smooth 0.000000",
+                  *(f"light[{i}].col.{c} {sun if on else 0.0:.6f}" for c in "xyz"),
+                  *(f"light[{i}].spec.{c} 0.000000" for c in "xyz"),
+                  *(f"light[{i}].vec.{c} {v:.6f}" for c, v in zip("xyz", vec if on else (0.0, 1.0, 0.0)))]
+    return "\n".join(lines) + "\n"
 
 
 PRESETS = {p.name: p for p in (

@@ -868,3 +868,144 @@ def test_overhead_v3_renders_a_few_houses_among_trees_at_its_low_building_densit
     green = [share(t, lambda t: (t.building == 0) & (t.rgb[..., 1] > 1.1 * t.rgb[..., 0])) for t in (sparse, built)]
     assert buildings[0] < 0.08 and buildings[0] < buildings[1] / 3, buildings
     assert green[0] > green[1], green
+
+
+def _plane_and_cone_scene(albedo: float):
+    """A fresh Blender session with a flat square and a cone of 72 faces (slope 0.6) seen from above, lit by
+    Workbench's studio light; returns a render function (pixel brightness at world x, y) and the shading."""
+    import bmesh
+    import bpy
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    mesh, bm = bpy.data.meshes.new("shapes"), bmesh.new()
+    tip = bm.verts.new((0.0, 0.0, 0.6))
+    ring = [bm.verts.new((np.cos(2 * np.pi * k / 72), np.sin(2 * np.pi * k / 72), 0.0)) for k in range(72)]
+    for k in range(72):
+        bm.faces.new([ring[k], ring[(k + 1) % 72], tip])
+    bm.faces.new([bm.verts.new(c) for c in ((1.2, -1.4, 0), (1.4, -1.4, 0), (1.4, -1.2, 0), (1.2, -1.2, 0))])
+    bm.to_mesh(mesh)
+    scene.collection.objects.link(bpy.data.objects.new("shapes", mesh))
+    camera = bpy.data.cameras.new("nadir")
+    camera.type, camera.ortho_scale = "ORTHO", 3.0
+    camera_obj = bpy.data.objects.new("nadir", camera)
+    camera_obj.location = (0.0, 0.0, 10.0)
+    scene.collection.objects.link(camera_obj)
+    scene.camera = camera_obj
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.resolution_x = scene.render.resolution_y = 300
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format, scene.render.image_settings.color_depth = "OPEN_EXR", "32"
+    shading = scene.display.shading
+    shading.light, shading.color_type, shading.single_color = "STUDIO", "SINGLE", (albedo,) * 3
+    shading.show_specular_highlight = False  # as the fast preset renders
+
+    def render(path):
+        scene.render.filepath = str(path)
+        bpy.ops.render.render(write_still=True)
+        image = bpy.data.images.load(str(path), check_existing=False)
+        pixels = np.array(image.pixels[:]).reshape(300, 300, 4)[..., 0] / albedo  # row 0 at the bottom
+        bpy.data.images.remove(image)
+        return lambda x, y: float(pixels[int((y / 3 + 0.5) * 300), int((x / 3 + 0.5) * 300)])
+
+    return render, shading
+
+
+def test_the_sun_studio_light_lights_flat_ground_as_the_studio_light_and_slopes_from_the_sun(tmp_path):
+    """The Blender facts `quality.sun_studio_light` rests on, measured: a flat surface under Workbench's studio
+    light (STUDIO_FLAT per unit albedo), and under the sun's studio light as bright at any elevation; each face
+    of a cone lit as the sun and sky light it (ambient + WORKBENCH_DIFFUSE x sun x cos), its brightest side
+    towards the sun whatever the azimuth, so the studio light's axes are mapped to the world's right."""
+    import bpy
+
+    from meta_sim.sim.quality import SKY_SHARE, STUDIO_FLAT, WORKBENCH_DIFFUSE, sun_studio_light
+
+    render, shading = _plane_and_cone_scene(0.4)
+    shading.studio_light, shading.use_world_space_lighting = "Default", False
+    assert render(tmp_path / "studio.exr")(1.3, -1.3) == pytest.approx(STUDIO_FLAT, rel=0.005)
+    prefs = bpy.context.preferences
+    for elevation_deg, azimuth_deg in ((45, 0), (30, 120), (70, 250)):
+        elevation, azimuth = np.radians(elevation_deg), np.radians(azimuth_deg)
+        path = tmp_path / f"sun-{azimuth_deg}.sl"
+        path.write_text(sun_studio_light(elevation, azimuth))
+        light = prefs.studio_lights.load(str(path), "STUDIO")
+        try:
+            shading.studio_light, shading.use_world_space_lighting = light.name, True
+            at = render(tmp_path / f"sun-{azimuth_deg}.exr")
+        finally:
+            prefs.studio_lights.remove(light)
+        assert at(1.3, -1.3) == pytest.approx(STUDIO_FLAT, rel=0.005)
+        to_sun = np.array([np.cos(elevation) * np.sin(azimuth), -np.cos(elevation) * np.cos(azimuth),
+                           np.sin(elevation)])
+        angles = 2 * np.pi * (np.arange(72) + 0.5) / 72
+        faces = np.array([at(0.45 * np.cos(a), 0.45 * np.sin(a)) for a in angles])
+        normals = np.stack([0.6 * np.cos(angles), 0.6 * np.sin(angles), np.ones(72)], axis=1)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        sun = (1 - SKY_SHARE) * STUDIO_FLAT / (WORKBENCH_DIFFUSE * np.sin(elevation))
+        expected = SKY_SHARE * STUDIO_FLAT + WORKBENCH_DIFFUSE * sun * np.clip(normals @ to_sun, 0.0, None)
+        assert np.abs(faces - expected).max() < 0.01, (elevation_deg, azimuth_deg)
+        brightest = angles[np.argmax(faces)]
+        towards_sun = np.arctan2(to_sun[1], to_sun[0])
+        assert abs(np.angle(np.exp(1j * (brightest - towards_sun)))) < np.radians(6)
+
+
+def test_sun_studio_light_files_name_the_sun_in_studio_light_axes_and_refuse_a_sun_below_the_horizon():
+    from meta_sim.core.errors import MetaSimError
+    from meta_sim.sim.quality import SKY_SHARE, STUDIO_FLAT, sun_studio_light
+
+    text = sun_studio_light(np.radians(90), 0.0)  # overhead: studio light y is up
+    values = dict(line.split(" ") for line in text.splitlines()[1:])
+    assert text.startswith("version 1\n") and float(values["light_ambient.x"]) == pytest.approx(SKY_SHARE * STUDIO_FLAT,
+                                                                                               abs=1e-6)
+    assert [float(values[f"light[0].vec.{c}"]) for c in "xyz"] == pytest.approx([0.0, 1.0, 0.0], abs=1e-6)
+    assert all(values[f"light[{i}].flag"] == "0" for i in (1, 2, 3))
+    south = dict(line.split(" ") for line in sun_studio_light(np.radians(30), 0.0).splitlines()[1:])
+    assert [float(south[f"light[0].vec.{c}"]) for c in "xyz"] == pytest.approx([0.0, 0.5, np.cos(np.radians(30))],
+                                                                               abs=1e-6)  # z: south
+    for bad in (0.0, -0.1):
+        with pytest.raises(MetaSimError, match="above the horizon"):
+            sun_studio_light(bad, 0.0)
+
+
+def test_the_fast_preset_shows_sloped_roofs_sunlit_on_the_suns_side_in_a_richer_city(space, bank):
+    """Issue 18: a city of the richer scene (here a dense town) is lit by its sun and sky in the fast preset:
+    across its sloped roofs the brightness rises towards the sun (each roof's brightness gradient, summed, points
+    within 30 degrees of the sun's azimuth), while flat roofs stay as bright as under the studio light, which
+    the same city is rendered with too."""
+    from meta_sim.blender.scene import CityScene
+    from meta_sim.render.loop import resolve_textures
+
+    layout, rects = layout_for_tiles(5, 1, 115.2, LayoutParams(style="dense", sloped_share=0.8))
+    assert layout.params.richer_scene
+    scene = CityScene(layout, rects, pixel_size_m=0.6)
+    try:
+        assert scene.sun_lit
+        scene.set_roofs(resolve_textures(space, space.validate({"flat_roof": "flat-concrete-slab",
+                                                                 "sloped_roof": "sloped-seam-grey"}), [bank]))
+        instance, roof_class = scene.render_labels(scene.rects[0])
+        sunlit = scene.render_rgb(scene.rects[0], get_preset("fast")).mean(axis=-1)
+        scene.sun_lit = False
+        studio = scene.render_rgb(scene.rects[0], get_preset("fast")).mean(axis=-1)
+        azimuth = np.radians(scene.sun["azimuth_deg"])
+    finally:
+        scene.close()
+    flat = roof_class == 1
+    assert flat.sum() > 500 and np.median(sunlit[flat]) == pytest.approx(np.median(studio[flat]), rel=0.05)
+    rows, cols = np.indices(instance.shape)
+    gradients = {"sunlit": np.zeros(2), "studio": np.zeros(2)}
+    buildings = 0
+    for b in np.unique(instance[roof_class == 2]):
+        on = (instance == b) & (roof_class == 2)
+        if on.sum() < 60:
+            continue
+        buildings += 1
+        east, north = cols[on] - cols[on].mean(), rows[on].mean() - rows[on]  # row 0 is north
+        design = np.stack([np.ones(on.sum()), east, north], axis=1)
+        for name, image in (("sunlit", sunlit), ("studio", studio)):
+            slope = np.linalg.lstsq(design, image[on], rcond=None)[0][1:]
+            gradients[name] += slope / (np.linalg.norm(slope) + 1e-12)
+    assert buildings >= 8, buildings
+    towards_sun = np.arctan2(-np.cos(azimuth), np.sin(azimuth))
+    direction = np.arctan2(gradients["sunlit"][1], gradients["sunlit"][0])
+    assert abs(np.angle(np.exp(1j * (direction - towards_sun)))) < np.radians(30)
+    assert np.linalg.norm(gradients["sunlit"]) > 0.5 * buildings  # most roofs agree
