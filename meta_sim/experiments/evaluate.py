@@ -125,6 +125,15 @@ def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0,
     kind (``flat_top10``) resamples the labels instead, each drawn label bringing all its rows (a cluster
     bootstrap). E2's groups share a few held-out textures, and a texture's groups miss or hit together: what
     varies from one set of textures to the next is the textures, and resampling groups hides it."""
+    means = bootstrap_means(rows, resamples, seed, clusters)
+    return {key: [float(np.percentile(m, 2.5)), float(np.percentile(m, 97.5))] for key, m in means.items()}
+
+
+def bootstrap_means(rows: list[dict], resamples: int = 2000, seed: int = 0,
+                    clusters: dict[str, list] | None = None) -> dict[str, np.ndarray]:
+    """Per metric of the score rows: its mean in each of ``resamples`` bootstrap resamples (``bootstrap_intervals``
+    takes their percentiles). Metrics resampled alike share the draws, so resampled means of several metrics
+    can be added up draw by draw."""
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, len(rows), (resamples, len(rows)))
     by_kind = {}
@@ -140,10 +149,9 @@ def bootstrap_intervals(rows: list[dict], resamples: int = 2000, seed: int = 0,
         if kind in by_kind:
             index, n, picks = by_kind[kind]
             sums, counts = np.bincount(index, values, n), np.bincount(index, minlength=n).astype(np.float64)
-            means = sums[picks].sum(axis=1) / counts[picks].sum(axis=1)
+            out[key] = sums[picks].sum(axis=1) / counts[picks].sum(axis=1)
         else:
-            means = values[draws].mean(axis=1)
-        out[key] = [float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))]
+            out[key] = values[draws].mean(axis=1)
     return out
 
 

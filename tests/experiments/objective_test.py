@@ -97,6 +97,36 @@ def test_the_choice_is_the_best_mean_of_the_four_targets_and_the_default_wins_ti
     assert choose(rows)["name"] == "c"
 
 
+def test_a_setting_replaces_the_default_only_when_its_paired_gain_is_more_than_resampling_shows(monkeypatch):
+    """``paired_gain`` on made-up score rows (``_rows`` stands in for the search): a challenger better on every
+    group of both experiments gains with an interval above 0; one that gains only on a single E2 texture out of
+    three (and is as good elsewhere) has an interval reaching 0, so the default would stay; the table says
+    which."""
+    import numpy as np
+
+    from meta_sim.experiments import objective
+
+    rng = np.random.default_rng(0)
+
+    def rows(e1_hits, e2_hits, textures):
+        e1 = [{"flat_top1": float(h), "sloped_top1": float(h)} for h in e1_hits]
+        e2 = [{"flat_top10": float(h), "sloped_top10": float(h)} for h in e2_hits]
+        truth = [{"flat_roof": t, "sloped_roof": t} for t in textures]
+        return {"e1": (e1, [{}] * len(e1)), "e2": (e2, truth)}
+
+    textures = [f"held-{i % 3}" for i in range(90)]
+    base_e1, base_e2 = rng.random(90) < 0.7, rng.random(90) < 0.6
+    results = {"default": rows(base_e1, base_e2, textures),
+               "better": rows(np.ones(90), np.ones(90), textures),
+               "one texture": rows(base_e1, base_e2 | (np.array(textures) == "held-0"), textures)}
+    monkeypatch.setattr(objective, "_rows", lambda setting, data: results[setting])
+    better = objective.paired_gain("default", "better", None)
+    assert better["gain"] > 0.2 and better["interval"][0] > 0
+    narrow = objective.paired_gain("default", "one texture", None)
+    assert narrow["gain"] > 0 and narrow["interval"][0] <= 0 < narrow["interval"][1]
+    assert objective.paired_gain("default", "default", None) == {"gain": 0.0, "interval": [0.0, 0.0]}
+
+
 def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_validation():
     default, chosen = Setting(), Setting(0.3, 1.5, 30.0)
     validation = [{"setting": vars(s), "name": s.name, "metrics": _metrics(*m), "criterion": criterion(_metrics(*m))}
@@ -123,6 +153,14 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
     result["splits"]["check"] = {"e1": {"seeds": [31]}, "e2": {"seeds": [31], "heldout": "heldout-v3"}}
     lines = format_objective_table(result).splitlines()
     assert lines[3].startswith("| default: exponent 0.5, no blur | check |") and lines[3].endswith("| 0.500 |")
+    assert "Best on validation" not in table  # a result from before the adoption rule
+    result["test"]["best"] = result["test"].pop("chosen")
+    result["best"] = {"name": chosen.name, "gain_over_default": {"gain": 0.1, "interval": [-0.01, 0.2]},
+                      "adopted": False}
+    table = format_objective_table(result)
+    assert "| best on validation: exponent 0.3, blur 1.5 bins x 30 | test |" in table
+    assert ("Best on validation: exponent 0.3, blur 1.5 bins x 30, +0.100 over the default in the mean of the four "
+            "[-0.010, +0.200]") in table and "not adopted: the default stays" in table
     assert "check seeds 31 and E2 on `heldout-v3`" in lines[-1]
     del result["test"]["without score cone"]  # a result from before the score cone
     assert "without score cone" not in format_objective_table(result).split("validation #1")[0]
