@@ -335,14 +335,14 @@ def format_objective_table(result: dict, best: int = 5) -> str:
         row = result["test"].get(label)  # a result from before the score cone lacks the last two
         if row is None:
             continue
-        label = "best on validation" if label == "best" else label
-        lines.append(f"| {label}: {row['name']} | test | {cells(row['metrics'], True)} | {row['criterion']:.3f} |")
+        shown = "best on validation" if label == "best" else label
+        lines.append(f"| {shown}: {row['name']} | test | {cells(row['metrics'], True)} | {row['criterion']:.3f} |")
         checked = result.get("check", {}).get(label)  # a result from before the check split lacks it
         if checked is not None:
-            lines.append(f"| {label}: {row['name']} | check | {cells(checked['metrics'], True)} | "
+            lines.append(f"| {shown}: {row['name']} | check | {cells(checked['metrics'], True)} | "
                          f"{checked['criterion']:.3f} |")
         valid = by_name[row["name"]]
-        lines.append(f"| {label}: {row['name']} | validation | {cells(valid['metrics'], False)} | "
+        lines.append(f"| {shown}: {row['name']} | validation | {cells(valid['metrics'], False)} | "
                      f"{valid['criterion']:.3f} |")
     ranked = sorted(result["validation"], key=lambda r: -r["criterion"])[:best]
     for i, row in enumerate(ranked, 1):

@@ -159,6 +159,8 @@ def test_the_table_reports_the_default_and_the_chosen_setting_on_test_beside_val
                       "adopted": False}
     table = format_objective_table(result)
     assert "| best on validation: exponent 0.3, blur 1.5 bins x 30 | test |" in table
+    result["check"]["best"] = {**test["best"], "criterion": 0.6}
+    assert "| best on validation: exponent 0.3, blur 1.5 bins x 30 | check |" in format_objective_table(result)
     assert ("Best on validation: exponent 0.3, blur 1.5 bins x 30, +0.100 over the default in the mean of the four "
             "[-0.010, +0.200]") in table and "not adopted: the default stays" in table
     assert "check seeds 31 and E2 on `heldout-v3`" in lines[-1]
