@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from ..core.progress import Bars
+from .splits import E2_INTERVALS
 
 
 def _blender_import_seconds() -> float:
@@ -105,8 +106,6 @@ def format_render_table(result: dict) -> str:
 
 # Adjoint settings swept by bench_adjoint, paper first: (starts M, iterations).
 ADJOINT_SWEEP = ((1000, 200), (250, 200), (250, 100), (64, 100), (64, 50), (16, 50))
-# What E2's intervals resample (evaluate.texture_clusters); a result without the key resampled its groups.
-E2_INTERVALS = "held-out textures"
 # bench_nams's one adjoint setting: the continuous spaces' default (evaluate.CONTINUOUS_SEARCH).
 NAMS_ADJOINT = ((64, 100),)
 

@@ -40,7 +40,7 @@ from ..core.errors import MetaSimError
 from ..core.progress import Bars
 from ..pipeline.roofcolour import SEARCH_COLOUR, SEARCH_FAR, SEARCH_FAR_MARGIN, SEARCH_MATCH
 from .evaluate import bootstrap_intervals, bootstrap_means, mean_scores, score, texture_clusters
-from .splits import get_split
+from .splits import E2_INTERVALS, get_split
 
 EXPONENTS = (0.25, 0.3, 0.35, 0.5)
 SIGMAS = (1.0, 1.5, 2.0)  # bins of the 8 x 8 x 8 cone
@@ -295,7 +295,7 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
         ("default", rows[0]), ("best", best), ("without far search", named[WITHOUT_FAR.name]),
         ("far comparison", named[FAR_DEFAULT.name]), ("without score cone", named[WITHOUT_SCORE_CONE.name]))}
     return {"criterion": [f"{e} {k}" for e, k in CRITERION], "targets_per_seed": targets,
-            "e2_intervals": "held-out textures", "validation": rows, "chosen": chosen["setting"], "test": reported,
+            "e2_intervals": E2_INTERVALS, "validation": rows, "chosen": chosen["setting"], "test": reported,
             "check": checked, "best": {"setting": best["setting"], "name": best["name"], "gain_over_default": gain,
                                        "adopted": chosen is best and best is not rows[0]},
             "splits": {name: {e: get_split(e, name).to_dict() for e in ("e1", "e2")}
@@ -354,7 +354,8 @@ def format_objective_table(result: dict, best: int = 5) -> str:
               f"`{seeds['validation']['e2']['heldout']}`; test seeds "
               f"{', '.join(map(str, seeds['test']['e1']['seeds']))} "
               f"and E2 on `{seeds['test']['e2']['heldout']}` (95% intervals over the groups"
-              + (", E2's over the held-out textures of the roof kind" if result.get("e2_intervals") else "") + ")"
+              + (", E2's over the held-out textures of the roof kind"
+                 if result.get("e2_intervals") == E2_INTERVALS else "") + ")"
               + (f"; check seeds {', '.join(map(str, seeds['check']['e1']['seeds']))} and E2 on "
                  f"`{seeds['check']['e2']['heldout']}`, targets no choice looked at" if "check" in seeds else "")
               + ". "
