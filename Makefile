@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 64
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-nams bench-adjoint bench-ablations bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective clean
+.PHONY: setup demo test test-all lint addon bench-render bench-exposure bench-nams bench-adjoint bench-ablations bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -55,6 +55,11 @@ addon: setup
 
 bench-render: setup
 	$(BIN)/meta-sim bench render --out benchmarks/render.json
+
+# The fast preset's exposure (quality.FAST_EXPOSURE): flat roofs' brightness, path traced over rasterised, on the
+# training set's first 100 designs x 2 tiles (about 3 minutes on 2 CPUs).
+bench-exposure: setup
+	$(BIN)/meta-sim bench exposure --out benchmarks/exposure.json
 
 # Every knob that costs time against E1 accuracy, and the fast/balanced/paper profiles (long: the paper
 # profile renders 15,300 tiles). Reads benchmarks/render.json (render cost), benchmarks/nams.json (the search

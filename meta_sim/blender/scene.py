@@ -42,7 +42,7 @@ from ..sim.appearance import TREE_COLOUR, foliage_tint, ground_colours, vegetati
 from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.furniture import SURFACES, roof_furniture
 from ..sim.ground import ground_image
-from ..sim.quality import RenderPreset, sun_studio_light
+from ..sim.quality import SHADOW_FOCUS, SHADOW_SHIFT, RenderPreset, sun_studio_light, workbench_direction
 
 LABEL_ATTRIBUTE = "label"
 UV_NAME = "UVMap"
@@ -498,9 +498,8 @@ class CityScene:
         background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
         background.inputs["Color"].default_value = (0.45, 0.5, 0.6, 1.0)
         background.inputs["Strength"].default_value = 0.8
-        direction = (math.cos(elevation) * math.sin(azimuth), -math.cos(elevation) * math.cos(azimuth),
-                     math.sin(elevation))
-        scene.display.light_direction = direction
+        scene.display.light_direction = workbench_direction(elevation, azimuth)
+        scene.display.shadow_shift, scene.display.shadow_focus = SHADOW_SHIFT, SHADOW_FOCUS
         scene.view_settings.view_transform = "Standard"
         scene.view_settings.look = "None"
         scene.render.resolution_percentage = 100

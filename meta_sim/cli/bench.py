@@ -52,6 +52,22 @@ def bench_render(out, docs, designs, tiles, repeats, presets):
     _publish(result, out, format_render_table(result), "render", docs)
 
 
+@bench.command("exposure")
+@_docs_option
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/exposure.json"), show_default=True)
+@click.option("--designs", type=int, default=100, show_default=True,
+              help="the training set's first designs rendered with both presets")
+@click.option("--tiles", type=int, default=2, show_default=True, help="tiles per design")
+def bench_exposure_command(out, docs, designs, tiles):
+    """The fast preset's exposure: flat roofs' brightness, path traced over rasterised, on training renders."""
+    from ..experiments.exposure import bench_exposure, format_exposure_table
+
+    if designs < 1 or tiles < 1:
+        raise MetaSimError("--designs and --tiles must be at least 1")
+    result = _with_bars(bench_exposure, designs=designs, tiles=tiles)
+    _publish(result, out, format_exposure_table(result), "exposure", docs)
+
+
 @bench.command("nams")
 @_docs_option
 @click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/nams.json"), show_default=True)

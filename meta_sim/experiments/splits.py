@@ -153,6 +153,6 @@ MEASURED_DEFAULTS = {
     "fastest_adjoint_keeping_e1": ("meta_sim.experiments.bench:fastest_adjoint", VALIDATION),
     "training set 600 x 2": ("meta_sim.pipeline.dataset:DatasetConfig.designs", VALIDATION),
     "profiles fast, balanced and paper": ("meta_sim.pipeline.profiles:PROFILES", VALIDATION),
-    "fast exposure 6.0": ("meta_sim.sim.quality:FAST_EXPOSURE", TRAINING_RENDERS),
+    "fast exposure 3.3": ("meta_sim.sim.quality:FAST_EXPOSURE", TRAINING_RENDERS),
     "colour-texture features": ("meta_sim.pipeline.features:ColourTexture", TRAINING_RENDERS),
 }

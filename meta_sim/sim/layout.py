@@ -68,8 +68,9 @@ LAYOUT_VERSION = 1
 # its layout: tile headers and training-set keys of such cities carry it, so their caches are rendered and
 # trained again when it changes (``scene_version``). 2: water tanks on flat roofs and kerbs and sidewalks
 # along the roads between style regions. 3: the fast preset lights such a city with its own sun and sky
-# (``quality.sun_studio_light``), so sloped roofs show a sunlit and a shaded side.
-SCENE_VERSION = 3
+# (``quality.sun_studio_light``), so sloped roofs show a sunlit and a shaded side. 4: the fast preset's shadows
+# cast from the sun's direction (``quality.workbench_direction``).
+SCENE_VERSION = 4
 TILE_M = 115.2  # 384 px at 0.3 m per pixel
 
 KINDS = ("residential", "apartment", "office", "industrial", "highrise")

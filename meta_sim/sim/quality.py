@@ -54,10 +54,12 @@ class RenderPreset:
 
 # Workbench's studio light renders a surface far darker than the path-traced presets' sun and sky do,
 # so fast renders are scaled up to their brightness: a model trained on one preset then meets
-# targets at the brightness it learnt. How the value was chosen is in docs/design.md ("The fast
-# preset's exposure"): on the training sets' renders, no E1/E2 target ("Splits");
-# `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
-FAST_EXPOSURE = 6.0
+# targets at the brightness it learnt. `make bench-exposure` measures it: the median ratio of flat-roof
+# brightness, balanced over fast at exposure 1, on training renders, no E1/E2 target (docs/design.md, "The fast
+# preset's exposure"); `tests/render/render_test.py` checks that the two presets' roofs agree within a third.
+# 6.0 before the shadows were cast from the sun's direction (SHADOW_SHIFT), when most cities' flat surfaces
+# were shadowed at about half their light.
+FAST_EXPOSURE = 3.3
 
 # Every preset ends with a tone curve that does not clip: the identity up to a linear 0.6 (display
 # 0.80), then a shoulder towards 0.95 (display 0.977, an 8-bit 249), so a white roof keeps its texture
@@ -83,14 +85,31 @@ STUDIO_FLAT = 0.4216
 WORKBENCH_DIFFUSE = 0.931
 
 
+# Workbench's shadows from the sun: a surface is shadowed where the sun's light is blocked (cast shadows)
+# or where it faces away from the sun, with a hard edge at grazing light (shift 0, focus 1), so that a surface
+# the sun lights keeps the studio light's brightness at any elevation. Workbench's defaults (shift 0.1, focus
+# 0) also darken lit surfaces by a ramp over the sun's angle: a flat roof at 30 degrees came out at 0.68 of
+# its lit brightness. Measured by tests/render/render_test.py.
+SHADOW_SHIFT = 0.0
+SHADOW_FOCUS = 1.0
+
+
+def workbench_direction(elevation: float, azimuth: float) -> tuple[float, float, float]:
+    """The direction towards a sun at ``elevation`` and ``azimuth`` (radians; azimuth 0 is a sun in the south,
+    the scene's convention) in Workbench's light frame, where y is up and z points south: world (x, y, z) is
+    (x, z, -y). Both a studio light's directions and the shadows' ``light_direction`` are given in it; the
+    world vector given as it is would put the sun below the horizon for most azimuths, shadowing every flat
+    surface."""
+    to_sun = (math.cos(elevation) * math.sin(azimuth), -math.cos(elevation) * math.cos(azimuth), math.sin(elevation))
+    return to_sun[0], to_sun[2], -to_sun[1]
+
+
 def sun_studio_light(elevation: float, azimuth: float) -> str:
     """The text of a Workbench studio light (a ``.sl`` file) of a sun at ``elevation`` and ``azimuth``
-    (radians; azimuth 0 is a sun in the south, the scene's convention) and the sky, for world-space
-    lighting. A studio light's directions have y up and z towards the south: world (x, y, z) is (x, z, -y)."""
+    (radians; ``workbench_direction``) and the sky, for world-space lighting."""
     if not 0.0 < elevation <= math.pi / 2:
         raise MetaSimError(f"the sun's elevation must be above the horizon, not {math.degrees(elevation):g} degrees")
-    to_sun = (math.cos(elevation) * math.sin(azimuth), -math.cos(elevation) * math.cos(azimuth), math.sin(elevation))
-    vec = (to_sun[0], to_sun[2], -to_sun[1])
+    vec = workbench_direction(elevation, azimuth)
     sun = (1.0 - SKY_SHARE) * STUDIO_FLAT / (WORKBENCH_DIFFUSE * math.sin(elevation))
     sky = SKY_SHARE * STUDIO_FLAT
     lines = ["version 1", *(f"light_ambient.{c} {sky:.6f}" for c in "xyz")]

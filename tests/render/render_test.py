@@ -183,7 +183,7 @@ def test_path_traced_preset_renders_same_labels(rendered, traced):
 
 def test_presets_render_roofs_equally_bright(rendered, traced):
     """The rasterised preset's exposure brings its roofs to the path-traced brightness (without
-    it, the studio light rendered them at a sixth; see render_presets.FAST_EXPOSURE)."""
+    it, the studio light renders them at about a third; see quality.FAST_EXPOSURE)."""
     _, _, base = rendered
 
     def roof_luminance(tile_list):
@@ -1009,3 +1009,50 @@ def test_the_fast_preset_shows_sloped_roofs_sunlit_on_the_suns_side_in_a_richer_
     direction = np.arctan2(gradients["sunlit"][1], gradients["sunlit"][0])
     assert abs(np.angle(np.exp(1j * (direction - towards_sun)))) < np.radians(30)
     assert np.linalg.norm(gradients["sunlit"]) > 0.5 * buildings  # most roofs agree
+
+
+def test_fast_shadows_fall_away_from_each_citys_sun_and_lit_ground_keeps_its_brightness(space, bank, tmp_path):
+    """The fast preset's shadows come from the city's sun, whatever its azimuth: the ground just beyond the
+    buildings on the side away from the sun is dark far more often than on the side facing it
+    (Workbench's shadow direction mapped to its light frame, ``quality.workbench_direction``). Given the
+    world vector, the sun stood below the horizon for most azimuths: no cast shadows, and every flat surface
+    at half its light. And ground the sun lights is as bright under a low sun as under a high one
+    (Workbench's shading ramp off, ``quality.SHADOW_SHIFT``; with it a 30-degree sun darkened it by a third)."""
+    from scipy import ndimage
+
+    def dark_share(tile, step):
+        """The share of dark ground 3 pixels (3.6 m) from the buildings in the (row, column) direction ``step``."""
+        luma = linear_luma(tile.rgb)
+        buildings = tile.building > 0
+        ground = ~ndimage.binary_dilation(buildings, iterations=1)
+        dark = luma < 0.7 * np.percentile(luma[ground], 90)  # below the lit lawn
+        moved = ndimage.shift(buildings.astype(float), step * 3.0, order=0) > 0.5
+        return dark[moved & ground].mean()
+
+    azimuths, contrast = [], []
+    for seed in (3, 4, 5, 6, 7):
+        _, (tile,) = _render(space, [bank], tmp_path / str(seed), _design(space, 5, 9), n_tiles=1, seed=seed)
+        azimuth = np.radians(tile.meta["sun"]["azimuth_deg"])
+        azimuths.append(azimuth)
+        # row 0 is north; the sun's direction on the ground is (sin a, -cos a) (east, north), azimuth 0 south
+        away = np.array([-np.cos(azimuth), -np.sin(azimuth)])
+        contrast.append(dark_share(tile, away) - dark_share(tile, -away))
+    assert np.ptp(np.array(azimuths) % (2 * np.pi)) > np.pi / 2  # suns from several sides
+    assert min(contrast) > 0.0 and np.mean(contrast) > 0.3, contrast
+
+    sun_space = DesignSpace.from_dict({**space.to_dict(), "name": "sun", "parameters": [
+        *space.to_dict()["parameters"],
+        {"name": "sun", "type": "continuous", "appearance": "sun_elevation_deg", "low": 30, "high": 80}]})
+    settings = RenderSettings(space=sun_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "sun",
+                              n_tiles=1, **SMALL)
+    jobs = [single_job(sun_space, sun_space.validate({**_design(space, 5, 9), "sun": e}), SEED) for e in (30.0, 80.0)]
+    render_jobs(jobs, settings)
+    low, high = (tiles.read_tile(tmp_path / "sun" / f"{job.name}_t00.exr") for job in jobs)
+    knee = get_preset("fast").tone[0]  # below it the tone curve is the identity
+    lit = (low.rgb.max(axis=-1) < knee) & (high.rgb.max(axis=-1) < knee) & (low.building == 0)
+    for tile in (low, high):
+        luma = linear_luma(tile.rgb)
+        lit &= luma > 0.7 * np.percentile(luma[tile.building == 0], 90)
+    assert lit.sum() > 1000
+    ratio = linear_luma(low.rgb)[lit] / linear_luma(high.rgb)[lit]
+    assert np.median(ratio) == pytest.approx(1.0, abs=0.01)
