@@ -1,5 +1,9 @@
 """bench-objective's protocol: the grid, the choice on validation (the default wins ties) and its table."""
 
+import dataclasses
+import json
+from pathlib import Path
+
 import pytest
 
 from meta_sim.core.errors import MetaSimError
@@ -176,3 +180,11 @@ def test_the_command_is_there_with_the_options_of_a_bench_on_bench_nams_targets(
     out = CliRunner().invoke(main, ["bench", "objective", "--help"])
     assert out.exit_code == 0
     assert all(option in out.output for option in ("--docs", "--targets", "--cache", "benchmarks/objective.json"))
+
+
+def test_the_search_defaults_are_the_setting_the_published_bench_objective_run_chose():
+    """`make bench-objective` names the setting it chose (adopted, or the default it kept); the code's defaults
+    (`roofcolour.SEARCH_COLOUR`, `SEARCH_MATCH`) must be that setting, or the published figures are not the
+    defaults'."""
+    published = json.loads((Path(__file__).resolve().parents[2] / "benchmarks" / "objective.json").read_text())
+    assert dataclasses.asdict(DEFAULT) == published["chosen"]
