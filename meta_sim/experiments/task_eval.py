@@ -100,7 +100,7 @@ class TaskEvalSettings:
 class Harness:
     """What every strategy of every experiment shares: the models, the source pool, the caches."""
 
-    methods: object  # evaluate.Methods
+    methods: object  # evaluate.Methods; None for a harness that renders and trains segmenters only
     dataset: object  # pipeline.dataset.DatasetConfig
     models_settings: object
     settings: TaskEvalSettings
@@ -114,10 +114,20 @@ class Harness:
     def gsd(self) -> float:
         return self.settings.train.pixel_size_m
 
+    @property
+    def space(self):
+        """The design space the synthetic sets are drawn from: the NAMS model's, or the dataset's."""
+        if self.methods is not None:
+            return self.methods.nams.space
+        from ..sim.design import DesignSpace
+
+        return DesignSpace.load(self.dataset.space)
+
 
 def make_harness(dataset, models_settings, settings: TaskEvalSettings, root: Path | None = None,
-                 realdata: Path | None = None, bars: Bars | None = None) -> Harness:
-    """Train or reuse NAMS, DR and the MS2 pool; read the real source domain."""
+                 realdata: Path | None = None, bars: Bars | None = None, infer: bool = True) -> Harness:
+    """Train or reuse NAMS, DR and the MS2 pool (unless ``infer`` is False: a harness that only renders
+    the dataset's design space and trains segmenters); read the real source domain."""
     from ..core.cache import cache_root
     from .evaluate import load_methods
 
@@ -125,7 +135,7 @@ def make_harness(dataset, models_settings, settings: TaskEvalSettings, root: Pat
     root = Path(root or cache_root())
     realdata = Path(realdata or realdomains.REALDATA)
     source = _real_pool(realdomains.SOURCE, realdomains.scenes(realdomains.SOURCE, realdata), settings.train)
-    methods = load_methods(dataset, models_settings, root, True, bars)
+    methods = load_methods(dataset, models_settings, root, True, bars) if infer else None
     return Harness(methods, dataset, models_settings, settings, root, realdata, source, bars)
 
 
@@ -152,7 +162,7 @@ def synthetic_jobs(h: Harness, designs: list[dict] | None, r: float, seed: int) 
     strategy of an experiment."""
     from ..render.jobs import sample_population
 
-    space = h.methods.nams.space
+    space = h.space
     n = h.settings.synthetic_jobs
     if designs is None:
         drawn = space.sample(np.random.default_rng([seed, 5]), n)
@@ -176,7 +186,7 @@ def render_set(h: Harness, name: str, jobs: list[Job], sensor: str = "none", roo
     from ..sim.sensor import get_sensor
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
 
-    space = h.methods.nams.space
+    space = h.space
     digest = hashlib.sha256(json.dumps([[j.design, j.city_seed] for j in jobs], sort_keys=True).encode())
     key = f"{digest.hexdigest()[:12]}-t{h.settings.synthetic_tiles}-{h.dataset.preset}-{h.dataset.tile_px}px"
     key += ("" if sensor == "none" else f"-{sensor}") + (f"-j{roof_jitter:g}" if roof_jitter else "")
@@ -359,30 +369,34 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation, ``ground``
     the ground cover mix. Every segmenter is also scored on the domain's ``adapt`` scenes (row
     "validation"): the scenes the designs were inferred from, where choices may be made; the ``test``
-    scenes only report."""
+    scenes only report.
+    A harness without NAMS (``make_harness(infer=False)``) measures the renders alone: no design is
+    inferred, the row's "rendered_only" is None, and the classifier, the colours and the picture take the
+    renders of uniform designs."""
     from ..task.data import merge
     from ..task.score import all_building
 
     s = h.settings
+    infer = h.methods is not None
+    space = h.space
     rows, picture, uniform = {}, [], {}
     for domain in realdomains.DOMAINS:
         adapt, test = realdomains.split(realdomains.scenes(domain, h.realdata))
-        designs = _infer_real(h, adapt, s.target_seed, domain)["nams"]
         seen_by = realdomains.SENSOR_OF[domain] if sensor == "auto" else sensor
-        rendered = render_set(h, f"{domain} nams", synthetic_jobs(h, designs, s.r_real, s.target_seed), seen_by,
-                              roof_jitter, ground)
         if seen_by not in uniform:  # the same cities with uniform designs: what inferring the design adds
             uniform[seen_by] = render_set(h, "uniform", synthetic_jobs(h, None, s.r_real, s.target_seed), seen_by,
                                           roof_jitter, ground)
+        designs = _infer_real(h, adapt, s.target_seed, domain)["nams"] if infer else None
+        rendered = (render_set(h, f"{domain} nams", synthetic_jobs(h, designs, s.r_real, s.target_seed), seen_by,
+                               roof_jitter, ground) if infer else uniform[seen_by])
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
         test_pool = _real_pool(f"{domain} test", test, s.train)
         adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
         pools = (test_pool, adapt_pool)
-        sim = _scored(h, None, rendered, f"{domain} rendered only", pools)
+        sim = _scored(h, None, rendered, f"{domain} rendered only", pools) if infer else (None, None)
         real = _scored(h, other, None, f"{'+'.join(others)}", pools)
         flat = _scored(h, None, uniform[seen_by], "uniform designs", pools)
-        space = h.methods.nams.space
         rows[domain] = {"rendered_only": _mean_iou(sim[0]), "uniform_designs": _mean_iou(flat[0]),
                         "other_real": _mean_iou(real[0]), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
@@ -391,26 +405,28 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
-        if hasattr(h.methods.extractor, "finder"):  # what the roof colours of the inferred designs rest on
+        if infer and hasattr(h.methods.extractor, "finder"):  # what the roof colours of the inferred designs rest on
             from .finder_bench import finder_on_scenes
 
             rows[domain]["roof_finder"] = {name: finder_on_scenes(h.methods.extractor, scenes, h.dataset.pixel_size_m)
                                            for name, scenes in (("validation", adapt), ("test", test))}
-        for param in space.parameters:  # what the inferred designs set replaces the run's setting
+        for param in space.parameters:  # what the designs set replaces the run's setting
             if getattr(param, "appearance", None) in ("sensor", "roof_jitter", "ground"):
-                rows[domain][param.appearance] = "inferred"
+                rows[domain][param.appearance] = "inferred" if infer else "uniform"
         if realness:
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
             rows[domain]["colour"] = {"real": colour_stats(adapt_pool), "rendered": colour_stats(rendered)}
             shown = _same_ground(adapt_pool.images[:3] + rendered.images[:3])
             picture.append([(f"REAL {domain}", _srgb8(i)) for i in shown[:3]] +
-                           [("RENDERED", _srgb8(i)) for i in shown[3:]])
+                           [("RENDERED" if infer else "UNIFORM DESIGN", _srgb8(i)) for i in shown[3:]])
     if picture:
         from ..task.score import prediction_sheet
 
         tag = ("" if sensor == "none" else f"-{sensor}") + (f"-jitter{roof_jitter:g}" if roof_jitter else "")
         tag += "" if ground == "plain" else f"-{ground}"
-        tag += "" if h.methods.nams.space.name == "rooftops-v1" else f"-{h.methods.nams.space.name}"
+        tag += "" if space.name == "rooftops-v1" else f"-{space.name}"
+        tag += "" if s.train.colour == "light" else f"-{s.train.colour}"
+        tag += "" if infer else UNIFORM_ONLY.replace(":", "-")
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 
@@ -470,7 +486,9 @@ def _srgb8(image: np.ndarray) -> np.ndarray:
     return (np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
-def _mean_iou(per_seed: list[Counts]) -> dict:
+def _mean_iou(per_seed: list[Counts] | None) -> dict | None:
+    if per_seed is None:
+        return None
     ious = [c.iou() for c in per_seed]
     return {"iou": float(np.mean(ious)), "iou_std": float(np.std(ious, ddof=1)) if len(ious) > 1 else 0.0,
             "precision": float(np.mean([c.metrics()["precision"] for c in per_seed])),
@@ -572,6 +590,10 @@ REALISM_SPACES = ("overhead-v1",)
 # A space's run with this suffix (e.g. "overhead-v2+scene") trains the segmenters on renders with the
 # "scene" colour augmentation (``task.data.COLOUR_AUGMENTS``) instead of the light one.
 SCENE_AUGMENTED = "+scene"
+# A space's run with this suffix (e.g. "overhead-v2+scene:uniform") trains no NAMS model and infers no design:
+# it measures the space's renders alone, with segmenters trained on renders of uniform designs (minutes, not
+# the hours a NAMS model of a rich space takes on an empty cache).
+UNIFORM_ONLY = ":uniform"
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -586,12 +608,14 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     import time
 
     augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
-    spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable) - set(spaces)))
+    renders_only = {name + UNIFORM_ONLY for name in (*builtin_spaces(), *augmentable)}
+    spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | renders_only) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
-                           f"or another built-in design space ({', '.join(builtin_spaces())})")
+                           f"or another built-in design space ({', '.join(builtin_spaces())}), with "
+                           f"{SCENE_AUGMENTED} and/or {UNIFORM_ONLY} after it")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
@@ -603,11 +627,14 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         models[dataset.space] = h.methods.nams.model_id
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for run in spaces:
-        space, scene = run.removesuffix(SCENE_AUGMENTED), run.endswith(SCENE_AUGMENTED)
+        infer = not run.endswith(UNIFORM_ONLY)
+        named = run.removesuffix(UNIFORM_ONLY)
+        space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
         run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
-        other = make_harness(wider, models_settings, run_settings, root, realdata, bars)
-        models[space] = other.methods.nams.model_id
+        other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
+        if infer:
+            models[space] = other.methods.nams.model_id
         result["runs"][run] = run_sim_only(other, out, True)["domains"]
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
                   seconds=time.perf_counter() - started, nams_models=models,
@@ -618,7 +645,8 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
 def _space_cell(row: dict) -> str:
     """A realism row's design space, and the segmenters' colour augmentation when it is not the light one."""
     augment = row.get("colour_augment", "light")
-    return row.get("space", "rooftops-v1") + ("" if augment == "light" else f", {augment} augmentation")
+    return (row.get("space", "rooftops-v1") + ("" if augment == "light" else f", {augment} augmentation")
+            + (", uniform designs only" if row.get("rendered_only", {}) is None else ""))
 
 
 def _g(value) -> str:
@@ -636,7 +664,9 @@ def realism_markdown(result: dict) -> str:
     lines = [f"Per real domain, scored on its test scenes (mean +- standard deviation over {seeds} seeds): "
              "building IoU (%) of a segmenter trained on rendered tiles alone (the design NAMS inferred for "
              "the domain), of one trained on renders of uniform designs in the same cities, of one trained on the "
-             "other real domains, and of calling everything a building; "
+             "other real domains, and of calling everything a building (a run named ...:uniform infers no design: "
+             "its difference to all building, precision and recall, classifier and colours are of the uniform "
+             "designs' renders); "
              "and the accuracy of a small CNN telling held-out real crops from crops of renders in held-out "
              "cities (0.5: indistinguishable).", "",
              "| domain | space | sensor | roof jitter | ground | rendered only | rendered only, uniform designs "
@@ -647,14 +677,17 @@ def realism_markdown(result: dict) -> str:
                   key=lambda item: realdomains.DOMAINS.index(item[0]))
     for domain, row in rows:
         r, o = row["rendered_only"], row["other_real"]
+        # A run without NAMS (":uniform") has no inferred design: its renders are the uniform designs'.
+        shown = r if r is not None else row["uniform_designs"]
         acc = row.get("realness")
         lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                      f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
-                     f"{100 * r['iou']:.1f} +- {100 * r['iou_std']:.1f} | {_iou_cell(row.get('uniform_designs'))} | "
+                     f"{_iou_cell(r)} | {_iou_cell(row.get('uniform_designs'))} | "
                      f"{100 * o['iou']:.1f} +- "
                      f"{100 * o['iou_std']:.1f} ({'+'.join(row['other_domains'])}) | {100 * row['all_building']:.1f} "
-                     f"| {100 * (r['iou'] - row['all_building']):+.1f} | "
-                     + (f"{100 * r['precision']:.1f} / {100 * r['recall']:.1f} | " if "recall" in r else "- | ")
+                     f"| {100 * (shown['iou'] - row['all_building']):+.1f} | "
+                     + (f"{100 * shown['precision']:.1f} / {100 * shown['recall']:.1f} | " if "recall" in shown
+                        else "- | ")
                      + (f"{acc['accuracy']:.2f} +- {acc['accuracy_std']:.2f} |" if acc else "- |"))
     checked = [(domain, row) for domain, row in rows if "validation" in row]
     if checked:

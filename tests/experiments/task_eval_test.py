@@ -272,3 +272,62 @@ def test_the_realism_picture_shows_real_scenes_and_renders_on_the_same_ground():
     assert [s.shape for s in shown] == [(111, 111, 3), (111, 111, 3)]
     assert shown[0][55, 55].max() == 1.0
     assert np.array_equal(shown[1], render[40:151, 40:151])
+
+
+def test_a_uniform_only_realism_run_trains_no_nams_model_and_scores_the_renders_of_uniform_designs(
+        tmp_path, monkeypatch):
+    """"overhead-v2+scene:uniform": a harness without NAMS (no model trained, no design inferred); its rows have
+    no rendered-only IoU, and the table's difference to all building is the uniform designs'."""
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+    from meta_sim.task.data import Pool
+
+    made = []
+
+    def harness(dataset, models_settings, settings, root, realdata, bars, infer=True):
+        made.append((dataset.space, settings.train.colour, infer))
+        return task_eval.Harness(None, dataset, models_settings, settings, tmp_path, REALDATA, None)
+
+    monkeypatch.setattr(task_eval, "make_harness", harness)
+    monkeypatch.setattr(task_eval, "_infer_real", lambda *a: pytest.fail("a uniform-only run inferred a design"))
+    image, mask = np.full((64, 64, 3), 0.5, np.float32), np.zeros((64, 64), bool)
+    mask[8:24, 8:24] = True
+    rendered = Pool("uniform", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
+    drawn = []
+
+    def render_set(h, name, jobs, *args):
+        drawn.append((name, h.space.name, len(jobs)))
+        return rendered
+
+    monkeypatch.setattr(task_eval, "render_set", render_set)
+    monkeypatch.setattr(task_eval, "_scored",
+                        lambda h, real, synthetic, label, pools: [[_counts(0.3 if real is None else 0.6)]] * 2)
+    monkeypatch.setattr(task_eval, "_realness", lambda *a: {"accuracy": 0.75, "accuracy_std": 0.0})
+    monkeypatch.setattr(task_eval.realdomains, "scenes",
+                        lambda domain, realdata: [realdomains.Scene(f"{domain}{k}", image, mask, 0.6)
+                                                  for k in range(2)])
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={"overhead-v2+scene:uniform"})
+    assert made == [("overhead-v2", "scene", False)] and result["nams_models"] == {}
+    assert drawn == [("uniform", "overhead-v2", task_eval.TaskEvalSettings().synthetic_jobs)]  # one set, shared
+    rows = result["runs"]["overhead-v2+scene:uniform"]
+    assert set(rows) == set(realdomains.DOMAINS)
+    banepa = rows["banepa"]
+    assert banepa["rendered_only"] is None and banepa["designs"] is None and banepa["sensor"] == "uniform"
+    assert banepa["ground"] == "uniform" and banepa["validation"]["rendered_only"] is None
+    assert 0.2 < banepa["uniform_designs"]["iou"] < 0.4 and banepa["realness"]["accuracy"] == 0.75
+    assert (tmp_path / "realism-overhead-v2-scene-uniform.png").is_file()
+    line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| banepa"))
+    cells = line.split(" | ")
+    assert cells[1] == "overhead-v2, scene augmentation, uniform designs only" and cells[5] == "-"
+    share = 100 * banepa["all_building"]
+    assert cells[9] == f"{100 * banepa['uniform_designs']['iou'] - share:+.1f}"
+
+
+def test_a_harness_without_nams_draws_from_its_datasets_space():
+    from meta_sim.experiments.task_eval import Harness
+    from meta_sim.pipeline.dataset import DatasetConfig
+
+    h = Harness(None, DatasetConfig(space="overhead-v3"), None, TaskEvalSettings(), Path("."), REALDATA, None)
+    assert h.space.name == "overhead-v3" and "building_density" in h.space.names
