@@ -416,7 +416,10 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         if realness:
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
             rows[domain]["colour"] = {"real": colour_stats(adapt_pool), "rendered": colour_stats(rendered)}
-            shown = _same_ground(adapt_pool.images[:3] + rendered.images[:3])
+            # Uniform designs: one tile of each of three cities, other cities for each domain.
+            picks = ([(3 * len(rows) - 3 + k) * s.synthetic_tiles % len(rendered) for k in range(3)] if not infer
+                     else [0, 1, 2])
+            shown = _same_ground(adapt_pool.images[:3] + [rendered.images[k] for k in picks if k < len(rendered)])
             picture.append([(f"REAL {domain}", _srgb8(i)) for i in shown[:3]] +
                            [("RENDERED" if infer else "UNIFORM DESIGN", _srgb8(i)) for i in shown[3:]])
     if picture:
