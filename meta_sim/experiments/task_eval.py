@@ -31,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -114,9 +115,9 @@ class Harness:
     def gsd(self) -> float:
         return self.settings.train.pixel_size_m
 
-    @property
+    @cached_property
     def space(self):
-        """The design space the synthetic sets are drawn from: the NAMS model's, or the dataset's."""
+        """The design space the synthetic sets are drawn from: the NAMS model's, or the dataset's (read once)."""
         if self.methods is not None:
             return self.methods.nams.space
         from ..sim.design import DesignSpace
@@ -380,7 +381,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     infer = h.methods is not None
     space = h.space
     rows, picture, uniform = {}, [], {}
-    for domain in realdomains.DOMAINS:
+    for index, domain in enumerate(realdomains.DOMAINS):
         adapt, test = realdomains.split(realdomains.scenes(domain, h.realdata))
         seen_by = realdomains.SENSOR_OF[domain] if sensor == "auto" else sensor
         if seen_by not in uniform:  # the same cities with uniform designs: what inferring the design adds
@@ -416,9 +417,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         if realness:
             rows[domain]["realness"] = _realness(h, domain, adapt_pool, test_pool, rendered)
             rows[domain]["colour"] = {"real": colour_stats(adapt_pool), "rendered": colour_stats(rendered)}
-            # Uniform designs: one tile of each of three cities, other cities for each domain.
-            picks = ([(3 * len(rows) - 3 + k) * s.synthetic_tiles % len(rendered) for k in range(3)] if not infer
-                     else [0, 1, 2])
+            # Uniform designs, one set for every domain: a tile of each of three cities, other cities per domain.
+            picks = range(3) if infer else [(3 * index + k) * s.synthetic_tiles % len(rendered) for k in range(3)]
             shown = _same_ground(adapt_pool.images[:3] + [rendered.images[k] for k in picks if k < len(rendered)])
             picture.append([(f"REAL {domain}", _srgb8(i)) for i in shown[:3]] +
                            [("RENDERED" if infer else "UNIFORM DESIGN", _srgb8(i)) for i in shown[3:]])
