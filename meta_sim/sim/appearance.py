@@ -21,13 +21,13 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from .ground import COVERS, DIRT, MIXES
-from .jitter import roof_jitter
+from .jitter import roof_jitter, roof_paint
 from .sensor import SENSORS, Sensor, get_sensor
 
 # categorical field -> the choices it allows; continuous field -> (lowest, highest) value
 CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
 CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
-                     "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0)}
+                     "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0), "roof_paint": (0.0, 1.0)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
@@ -44,7 +44,8 @@ class Appearance:
     tree colours, a sun elevation drawn from the city seed, and today's ground. ``brightness`` scales the
     rendered light before the sensor sees it (real images of one place differ in brightness by camera
     settings and haze); ``ground_albedo`` scales the reflectance of the bare ground only, in the scene
-    (``ground_colours``), so the ground can be darker or brighter than the roofs.
+    (``ground_colours``), so the ground can be darker or brighter than the roofs; ``roof_paint`` is the
+    share of buildings whose roof is painted in place of its texture (``sim.jitter.roof_paint``).
     """
 
     sensor: Sensor = Sensor()
@@ -54,6 +55,7 @@ class Appearance:
     sun_elevation_deg: float | None = None
     brightness: float = 1.0
     ground_albedo: float | None = None
+    roof_paint: float = 0.0
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -87,14 +89,18 @@ class Appearance:
             out["brightness"] = self.brightness
         if self.ground_albedo is not None:
             out["ground_albedo"] = self.ground_albedo
+        if self.roof_paint:
+            out["roof_paint"] = self.roof_paint
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
               seed, preset=None) -> np.ndarray:
-        """A finished linear render as this appearance shows it: roofs varied per building, the light
+        """A finished linear render as this appearance shows it: a share of the roofs painted, roofs varied
+        per building, the light
         scaled by the brightness, then seen through the sensor (its noise seeded by ``seed``), whose
         own tone curve replaces that of the render ``preset`` (a ``RenderPreset``; None: no curve)."""
-        image = roof_jitter(rgb, instance, roof_class, city_seed, self.roof_jitter)
+        image = roof_paint(rgb, instance, roof_class, city_seed, self.roof_paint)
+        image = roof_jitter(image, instance, roof_class, city_seed, self.roof_jitter)
         if self.brightness != 1.0:
             image = image * np.float32(self.brightness)
         if self.sensor.active or preset is None:

@@ -8,6 +8,14 @@ from a generator seeded by the city and the building's id, so a building looks t
 tile and with every design's texture. ``strength`` 0 leaves the render untouched; 1 is the strongest
 setting (brightness x/÷ 1.3, tint +-8%, up to 30% weathering, one standard deviation or maximum).
 Labels are never touched.
+
+``roof_paint`` goes further: real towns mix materials, and most of all paints (the blue, red and green
+tin roofs of Kampala and Banepa beside bare metal and concrete), so a share of the buildings get a
+painted roof in place of the design's texture: the roof keeps its shading and texture (each pixel's
+luminance), takes the chromaticity of a colour from ``PAINTS`` faded by sun and age (a random part of
+the way back to grey), and its brightness moves halfway (in
+log) towards that paint's lightness against a mid-grey roof. Which buildings are painted, and with
+what, is drawn per building from the city seed, so a larger share paints the same buildings and more.
 """
 
 from __future__ import annotations
@@ -20,12 +28,51 @@ BRIGHTNESS = 0.25  # standard deviation of the log gain at strength 1
 TINT = 0.08  # standard deviation of each channel's gain at strength 1
 WEATHERING = 0.3  # largest blend towards DUST at strength 1
 DUST = np.array([0.32, 0.30, 0.27], np.float32)  # linear grey-brown of dirt and faded paint
+# Linear albedo of roof paints common in real towns: blues, reds, greens, white, greys, rust and orange.
+PAINTS = np.array([
+    (0.02, 0.10, 0.40), (0.10, 0.30, 0.58), (0.03, 0.22, 0.30),  # blue, sky blue, teal
+    (0.40, 0.02, 0.02), (0.19, 0.02, 0.02), (0.58, 0.13, 0.05),  # red, maroon, orange
+    (0.02, 0.16, 0.06), (0.72, 0.72, 0.68), (0.30, 0.33, 0.33),  # green, white, galvanised grey
+    (0.30, 0.08, 0.03),  # rust
+], np.float32)
+FADED = (0.35, 0.8)  # range of the share of a paint's colour left after fading
+MID_GREY = 0.25  # the albedo a roof of unknown texture is taken to have
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # Rec. 709 luminance weights (linear RGB)
 
 
 def check_strength(strength) -> float:
     if isinstance(strength, bool) or not isinstance(strength, (int, float)) or not 0.0 <= strength <= 1.0:
         raise MetaSimError(f"--roof-jitter must be a number from 0 to 1, not {strength!r}")
     return float(strength)
+
+
+def check_share(share) -> float:
+    if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0.0 <= share <= 1.0:
+        raise MetaSimError(f"roof_paint must be a share from 0 to 1, not {share!r}")
+    return float(share)
+
+
+def roof_paint(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
+               share: float) -> np.ndarray:
+    """The linear render ``rgb`` (H, W, 3) with ``share`` of the buildings' roofs painted (see the module)."""
+    share = check_share(share)
+    if share == 0.0:
+        return rgb
+    out = rgb.astype(np.float32).copy()
+    roofs = (roof_class > 0) & (instance > 0)
+    for building in np.unique(instance[roofs]):
+        rng = np.random.default_rng([int(city_seed), int(building), 8])
+        if rng.random() >= share:  # one draw decides, so a larger share keeps these buildings painted
+            continue
+        paint = PAINTS[rng.integers(len(PAINTS))] * (1.0 + 0.1 * rng.standard_normal(3)).astype(np.float32)
+        paint = np.clip(paint, 0.005, 1.0)
+        lightness = float(paint @ LUMA)
+        chroma = 1.0 + rng.uniform(*FADED) * (paint / lightness - 1.0)  # per channel; grey is 1, 1, 1
+        where = roofs & (instance == building)
+        luminance = out[where] @ LUMA
+        gain = np.float32(np.sqrt(lightness / MID_GREY))
+        out[where] = luminance[:, None] * chroma[None, :].astype(np.float32) * gain
+    return out
 
 
 def roof_jitter(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,

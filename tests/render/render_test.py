@@ -562,6 +562,35 @@ def test_ground_albedo_darkens_the_bare_ground_in_the_scene_and_leaves_roofs_and
         assert np.mean(dark_luma[part]) / np.mean(luma[part]) == pytest.approx(1.0, abs=0.005)
 
 
+PAINT = {"name": "roof_paint", "type": "continuous", "appearance": "roof_paint", "low": 0.0, "high": 1.0}
+
+
+def test_a_declared_roof_paint_share_repaints_roofs_of_the_finished_render_and_records_it(space, bank, tmp_path):
+    """A design's roof_paint paints a share of the roofs after the render (one scene for every share), the
+    ground and the labels untouched; 0 is the render of a space without the field."""
+    paint_space = DesignSpace.from_dict({**space.to_dict(), "name": "paint",
+                                         "parameters": [*space.to_dict()["parameters"], PAINT]})
+    design = space.validate(_design(space, 5, 9))
+    _, (plain,) = _render(space, [bank], tmp_path / "plain", design, n_tiles=1)
+    settings = RenderSettings(space=paint_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "p",
+                              n_tiles=1, **SMALL)
+    jobs = [single_job(paint_space, {**design, "roof_paint": a}, SEED) for a in (0.0, 1.0)]
+    summary = render_jobs(jobs, settings)
+    assert summary.written == 2 and summary.cities == 1  # applied to the finished render
+    assert render_jobs(jobs, settings).skipped == 2
+    same, painted = (tiles.read_tile(tmp_path / "p" / f"{job.name}_t00.exr") for job in jobs)
+    assert painted.meta["roof_paint"] == 1.0 and "roof_paint" not in same.meta
+    assert np.array_equal(same.rgb, plain.rgb)
+    for name in ("instance", "roof_class", "building"):
+        assert np.array_equal(getattr(painted, name), getattr(plain, name))
+    roofs = (plain.roof_class > 0) & (plain.instance > 0)
+    assert np.array_equal(painted.rgb[~roofs], plain.rgb[~roofs])
+    hue = np.arctan2(np.sqrt(3) * (painted.rgb[..., 1] - painted.rgb[..., 2]),
+                     2 * painted.rgb[..., 0] - painted.rgb[..., 1] - painted.rgb[..., 2])
+    means = np.array([np.median(hue[roofs & (plain.instance == k)]) for k in np.unique(plain.instance[roofs])])
+    assert len(means) >= 3 and np.ptp(means) > 1.0  # roofs of one texture now differ in colour
+
+
 def test_the_ground_albedo_reaches_the_lawn_the_ground_covers_and_the_dirt_tracks_only():
     """What counts as ground: the ground quad's lawn or cover mix and the unpaved tracks' dirt. Walls, roads,
     pavings, yards, pools, cars and foliage keep their images; without the albedo every image is today's."""

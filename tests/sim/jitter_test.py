@@ -44,3 +44,49 @@ def test_bad_strength_is_refused(bad):
     rgb, instance, roof_class = _tile()
     with pytest.raises(MetaSimError, match="--roof-jitter"):
         roof_jitter(rgb, instance, roof_class, 1, bad)
+
+
+def test_a_share_of_the_roofs_is_painted_keeping_each_pixels_shading_and_the_ground():
+    from meta_sim.sim.jitter import LUMA, roof_paint
+
+    rgb, instance, roof_class = _tile()
+    rng = np.random.default_rng(0)
+    rgb = rgb * (0.8 + 0.4 * rng.random((40, 40, 1))).astype(np.float32)  # a textured roof
+    assert roof_paint(rgb, instance, roof_class, 5, 0.0) is rgb
+    out = roof_paint(rgb, instance, roof_class, 5, 1.0)
+    assert np.array_equal(out[instance == 0], rgb[instance == 0])
+    for k in range(1, 5):
+        before, after = rgb[instance == k], out[instance == k]
+        assert np.ptp(before, axis=1).max() < 1e-6 and np.ptp(after, axis=1).min() > 0.01  # grey becomes a colour
+        ratio = (after @ LUMA) / (before @ LUMA)
+        assert np.ptp(ratio) < 1e-4  # the texture's shading survives: one gain per roof
+    assert np.array_equal(out, roof_paint(rgb, instance, roof_class, 5, 1.0))
+    assert not np.array_equal(out, roof_paint(rgb, instance, roof_class, 6, 1.0))
+
+
+def test_a_larger_paint_share_paints_the_same_roofs_and_more_alike_in_every_tile():
+    from meta_sim.sim.jitter import roof_paint
+
+    rgb, instance, roof_class = _tile()
+    painted = {}
+    for share in (0.3, 0.6, 0.9):
+        out = roof_paint(rgb, instance, roof_class, 11, share)
+        painted[share] = {k for k in range(1, 5) if not np.allclose(out[instance == k], rgb[instance == k])}
+        for k in painted[share]:
+            assert np.allclose(out[instance == k], roof_paint(rgb, instance, roof_class, 11, 1.0)[instance == k])
+    assert painted[0.3] <= painted[0.6] <= painted[0.9]
+    row = np.full((1, 40, 3), 0.4, np.float32)  # 40 one-pixel buildings
+    ids, roofs = np.arange(1, 41, dtype=np.uint32)[None], np.ones((1, 40), np.uint32)
+    many = [int((roof_paint(row, ids, roofs, seed, 0.5) != row).any(axis=2).sum()) for seed in range(5)]
+    assert 10 <= np.mean(many) <= 30  # about half of 40 buildings
+    half = roof_paint(rgb[:, 20:], instance[:, 20:], roof_class[:, 20:], 11, 0.6)
+    assert np.array_equal(roof_paint(rgb, instance, roof_class, 11, 0.6)[:, 20:], half)
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, True, "1", float("nan")])
+def test_a_bad_paint_share_is_refused(bad):
+    from meta_sim.sim.jitter import roof_paint
+
+    rgb, instance, roof_class = _tile()
+    with pytest.raises(MetaSimError, match="roof_paint"):
+        roof_paint(rgb, instance, roof_class, 1, bad)
