@@ -225,6 +225,28 @@ def test_overhead_towns_v1_is_overhead_v2_with_every_city_a_dense_town():
     assert {layout.style_of(b) for b in layout.buildings} == {"dense"}
 
 
+def test_overhead_towns_v2_is_towns_v1_with_painted_roofs_and_darker_ground_recorded_in_the_header():
+    from meta_sim.sim.appearance import Appearance
+
+    v1, v2 = DesignSpace.load("overhead-towns-v1"), DesignSpace.load("overhead-towns-v2")
+    paint, albedo = v2.parameter("roof_paint"), v2.parameter("ground_albedo")
+    assert (paint.appearance, paint.low, paint.high) == ("roof_paint", 0.0, 0.8)
+    assert (albedo.low, albedo.high) == (0.3, 0.9) and v1.parameter("ground_albedo").low == 0.4
+    changed = ("roof_paint", "ground_albedo")
+    assert tuple(p for p in v2.parameters if p.name not in changed) == tuple(p for p in v1.parameters
+                                                                          if p.name not in changed)
+    after = v1.names.index("roof_jitter") + 1
+    assert v2.names == (*v1.names[:after], "roof_paint", *v1.names[after:])
+    assert v2.layout == v1.layout and v2.scene_version() == v1.scene_version()
+    for design in v2.sample(np.random.default_rng(5), 5):
+        look = Appearance().with_design(v2, design)
+        assert look.roof_paint == design["roof_paint"] and look.header()["roof_paint"] == design["roof_paint"]
+    assert "roof_paint" not in Appearance().with_design(v1, v1.sample(np.random.default_rng(5), 1)[0]).header()
+    with pytest.raises(MetaSimError, match=r"roof_paint must stay within \[0, 1\]"):
+        DesignSpace.from_dict({**v2.to_dict(), "parameters": [
+            {**p.to_dict(), "high": 1.5} if p.name == "roof_paint" else p.to_dict() for p in v2.parameters]})
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),
