@@ -40,16 +40,32 @@ MID_GREY = 0.25  # the albedo a roof of unknown texture is taken to have
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)  # Rec. 709 luminance weights (linear RGB)
 
 
+def _check_unit(value, message: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+        raise MetaSimError(f"{message}, not {value!r}")
+    return float(value)
+
+
 def check_strength(strength) -> float:
-    if isinstance(strength, bool) or not isinstance(strength, (int, float)) or not 0.0 <= strength <= 1.0:
-        raise MetaSimError(f"--roof-jitter must be a number from 0 to 1, not {strength!r}")
-    return float(strength)
+    return _check_unit(strength, "--roof-jitter must be a number from 0 to 1")
 
 
 def check_share(share) -> float:
-    if isinstance(share, bool) or not isinstance(share, (int, float)) or not 0.0 <= share <= 1.0:
-        raise MetaSimError(f"roof_paint must be a share from 0 to 1, not {share!r}")
-    return float(share)
+    return _check_unit(share, "roof_paint must be a share from 0 to 1")
+
+
+def _each_roof(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int, stream: int,
+               change) -> np.ndarray:
+    """A copy of ``rgb`` with ``change(rng, pixels)`` applied to each building's roof pixels; ``rng`` is
+    seeded by the city, the building and ``stream``, and a change that returns None leaves its roof."""
+    out = rgb.astype(np.float32).copy()
+    roofs = (roof_class > 0) & (instance > 0)
+    for building in np.unique(instance[roofs]):
+        where = roofs & (instance == building)
+        changed = change(np.random.default_rng([int(city_seed), int(building), stream]), out[where])
+        if changed is not None:
+            out[where] = changed
+    return out
 
 
 def roof_paint(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
@@ -58,21 +74,18 @@ def roof_paint(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, ci
     share = check_share(share)
     if share == 0.0:
         return rgb
-    out = rgb.astype(np.float32).copy()
-    roofs = (roof_class > 0) & (instance > 0)
-    for building in np.unique(instance[roofs]):
-        rng = np.random.default_rng([int(city_seed), int(building), 8])
+
+    def paint_roof(rng, pixels):
         if rng.random() >= share:  # one draw decides, so a larger share keeps these buildings painted
-            continue
+            return None
         paint = PAINTS[rng.integers(len(PAINTS))] * (1.0 + 0.1 * rng.standard_normal(3)).astype(np.float32)
         paint = np.clip(paint, 0.005, 1.0)
         lightness = float(paint @ LUMA)
         chroma = 1.0 + rng.uniform(*FADED) * (paint / lightness - 1.0)  # per channel; grey is 1, 1, 1
-        where = roofs & (instance == building)
-        luminance = out[where] @ LUMA
         gain = np.float32(np.sqrt(lightness / MID_GREY))
-        out[where] = luminance[:, None] * chroma[None, :].astype(np.float32) * gain
-    return out
+        return (pixels @ LUMA)[:, None] * chroma[None, :].astype(np.float32) * gain
+
+    return _each_roof(rgb, instance, roof_class, city_seed, 8, paint_roof)
 
 
 def roof_jitter(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
@@ -81,14 +94,12 @@ def roof_jitter(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, c
     strength = check_strength(strength)
     if strength == 0.0:
         return rgb
-    out = rgb.astype(np.float32).copy()
-    roofs = (roof_class > 0) & (instance > 0)
-    for building in np.unique(instance[roofs]):
-        rng = np.random.default_rng([int(city_seed), int(building), 7])
+
+    def vary_roof(rng, pixels):
         gain = np.exp(BRIGHTNESS * strength * rng.standard_normal())
         tint = 1.0 + TINT * strength * rng.standard_normal(3)
         weathering = WEATHERING * strength * rng.random()
-        where = roofs & (instance == building)
-        pixels = out[where] * (gain * tint).astype(np.float32)
-        out[where] = (1.0 - weathering) * pixels + weathering * DUST * gain
-    return out
+        pixels = pixels * (gain * tint).astype(np.float32)
+        return (1.0 - weathering) * pixels + weathering * DUST * gain
+
+    return _each_roof(rgb, instance, roof_class, city_seed, 7, vary_roof)
