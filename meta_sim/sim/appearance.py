@@ -96,9 +96,9 @@ class Appearance:
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
               seed, preset=None) -> np.ndarray:
         """A finished linear render as this appearance shows it: a share of the roofs painted, roofs varied
-        per building, the light
-        scaled by the brightness, then seen through the sensor (its noise seeded by ``seed``), whose
-        own tone curve replaces that of the render ``preset`` (a ``RenderPreset``; None: no curve)."""
+        per building, the light scaled by the brightness, then seen through the sensor (its noise seeded by
+        ``seed``), whose own tone curve replaces that of the render ``preset`` (a ``RenderPreset``; None: no
+        curve)."""
         image = roof_paint(rgb, instance, roof_class, city_seed, self.roof_paint)
         image = roof_jitter(image, instance, roof_class, city_seed, self.roof_jitter)
         if self.brightness != 1.0:

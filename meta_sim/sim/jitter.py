@@ -13,8 +13,8 @@ Labels are never touched.
 tin roofs of Kampala and Banepa beside bare metal and concrete), so a share of the buildings get a
 painted roof in place of the design's texture: the roof keeps its shading and texture (each pixel's
 luminance), takes the chromaticity of a colour from ``PAINTS`` faded by sun and age (a random part of
-the way back to grey), and its brightness moves halfway (in
-log) towards that paint's lightness against a mid-grey roof. Which buildings are painted, and with
+the way back to grey), and its brightness moves halfway (in log) towards that paint's lightness against
+a mid-grey roof. Which buildings are painted, and with
 what, is drawn per building from the city seed, so a larger share paints the same buildings and more.
 """
 
