@@ -42,7 +42,16 @@ from ..sim.appearance import TREE_COLOUR, foliage_tint, ground_colours, vegetati
 from ..sim.clutter import TREE_HEIGHT_M
 from ..sim.furniture import SURFACES, roof_furniture
 from ..sim.ground import ground_image
-from ..sim.quality import SHADOW_FOCUS, SHADOW_SHIFT, RenderPreset, sun_studio_light, workbench_direction
+from ..sim.quality import (
+    SHADOW_DEPTH,
+    SHADOW_FOCUS,
+    SHADOW_SHIFT,
+    SKY_COLOUR,
+    RenderPreset,
+    cycles_light,
+    sun_studio_light,
+    workbench_direction,
+)
 
 LABEL_ATTRIBUTE = "label"
 UV_NAME = "UVMap"
@@ -277,12 +286,13 @@ class CityScene:
     def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0,
                  collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None,
                  greenness: float | None = None, sun_elevation_deg: float | None = None,
-                 ground_albedo: float | None = None):
+                 ground_albedo: float | None = None, shadow_depth: float | None = None):
         self.layout = layout
         self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
         self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
         self.sun_elevation_deg = sun_elevation_deg  # None: drawn from the city seed
         self.ground_albedo = ground_albedo  # ``sim.appearance.ground_colours``; None: today's ground
+        self.shadow_depth = shadow_depth  # share of the light a shadow takes; None: ``quality.SHADOW_DEPTH``
         self.pixel_size_m = pixel_size_m
         self._yard = None
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
@@ -465,7 +475,8 @@ class CityScene:
         self.camera = _tagged(bpy.data.objects.new("nadir", camera), self.key)
         self.collection.objects.link(self.camera)
         sun = _tagged(bpy.data.lights.new("sun", "SUN"), self.key)
-        sun.energy = 4.0
+        sun.energy, _ = cycles_light(self._elevation, self.shadow_depth)  # and again per render (``_set_quality``)
+        self._sun_light = sun
         sun.angle = math.radians(0.5)
         sun_obj = _tagged(bpy.data.objects.new("sun", sun), self.key)
         sun_obj.rotation_euler = (math.pi / 2 - self._elevation, 0.0, self._azimuth)
@@ -491,13 +502,14 @@ class CityScene:
         scene, elevation, azimuth = self._scene, self._elevation, self._azimuth
         scene.camera = self.camera
         world = _tagged(bpy.data.worlds.new("sky"), self.key)
-        world.color = (0.45, 0.5, 0.6)
+        world.color = SKY_COLOUR
         scene.world = world
         if world.node_tree is None:
             world.use_nodes = True
         background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-        background.inputs["Color"].default_value = (0.45, 0.5, 0.6, 1.0)
-        background.inputs["Strength"].default_value = 0.8
+        background.inputs["Color"].default_value = (*SKY_COLOUR, 1.0)
+        _, background.inputs["Strength"].default_value = cycles_light(elevation, self.shadow_depth)  # and per render
+        self._sky = background
         scene.display.light_direction = workbench_direction(elevation, azimuth)
         scene.display.shadow_shift, scene.display.shadow_focus = SHADOW_SHIFT, SHADOW_FOCUS
         scene.view_settings.view_transform = "Standard"
@@ -611,7 +623,7 @@ class CityScene:
             shading.studio_light = self._sun_studio_light() if self.sun_lit else "Default"
             shading.color_type = "TEXTURE"
             shading.show_shadows = preset.shadows
-            shading.shadow_intensity = 0.55
+            shading.shadow_intensity = SHADOW_DEPTH if self.shadow_depth is None else self.shadow_depth
             shading.show_cavity = False
             shading.show_specular_highlight = False
             scene.display.render_aa = preset.antialiasing
@@ -632,6 +644,8 @@ class CityScene:
             # Spelled out: a new scene (the add-on's) would otherwise pick another pattern than the factory one
             # and its preview would not be the farm's pixels.
             cycles.sampling_pattern = "TABULATED_SOBOL"
+            self._sun_light.energy, self._sky.inputs["Strength"].default_value = cycles_light(
+                self._elevation, self.shadow_depth)
 
     def _sun_studio_light(self) -> str:
         """The name of this city's studio light of its sun and sky, loaded into the session on first use (a

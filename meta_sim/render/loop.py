@@ -128,10 +128,10 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         clock = time.perf_counter()
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
-        look = work[0][3]  # the jobs of one scene share ground, its albedo, greenness and sun
+        look = work[0][3]  # the jobs of one scene share ground, its albedo, greenness, sun and shadows
         scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
                           greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
-                          ground_albedo=look.ground_albedo)
+                          ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth)
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:

@@ -1,5 +1,5 @@
-"""How a city looks beyond its roofs: ground cover and its albedo, vegetation colour, sun, brightness, roof
-variation and sensor.
+"""How a city looks beyond its roofs: ground cover and its albedo, vegetation colour, sun and shadows,
+brightness, roof variation and sensor.
 
 Each of these can be set for a whole render (``meta-sim render --ground mixed --sensor drone ...``)
 or declared as a parameter of a design space, so NAMS infers it for a target like a roof material::
@@ -27,7 +27,8 @@ from .sensor import SENSORS, Sensor, get_sensor
 # categorical field -> the choices it allows; continuous field -> (lowest, highest) value
 CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
 CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
-                     "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0), "roof_paint": (0.0, 1.0)}
+                     "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0), "roof_paint": (0.0, 1.0),
+                     "shadow_depth": (0.0, 0.95)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
@@ -45,7 +46,9 @@ class Appearance:
     rendered light before the sensor sees it (real images of one place differ in brightness by camera
     settings and haze); ``ground_albedo`` scales the reflectance of the bare ground only, in the scene
     (``ground_colours``), so the ground can be darker or brighter than the roofs; ``roof_paint`` is the
-    share of buildings whose roof is painted in place of its texture (``sim.jitter.roof_paint``).
+    share of buildings whose roof is painted in place of its texture (``sim.jitter.roof_paint``);
+    ``shadow_depth`` the share of a flat surface's light a shadow takes away, None for the presets' own
+    (``sim.quality.SHADOW_DEPTH`` in the fast preset, ``cycles_light`` in the path-traced ones).
     """
 
     sensor: Sensor = Sensor()
@@ -56,6 +59,7 @@ class Appearance:
     brightness: float = 1.0
     ground_albedo: float | None = None
     roof_paint: float = 0.0
+    shadow_depth: float | None = None
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -70,7 +74,7 @@ class Appearance:
 
     def scene_key(self) -> tuple:
         """What the Blender scene of a city depends on (the rest is applied to finished renders)."""
-        return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo)
+        return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo, self.shadow_depth)
 
     def header(self) -> dict:
         """The fields that differ from a plain render, for a tile's header (empty for a plain one)."""
@@ -91,6 +95,8 @@ class Appearance:
             out["ground_albedo"] = self.ground_albedo
         if self.roof_paint:
             out["roof_paint"] = self.roof_paint
+        if self.shadow_depth is not None:
+            out["shadow_depth"] = self.shadow_depth
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,

@@ -94,6 +94,35 @@ SHADOW_SHIFT = 0.0
 SHADOW_FOCUS = 1.0
 
 
+# How deep a shadow is: the share of a flat surface's light that a shadow takes away. Workbench's shadow
+# intensity in the fast preset, used for every city unless a design declares its own (``shadow_depth``, an
+# appearance field). Real shadows under a clear sky keep only the sky's light, some 10-25% of the total;
+# a declared depth also sets the path-traced presets' sun and sky (``cycles_light``).
+SHADOW_DEPTH = 0.55
+# The path-traced presets' sun (irradiance, W/m^2) and sky (strength of the world's colour).
+SUN_ENERGY = 4.0
+SKY_STRENGTH = 0.8
+SKY_COLOUR = (0.45, 0.5, 0.6)
+
+
+def cycles_light(elevation: float, shadow_depth: float | None = None) -> tuple[float, float]:
+    """``(sun energy, sky strength)`` of the path-traced presets for a sun at ``elevation`` (radians):
+    today's sun and sky when ``shadow_depth`` is None, else the two rescaled so that the sky's share of the
+    light on a flat surface is ``1 - shadow_depth`` (what a cast shadow keeps) while their sum, the lit
+    surface's brightness, stays as it was. A diffuse surface under a sky of radiance L receives L (in units
+    of its albedo), under a sun of irradiance E at elevation e it receives E sin(e) / pi."""
+    if not 0.0 < elevation <= math.pi / 2:
+        raise MetaSimError(f"the sun's elevation must be above the horizon, not {math.degrees(elevation):g} degrees")
+    if shadow_depth is None:
+        return SUN_ENERGY, SKY_STRENGTH
+    if not 0.0 <= shadow_depth < 1.0:
+        raise MetaSimError(f"a shadow's depth must be at least 0 and below 1, not {shadow_depth!r}")
+    sky = SKY_STRENGTH * sum(SKY_COLOUR) / 3
+    sun = SUN_ENERGY * math.sin(elevation) / math.pi
+    total = sky + sun
+    return shadow_depth * total * math.pi / math.sin(elevation), SKY_STRENGTH * (1.0 - shadow_depth) * total / sky
+
+
 def workbench_direction(elevation: float, azimuth: float) -> tuple[float, float, float]:
     """The direction towards a sun at ``elevation`` and ``azimuth`` (radians; azimuth 0 is a sun in the south,
     the scene's convention) in Workbench's light frame, where y is up and z points south: world (x, y, z) is

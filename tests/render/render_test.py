@@ -591,6 +591,48 @@ def test_a_declared_roof_paint_share_repaints_roofs_of_the_finished_render_and_r
     assert len(means) >= 3 and np.ptp(means) > 1.0  # roofs of one texture now differ in colour
 
 
+SHADOW = {"name": "shadow_depth", "type": "continuous", "appearance": "shadow_depth", "low": 0.3, "high": 0.95}
+
+
+def test_a_declared_shadow_depth_darkens_cast_shadows_and_leaves_sunlit_ground_as_it_was(space, bank):
+    """The same dense town with its shadows deeper: ground the sun lights keeps its brightness and ground in a
+    cast shadow keeps 1 - depth of it: in Workbench its shadow intensity, in Cycles the sky's share of the
+    light (``quality.cycles_light``). The default depth renders as a space without the field."""
+    from meta_sim.blender.scene import CityScene
+    from meta_sim.render.loop import resolve_textures
+    from meta_sim.sim.quality import SHADOW_DEPTH, cycles_light
+
+    layout, rects = layout_for_tiles(5, 1, 115.2, LayoutParams(style="dense", sloped_share=0.5))
+    scene = CityScene(layout, rects, pixel_size_m=0.6, sun_elevation_deg=35.0)
+    try:
+        scene.set_roofs(resolve_textures(space, space.validate({"flat_roof": "flat-concrete-slab",
+                                                                 "sloped_roof": "sloped-seam-grey"}), [bank]))
+        _, roof_class = scene.render_labels(scene.rects[0])
+        renders = {}
+        for preset, depth in (("fast", None), ("fast", SHADOW_DEPTH), ("fast", 0.9), ("balanced", None),
+                              ("balanced", 0.9)):
+            scene.shadow_depth = depth
+            renders[preset, depth] = linear_luma(scene.render_rgb(scene.rects[0], get_preset(preset)))
+    finally:
+        scene.close()
+    assert np.array_equal(renders["fast", SHADOW_DEPTH], renders["fast", None])
+    below_knee = np.logical_and.reduce([r < get_preset(p).tone[0] for (p, _), r in renders.items()])
+    ground = _erode(roof_class == 0, 2) & below_knee
+    # Workbench's shadow takes its intensity's share of all the light: the lit ground stays, the shadowed
+    # ground keeps (1 - 0.9) / (1 - default) of its light
+    fast = renders["fast", 0.9] / np.maximum(renders["fast", None], 1e-6)
+    lit, shade = ground & (np.abs(fast - 1) < 0.02), ground & (fast < 0.5)
+    assert lit.sum() > 2000 and shade.sum() > 500, (lit.sum(), shade.sum())
+    assert np.median(fast[shade]) == pytest.approx((1 - 0.9) / (1 - SHADOW_DEPTH), abs=0.02)
+    # Cycles, on the same lit and shadowed ground: the sun and sky keep their sum (walls hide a little of the
+    # sky from the ground near them); a shadow keeps the sky's new share of the old sky (0.28 here) plus the
+    # light sunlit walls and ground bounce into it, which grows with the sun (0.45 measured)
+    plain, deep = renders["balanced", None], renders["balanced", 0.9]
+    sky = cycles_light(np.radians(35.0), 0.9)[1] / cycles_light(np.radians(35.0))[1]
+    assert deep[lit].mean() / plain[lit].mean() == pytest.approx(1.0, abs=0.1)
+    assert sky - 0.03 < deep[shade].mean() / plain[shade].mean() < 0.6
+
+
 def test_the_ground_albedo_reaches_the_lawn_the_ground_covers_and_the_dirt_tracks_only():
     """What counts as ground: the ground quad's lawn or cover mix and the unpaved tracks' dirt. Walls, roads,
     pavings, yards, pools, cars and foliage keep their images; without the albedo every image is today's."""

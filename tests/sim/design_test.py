@@ -150,11 +150,26 @@ def test_ground_albedo_is_a_continuous_look_of_the_scene_recorded_in_the_header(
     # a scene of its own: the ground's colours are built into it, unlike brightness or the sensor
     assert look.scene_key() != without.scene_key()
     assert look.scene_key() != Appearance().with_design(space, {**design, "albedo": 0.6}).scene_key()
-    assert Appearance().scene_key() == ("plain", None, None, None) and Appearance().header() == {}
+    assert Appearance().scene_key() == ("plain", None, None, None, None) and Appearance().header() == {}
     assert space.decode(space.encode(design)) == pytest.approx(design)
     for bad, message in (("2", "out of range"), ("0.3", "out of range"), ("dark", "not a number")):
         with pytest.raises(MetaSimError, match=message):
             space.parse(f"flat_roof=a,ground=arid,sensor=drone,greenness=0.5,sun=40,style=dense,albedo={bad}")
+
+
+def test_shadow_depth_is_a_continuous_look_of_the_scene_below_one():
+    from meta_sim.sim.appearance import Appearance
+
+    shadow = {"name": "shadow", "type": "continuous", "appearance": "shadow_depth", "low": 0.3, "high": 0.95}
+    space = _appearance_space(shadow)
+    design = space.parse("flat_roof=a,ground=arid,sensor=drone,greenness=0.5,sun=40,style=dense,shadow=0.8")
+    look = Appearance().with_design(space, design)
+    assert look.shadow_depth == 0.8 and look.header()["shadow_depth"] == 0.8
+    without = Appearance().with_design(_appearance_space(), {k: v for k, v in design.items() if k != "shadow"})
+    assert without.shadow_depth is None and "shadow_depth" not in without.header()
+    assert look.scene_key() != without.scene_key()  # set in the scene's light, like the sun
+    with pytest.raises(MetaSimError, match=r"shadow_depth must stay within \[0, 0.95\]"):
+        _appearance_space({**shadow, "high": 1.0})
 
 
 def test_ground_albedo_scales_the_bare_ground_colours_and_none_leaves_them_as_they_were():
