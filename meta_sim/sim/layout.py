@@ -270,6 +270,10 @@ class LayoutParams:
         lot has room behind the house).
     shrub_density: 0..1, how often lot edges carry a hedge and how many
         bushes stand around a house.
+    open_share: 0..1, the share of a dense town's ground kept free of houses in open patches (round,
+        radius 6-30 m, placed at random): fields, gardens and groves, where the town's trees and bushes
+        grow as in its other gaps. Its roofs lose a little more than the share (houses cannot lean on a
+        patch's edge). 0 packs the town as always; a larger share keeps the patches of a smaller one.
     roof_furniture: 0..1, how much stands on the roofs (``sim/furniture.py``):
         parapet rims, HVAC units, skylights, hatches, stair housings and
         solar rows on flat roofs, chimneys, roof windows and solar panels on
@@ -290,10 +294,11 @@ class LayoutParams:
     pool_share: float = 0.0
     shrub_density: float = 0.0
     roof_furniture: float = 0.0
+    open_share: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
-        for name in ("car_density", "pool_share", "shrub_density", "roof_furniture"):
+        for name in ("car_density", "pool_share", "shrub_density", "roof_furniture", "open_share"):
             object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
         if not isinstance(self.tree_size, str) or self.tree_size not in TREE_SIZES:
             raise MetaSimError(f"{owner}.tree_size must be one of {', '.join(TREE_SIZES)}, got {self.tree_size!r}")
@@ -368,7 +373,7 @@ def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
 
 # The knobs added after the first layouts: `to_dict` writes them only when set.
 _CLUTTER_DEFAULTS = {"tree_size": "small", "street_details": False, "car_density": 0.0, "pool_share": 0.0,
-                     "shrub_density": 0.0, "roof_furniture": 0.0}
+                     "shrub_density": 0.0, "roof_furniture": 0.0, "open_share": 0.0}
 
 
 @dataclass(frozen=True)
@@ -1103,6 +1108,9 @@ STOREY_M = 3.0
 ROAD_CLEARANCE_M = 0.2  # between any roof outline and a road
 TOUCH_M = 1e-3  # neighbours may share walls: outlines may meet within the 0.1 mm rounding
 DENSE_M2_PER_TREE = 400.0  # at tree_density 1
+OPEN_RADIUS_M = (6.0, 30.0)  # a dense town's open patches (``LayoutParams.open_share``): radius, log-uniform
+OPEN_SAMPLES = 2000  # points a region's open share is measured on
+OPEN_MAX_PATCHES = 400
 
 
 @dataclass(frozen=True)
@@ -1233,13 +1241,32 @@ class _Placed:
     height_m: float
 
 
+def _open_patches(rng: np.random.Generator, window: Polygon, share: float) -> polygons.Occupancy:
+    """Round patches of a dense region kept free of houses, added until they cover about ``share`` of its
+    ``window`` (measured on `OPEN_SAMPLES` points spread over it). The patches come in one order from
+    ``rng``, so a larger share keeps the patches of a smaller one."""
+    opens = polygons.Occupancy()
+    x0, y0, x1, y1 = polygon_bbox(window)
+    points = rng.uniform((x0, y0), (x1, y1), size=(OPEN_SAMPLES, 2))
+    points = points[[polygons.inside(((x, y),), window, 0.0) for x, y in points]]
+    covered = np.zeros(len(points), bool)
+    for _ in range(OPEN_MAX_PATCHES if len(points) else 0):
+        if covered.mean() >= share:
+            break
+        x, y = rng.uniform(x0, x1), rng.uniform(y0, y1)
+        r = math.exp(rng.uniform(*np.log(OPEN_RADIUS_M)))
+        opens.add(polygons.disc(x, y, r))
+        covered |= np.hypot(points[:, 0] - x, points[:, 1] - y) <= r
+    return opens
+
+
 def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[tuple[Point, Point, float]],
                      roads: polygons.Occupancy, built: polygons.Occupancy, density: float, width: float,
-                     height: float) -> list[_Placed]:
+                     height: float, opens: polygons.Occupancy | None = None) -> list[_Placed]:
     """Packed houses of one dense region: rows along both sides of every lane, then infill behind them.
 
-    Each house keeps `ROAD_CLEARANCE_M` off every road and stays inside its region; houses of a row
-    often share walls, and infill houses take the direction of the nearest lane.
+    Each house keeps `ROAD_CLEARANCE_M` off every road and out of the ``opens`` patches and stays inside its
+    region; houses of a row often share walls, and infill houses take the direction of the nearest lane.
     """
     window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
     placed: list[_Placed] = []
@@ -1250,6 +1277,8 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
         x0, y0, x1, y1 = polygon_bbox(footprint)
         outline = polygons.rotate(footprint, (x0 + x1) / 2, (y0 + y1) / 2, rotation)  # as Building turns it
         if not polygons.inside(outline, window, 0.0) or not roads.clear(outline, ROAD_CLEARANCE_M):
+            return False
+        if opens is not None and not opens.clear(outline, 0.0):
             return False
         if not built.clear(outline, -TOUCH_M):
             return False
@@ -1379,7 +1408,8 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     buildings, roofs, trees), plus one for the regions, so a stage's knob changes that stage only.
     Downtown and industrial grids are turned by an angle of their own; the suburban grid is not.
     """
-    road_rng, lot_rng, building_rng, roof_rng, tree_rng, region_rng = stage_generators(seed, 6)
+    # The seventh stream (open patches) is drawn only when a town has them; the first six are those of six.
+    road_rng, lot_rng, building_rng, roof_rng, tree_rng, region_rng, open_rng = stage_generators(seed, 7)
     regions, roads = _style_regions(region_rng, width, height, params.style)
     through = list(roads)
     grid_styles = [style for style, _ in params.style if style != "dense"]
@@ -1446,8 +1476,10 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     dense = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
+            window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
+            opens = _open_patches(open_rng, window, params.open_share) if params.open_share > 0 else None
             dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
-                                        params.building_density, width, height)
+                                        params.building_density, width, height, opens)
             for house in dense[k]:
                 lots.append(Lot(polygons.rounded_polygon(house.outline), -1))
                 sketches.append(_Sketch(len(lots) - 1, house.kind, house.footprint, "rect", house.height_m,

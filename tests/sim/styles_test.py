@@ -289,6 +289,35 @@ def test_a_dense_town_covers_most_of_its_ground_with_roofs(dense_city):
     assert _coverage(sparse)[1] < off_road
 
 
+@pytest.mark.parametrize("share", [0.3, 0.6])
+def test_open_patches_keep_about_their_share_of_a_dense_town_free_of_houses(dense_city, share):
+    """``open_share`` leaves round patches without houses (fields, gardens, groves) while the town keeps its
+    invariants; at 0 the town is the packed one, and with real trees the patches fill with them."""
+    open_city = generate_layout(3, 345.6, 345.6, LayoutParams(style="dense", open_share=share))
+    check_styled(open_city)
+    assert open_city.roads == dense_city.roads  # the lanes stay; only houses give way
+    # the roofs lose the patches' share and a little more: houses cannot lean on a patch's edge
+    ratio = _coverage(open_city)[0] / _coverage(dense_city)[0]
+    assert 1 - 1.4 * share - 0.05 < ratio < 1 - share, ratio
+    assert LayoutParams(style="dense", open_share=share).to_dict()["open_share"] == share
+    assert "open_share" not in LayoutParams(style="dense").to_dict()
+    real = {s: generate_layout(3, 345.6, 345.6, LayoutParams(style="dense", open_share=s, tree_size="real"))
+            for s in (0.0, share)}
+    assert len(real[share].trees) > 2 * len(real[0.0].trees)
+
+
+def test_a_larger_open_share_keeps_the_patches_of_a_smaller_one():
+    from meta_sim.sim.polygons import rounded_polygon
+
+    window = rounded_polygon(((0.0, 0.0), (300.0, 0.0), (300.0, 200.0), (0.0, 200.0)))
+    small, large = (layout_module._open_patches(np.random.default_rng(4), window, s) for s in (0.2, 0.5))
+    assert 0 < len(small.items) < len(large.items) and large.items[:len(small.items)] == small.items
+    assert not layout_module._open_patches(np.random.default_rng(4), window, 0.0).items
+    for bad in (-0.1, 1.5, "some"):
+        with pytest.raises(MetaSimError, match="open_share"):
+            LayoutParams(open_share=bad)
+
+
 def test_stages_keep_their_own_generators_in_styled_cities(mixed_city):
     params = mixed_city.params
     fewer_trees = generate_layout(5, 700.0, 600.0, replace(params, tree_density=0.1))
