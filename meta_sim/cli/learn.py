@@ -27,7 +27,8 @@ def _dataset_options(command):
                           "vegetation, sun, brightness and sensor for real targets; overhead-v2 also the "
                           "ground's albedo; overhead-v3 also sparse towns, building density from 0.05; "
                           "overhead-towns-v1 is overhead-v2 with every city a dense town; overhead-towns-v2 adds "
-                          "painted roofs and darker ground) or a JSON file"),
+                          "painted roofs and darker ground; overhead-towns-v3 also open ground among the houses and "
+                          "deeper shadows) or a JSON file"),
         click.option("--tile-px", type=int, default=384, show_default=True, help="training tile size in pixels"),
         click.option("--gsd", type=float, default=0.3, show_default=True, help="training tiles' metres per pixel"),
         click.option("--extractor", default="colour-texture", show_default=True,

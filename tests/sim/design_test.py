@@ -262,6 +262,25 @@ def test_overhead_towns_v2_is_towns_v1_with_painted_roofs_and_darker_ground_reco
             {**p.to_dict(), "high": 1.5} if p.name == "roof_paint" else p.to_dict() for p in v2.parameters]})
 
 
+def test_overhead_towns_v3_is_towns_v2_with_open_ground_and_deeper_shadows():
+    from meta_sim.sim.appearance import Appearance
+    from meta_sim.sim.layout import LayoutParams
+
+    v2, v3 = DesignSpace.load("overhead-towns-v2"), DesignSpace.load("overhead-towns-v3")
+    open_share, shadow = v3.parameter("open_share"), v3.parameter("shadow_depth")
+    assert (open_share.layout_field, open_share.low, open_share.high) == ("open_share", 0.0, 0.3)
+    assert (shadow.appearance, shadow.low, shadow.high) == ("shadow_depth", 0.55, 0.9)
+    assert tuple(p for p in v3.parameters if p.name not in ("open_share", "shadow_depth")) == v2.parameters
+    assert v3.names.index("open_share") == v3.names.index("building_density") + 1
+    assert v3.names.index("shadow_depth") == v3.names.index("sun_elevation") + 1
+    assert v3.layout == v2.layout and v3.scene_version() == v2.scene_version()
+    for design in v3.sample(np.random.default_rng(5), 5):
+        overrides = v3.layout_overrides(design)
+        assert LayoutParams(**overrides).open_share == design["open_share"] == overrides["open_share"]
+        look = Appearance().with_design(v3, design)
+        assert look.shadow_depth == design["shadow_depth"] == look.header()["shadow_depth"]
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),
