@@ -465,8 +465,11 @@ def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, render
 
 def colour_stats(pool: Pool) -> dict:
     """Mean display brightness (0-1) and saturation of building and of other pixels over a pool: where
-    renders and real imagery differ in plain colour, before any shape or texture."""
-    out = {}
+    renders and real imagery differ in plain colour, before any shape or texture. And per image (the median
+    over the pool): the building share and how dark its darkest pixels are, the 5th percentile of linear
+    luminance over its median (shadows and dark canopy bring it down)."""
+    out = {"image": {"building_share": float(np.median([m.mean() for m in pool.masks])),
+                     "dark_tail": float(np.median([_dark_tail(i) for i in pool.images]))}}
     for part, pick in (("building", True), ("ground", False)):
         pixels = np.concatenate([i[m == pick] for i, m in zip(pool.images, pool.masks)])
         if not len(pixels):
@@ -475,6 +478,17 @@ def colour_stats(pool: Pool) -> dict:
         out[part] = {"brightness": float(pixels.mean()),
                      "saturation": float(np.mean(np.where(high > 0, (high - low) / np.maximum(high, 1e-6), 0.0)))}
     return out
+
+
+def _dark_tail(display: np.ndarray) -> float:
+    """The 5th percentile of an sRGB image's linear luminance over its median (no-data black left out)."""
+    x = np.clip(display, 0.0, 1.0)
+    linear = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4) @ np.array([0.2126, 0.7152, 0.0722])
+    lit = linear[linear > 0.002]
+    if lit.size < 100:
+        return float("nan")
+    low, median = np.percentile(lit, [5, 50])
+    return float(low / median)
 
 
 def _same_ground(images: list[np.ndarray]) -> list[np.ndarray]:
@@ -707,14 +721,18 @@ def realism_markdown(result: dict) -> str:
     coloured = [(domain, row) for domain, row in rows if "colour" in row]
     if coloured:
         lines += ["", "Plain colour, real (`adapt` scenes) against rendered: mean display brightness (0-1) and "
-                  "saturation of building pixels and of the other pixels.", "",
+                  "saturation of building pixels and of the other pixels; per image (median over the images), the "
+                  "building share and the dark tail (5th percentile of linear luminance over the median: shadows "
+                  "and dark canopy lower it; '-' for runs from before it was measured).", "",
                   "| domain | space | sensor | roof jitter | ground | buildings: brightness real / rendered "
-                  "| saturation | other pixels: brightness real / rendered | saturation |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "| saturation | other pixels: brightness real / rendered | saturation | building share "
+                  "| dark tail |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for domain, row in coloured:
             real, rendered = row["colour"]["real"], row["colour"]["rendered"]
             cells = [f"{real[part][key]:.2f} / {rendered[part][key]:.2f}" if part in real and part in rendered
-                     else "-" for part in ("building", "ground") for key in ("brightness", "saturation")]
+                     else "-" for part in ("building", "ground", "image")
+                     for key in {"image": ("building_share", "dark_tail")}.get(part, ("brightness", "saturation"))]
             lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                          f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                          + " | ".join(cells) + " |")

@@ -258,6 +258,40 @@ def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_meas
                       "| 95.0 / 95.0 |")
 
 
+def test_colour_stats_give_the_building_share_and_how_dark_the_shadows_are_and_older_rows_show_a_dash():
+    from meta_sim.experiments.task_eval import colour_stats, realism_markdown
+    from meta_sim.task.data import Pool
+
+    def srgb(linear):
+        return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+
+    lit = np.full((40, 40, 3), 0.2, np.float32)
+    lit[:8] = 0.02  # a fifth in a shadow that keeps a tenth of the light
+    mask = np.zeros((40, 40), bool)
+    mask[10:20] = True
+    flat = colour_stats(Pool("p", [srgb(lit).astype(np.float32)], [mask], 0.6, ["a"]))
+    assert flat["image"]["building_share"] == pytest.approx(0.25)
+    assert flat["image"]["dark_tail"] == pytest.approx(0.1, rel=1e-3)
+    lit[:8] = 0.2
+    assert colour_stats(Pool("p", [srgb(lit).astype(np.float32)], [mask], 0.6, ["a"]))["image"]["dark_tail"] == \
+        pytest.approx(1.0, rel=1e-3)
+    part = {"brightness": 0.5, "saturation": 0.25}
+    row = {"rendered_only": {"iou": 0.5, "iou_std": 0.01}, "other_real": {"iou": 0.4, "iou_std": 0.02},
+           "other_domains": ["rio"], "all_building": 0.3, "sensor": "drone",
+           "colour": {"real": {"building": part, "ground": part, "image": flat["image"]},
+                      "rendered": {"building": part, "ground": part, "image": {"building_share": 0.5,
+                                                                               "dark_tail": 0.45}}}}
+    old = {**row, "colour": {side: {"building": part, "ground": part} for side in ("real", "rendered")}}
+    result = {"runs": {"a": {"banepa": row}, "b": {"kampala": old}}, "settings": {"seeds": [0]},
+              "render_preset": "fast", "seconds": 60}
+    lines = realism_markdown(result).splitlines()
+    header = next(line for line in lines if line.startswith("| domain") and "dark tail" in line)
+    banepa = [line for line in lines if line.startswith("| banepa")][-1]
+    kampala = [line for line in lines if line.startswith("| kampala")][-1]
+    assert banepa.endswith("| 0.25 / 0.50 | 0.10 / 0.45 |") and kampala.endswith("| - | - |")
+    assert len(banepa.split(" | ")) == len(header.split(" | ")) == len(kampala.split(" | "))
+
+
 def test_the_realism_picture_shows_real_scenes_and_renders_on_the_same_ground():
     """Real scenes and rendered tiles differ in size at the working pixel size; the picture crops each to
     the largest square all hold, around its centre."""
