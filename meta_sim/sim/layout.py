@@ -1476,8 +1476,8 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
     dense = {}
     for k, region in enumerate(regions):
         if region.style == "dense":
-            window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
-            opens = _open_patches(open_rng, window, params.open_share) if params.open_share > 0 else None
+            opens = (_open_patches(open_rng, polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height)),
+                                   params.open_share) if params.open_share > 0 else None)
             dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
                                         params.building_density, width, height, opens)
             for house in dense[k]:
