@@ -481,8 +481,9 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
                        methods.sbi)
 
 
-def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50) -> dict:
-    """Method name -> a function returning one design per target (searches batched over targets)."""
+def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50, found: dict | None = None) -> dict:
+    """Method name -> a function returning one design per target (searches batched over targets). NAMS's
+    searches also keep their ``SearchResult`` lists in ``found`` (by method name) when it is given."""
     import torch
 
     from ..nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
@@ -507,11 +508,17 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
         runs["sbi_nre"] = lambda: [r.design for r in nre_predict(ctx.sbi.model, ctx.sbi.feature_norm.apply(feats),
                                                                  space)]
     colour = search_colour(ctx.nams)
-    runs["nams_adjoint"] = lambda: [r.design for r in adjoint_search(
-        ctx.nams.model, normed, space, generator=generator, colour=colour, **adjoint_settings)]
+    found = {} if found is None else found
+
+    def kept(method: str, results: list) -> list[dict]:
+        found[method] = results
+        return [r.design for r in results]
+
+    runs["nams_adjoint"] = lambda: kept("nams_adjoint", adjoint_search(
+        ctx.nams.model, normed, space, generator=generator, colour=colour, **adjoint_settings))
     if discrete(space):  # the exhaustive search enumerates every design
-        runs["nams_exhaustive"] = lambda: [r.design for r in exhaustive_search(ctx.nams.model, normed, space, S=S,
-                                                                               colour=colour)]
+        runs["nams_exhaustive"] = lambda: kept("nams_exhaustive", exhaustive_search(ctx.nams.model, normed, space,
+                                                                                    S=S, colour=colour))
     return runs
 
 

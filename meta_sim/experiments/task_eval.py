@@ -148,13 +148,18 @@ def _real_pool(name: str, scenes: list, train: TrainSettings) -> Pool:
 # ---------------------------------------------------------------- designs and synthetic sets
 
 
-def _predictions(h: Harness, ctx, seed: int) -> dict:
-    """Strategy -> one design per target group, for the strategies that infer designs."""
+def _predictions(h: Harness, ctx, seed: int, found: dict | None = None) -> dict:
+    """Strategy -> one design per target group, for the strategies that infer designs (NAMS's search results
+    kept in ``found`` under "nams" when it is given)."""
     from .evaluate import CONTINUOUS_SEARCH, discrete, method_runs
 
-    runs = method_runs(ctx, seed, {} if discrete(ctx.nams.space) else CONTINUOUS_SEARCH, 50)
+    searched = {}
+    runs = method_runs(ctx, seed, {} if discrete(ctx.nams.space) else CONTINUOUS_SEARCH, 50, searched)
     runs.setdefault("nams_exhaustive", runs["nams_adjoint"])  # a space with continuous parameters
-    return {strategy: runs[method]() for strategy, method in METHOD_OF.items() if method in runs}
+    predicted = {strategy: runs[method]() for strategy, method in METHOD_OF.items() if method in runs}
+    if found is not None:
+        found["nams"] = searched.get("nams_exhaustive", searched.get("nams_adjoint"))
+    return predicted
 
 
 def synthetic_jobs(h: Harness, designs: list[dict] | None, r: float, seed: int) -> list[Job]:
@@ -316,7 +321,7 @@ def _tile_test_pool(h: Harness, paths: list[Path]) -> Pool:
     return Pool.from_dataset("target test tiles", TileDataset.from_paths(paths, "srgb", h.gsd))
 
 
-def _infer_real(h: Harness, adapt: list, seed: int, name: str) -> dict:
+def _infer_real(h: Harness, adapt: list, seed: int, name: str, found: dict | None = None) -> dict:
     """DR, MS2 and NAMS designs for a real domain: one per group of ``group_size`` adapt tiles (the
     scenes at the render pixel size, cut into render-sized tiles as `meta-sim infer` cuts them)."""
     from ..sim.imageio import cut_tiles
@@ -331,7 +336,7 @@ def _infer_real(h: Harness, adapt: list, seed: int, name: str) -> dict:
     m = h.methods
     ctx = EvalContext("e3", m.models, m.nams, m.dr, [Job({}, -1, f"{name}-{k}") for k in range(len(groups))],
                       None, size, features, per_tile, 0.0, {}, m.pool, [])
-    return _predictions(h, ctx, seed)
+    return _predictions(h, ctx, seed, found)
 
 
 def run_real(h: Harness, out: Path) -> dict:
@@ -359,7 +364,7 @@ def run_real(h: Harness, out: Path) -> dict:
 
 
 def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "none",
-                 roof_jitter: float = 0.0, ground: str = "plain") -> dict:
+                 roof_jitter: float = 0.0, ground: str = "plain", near: int = 0) -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
     domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
     designs in the same cities (what inferring the domain's design adds). With ``realness`` also the accuracy
@@ -373,7 +378,10 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     scenes only report.
     A harness without NAMS (``make_harness(infer=False)``) measures the renders alone: no design is
     inferred, the row's "rendered_only" is None, and the classifier, the colours and the picture take the
-    renders of uniform designs."""
+    renders of uniform designs.
+    ``near`` > 0 draws each domain's renders from its groups' ``near`` best-ranked designs of NAMS's search
+    (``nams.near_designs``) instead of one design per group; the row keeps the groups' designs."""
+    from ..nams import near_designs
     from ..task.data import merge
     from ..task.score import all_building
 
@@ -387,8 +395,10 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         if seen_by not in uniform:  # the same cities with uniform designs: what inferring the design adds
             uniform[seen_by] = render_set(h, "uniform", synthetic_jobs(h, None, s.r_real, s.target_seed), seen_by,
                                           roof_jitter, ground)
-        designs = _infer_real(h, adapt, s.target_seed, domain)["nams"] if infer else None
-        rendered = (render_set(h, f"{domain} nams", synthetic_jobs(h, designs, s.r_real, s.target_seed), seen_by,
+        found = {}
+        designs = _infer_real(h, adapt, s.target_seed, domain, found)["nams"] if infer else None
+        population = near_designs(found["nams"], near) if infer and near else designs
+        rendered = (render_set(h, f"{domain} nams", synthetic_jobs(h, population, s.r_real, s.target_seed), seen_by,
                                roof_jitter, ground) if infer else uniform[seen_by])
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
@@ -403,6 +413,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
                         "ground": ground, "space": space.name, "colour_augment": s.train.colour,
+                        **({"near": near} if infer and near else {}),
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
@@ -430,6 +441,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += "" if space.name == "rooftops-v1" else f"-{space.name}"
         tag += "" if s.train.colour == "light" else f"-{s.train.colour}"
         tag += "" if infer else UNIFORM_ONLY.replace(":", "-")
+        tag += f"-near{near}" if infer and near else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 
@@ -611,6 +623,10 @@ SCENE_AUGMENTED = "+scene"
 # it measures the space's renders alone, with segmenters trained on renders of uniform designs (minutes, not
 # the hours a NAMS model of a rich space takes on an empty cache).
 UNIFORM_ONLY = ":uniform"
+# A space's run with this suffix (e.g. "overhead-towns-v3+scene:near") renders each domain's training set from
+# its groups' NEAR_STARTS best-ranked designs (``run_sim_only``'s ``near``) instead of one design per group.
+NEAR_POPULATION = ":near"
+NEAR_STARTS = 16
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -625,14 +641,15 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     import time
 
     augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
-    renders_only = {name + UNIFORM_ONLY for name in (*builtin_spaces(), *augmentable)}
-    spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | renders_only) - set(spaces)))
+    suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
+                for suffix in (UNIFORM_ONLY, NEAR_POPULATION)}
+    spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | suffixed) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
-                           f"{SCENE_AUGMENTED} and/or {UNIFORM_ONLY} after it")
+                           f"{SCENE_AUGMENTED} and/or {UNIFORM_ONLY} or {NEAR_POPULATION} after it")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
@@ -644,15 +661,15 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         models[dataset.space] = h.methods.nams.model_id
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for run in spaces:
-        infer = not run.endswith(UNIFORM_ONLY)
-        named = run.removesuffix(UNIFORM_ONLY)
+        infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
+        named = run.removesuffix(UNIFORM_ONLY).removesuffix(NEAR_POPULATION)
         space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
         run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
         other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
         if infer:
             models[space] = other.methods.nams.model_id
-        result["runs"][run] = run_sim_only(other, out, True)["domains"]
+        result["runs"][run] = run_sim_only(other, out, True, near=near)["domains"]
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
                   seconds=time.perf_counter() - started, nams_models=models,
                   **({"nams_model": models[dataset.space]} if dataset.space in models else {}))
@@ -663,7 +680,8 @@ def _space_cell(row: dict) -> str:
     """A realism row's design space, and the segmenters' colour augmentation when it is not the light one."""
     augment = row.get("colour_augment", "light")
     return (row.get("space", "rooftops-v1") + ("" if augment == "light" else f", {augment} augmentation")
-            + (", uniform designs only" if row.get("rendered_only", {}) is None else ""))
+            + (", uniform designs only" if row.get("rendered_only", {}) is None else "")
+            + (f", population of each group's {row['near']} best-ranked designs" if row.get("near") else ""))
 
 
 def _g(value) -> str:

@@ -26,6 +26,7 @@ from .search import (
     design_table,
     dr_predict,
     exhaustive_search,
+    near_designs,
     search,
     time_search,
     uniform_predict,
@@ -38,5 +39,6 @@ __all__ = [
     "NRETrainConfig", "PLAIN_COLOUR", "RatioClassifier", "RoofMatch", "SearchResult", "TrainConfig", "adjoint_search",
     "build_model",
     "design_losses", "design_table", "dr_predict", "exhaustive_search", "load_checkpoint", "model_id", "ms2_search",
-    "nre_predict", "save_checkpoint", "search", "time_search", "train_dr", "train_nams", "train_nre", "uniform_predict",
+    "near_designs", "nre_predict", "save_checkpoint", "search", "time_search", "train_dr", "train_nams", "train_nre",
+    "uniform_predict",
 ]

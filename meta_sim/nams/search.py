@@ -84,7 +84,9 @@ class SearchResult:
     ``votes`` maps each categorical parameter to {choice id: share}, shares
     summing to 1, largest first: among the S kept starts (adjoint), among the
     S best designs (exhaustive), or the regression output (DR). Losses are
-    the search objective in normalised feature units (None for DR).
+    the search objective in normalised feature units (None for DR). ``ranked``
+    lists designs with their losses, best first: the S kept starts' own designs
+    (adjoint; what the vote summarises) or the best designs (exhaustive).
     """
 
     design: dict
@@ -475,6 +477,16 @@ def _vote(space: DesignSpace, vectors: torch.Tensor) -> list[tuple[dict, dict]]:
     return [(space.decode(winner_vec[t].numpy()), shares[t]) for t in range(T)]
 
 
+def near_designs(results: list[SearchResult], n: int) -> list[dict]:
+    """The designs a search's answers stand for, where one design per target would hide what the search
+    could not tell apart: each target's ``n`` best-ranked designs (its answer alone where the search ranks
+    none, as DR), in target order. A population drawn from them keeps the spread of the parameters the
+    targets do not pin down, and each target's answer where they agree."""
+    if n < 1:
+        raise MetaSimError(f"near designs: n must be at least 1, not {n}")
+    return [dict(design) for r in results for design in ([d for d, _ in r.ranked[:n]] or [r.design])]
+
+
 def uniform_predict(space: DesignSpace, n: int, generator: torch.Generator | None = None) -> list[dict]:
     """``n`` designs drawn uniformly from the space (the paper's Uniform baseline)."""
     columns = {}
@@ -652,10 +664,11 @@ def _adjoint_pass(model: NAMS, targets: torch.Tensor, space: DesignSpace, M: int
                                    f"or check that the checkpoint and targets match")
             kept_z = torch.gather(z.detach(), 1, kept[:, :, None].expand(-1, -1, z.shape[-1]))
             vectors = torch.sigmoid(decoder(kept_z.to(dtype)).float())
-        for (design, shares), loss in zip(_vote(space, vectors), kept_loss):
+        for (design, shares), loss, kept_vectors in zip(_vote(space, vectors), kept_loss, vectors.double().numpy()):
+            ranked = [(space.decode(vector), float(value)) for vector, value in zip(kept_vectors, loss)]
             results.append(SearchResult(design=design, votes=shares, best_loss=float(loss[0]),
                                         mean_loss=float(loss.mean()), method="adjoint",
-                                        searched_design=dict(design)))
+                                        searched_design=dict(design), ranked=ranked))
     return results
 
 

@@ -359,6 +359,67 @@ def test_a_uniform_only_realism_run_trains_no_nams_model_and_scores_the_renders_
     assert cells[9] == f"{100 * banepa['uniform_designs']['iou'] - share:+.1f}"
 
 
+def test_a_near_realism_run_draws_each_domains_renders_from_its_groups_best_ranked_designs(tmp_path, monkeypatch):
+    """"overhead-towns-v3+scene:near": the domain's training cities take designs from its groups' NEAR_STARTS
+    best-ranked designs (the search's spread), not the groups' answers alone; the row keeps the answers."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.nams import SearchResult
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+    from meta_sim.sim.design import DesignSpace
+    from meta_sim.task.data import Pool
+
+    space = DesignSpace.load("overhead-towns-v3")
+    rng = np.random.default_rng(0)
+    starts = space.sample(rng, 40)  # two groups of 20 ranked starts each
+    answers = space.sample(rng, 2)
+    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
+    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
+        methods, dataset, models, settings, tmp_path, REALDATA, None))
+
+    def infer_real(h, adapt, seed, name, found=None):
+        found["nams"] = [SearchResult(answers[g], {}, 0.1, 0.2, "adjoint", answers[g],
+                                      ranked=[(d, 0.1) for d in starts[20 * g:20 * g + 20]]) for g in range(2)]
+        return {"nams": list(answers)}
+
+    monkeypatch.setattr(task_eval, "_infer_real", infer_real)
+    image, mask = np.full((64, 64, 3), 0.5, np.float32), np.zeros((64, 64), bool)
+    mask[8:24, 8:24] = True
+    rendered = Pool("r", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
+    drawn = {}
+
+    def render_set(h, name, jobs, *args):
+        drawn[name] = [job.design for job in jobs]
+        return rendered
+
+    monkeypatch.setattr(task_eval, "render_set", render_set)
+    monkeypatch.setattr(task_eval, "_scored",
+                        lambda h, real, synthetic, label, pools: [[_counts(0.3 if real is None else 0.6)]] * 2)
+    monkeypatch.setattr(task_eval, "_realness", lambda *a: {"accuracy": 0.75, "accuracy_std": 0.0})
+    monkeypatch.setattr(task_eval.realdomains, "scenes",
+                        lambda domain, realdata: [realdomains.Scene(f"{domain}{k}", image, mask, 0.6)
+                                                  for k in range(2)])
+    run = "overhead-towns-v3+scene:near"
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={run})
+    near = starts[:task_eval.NEAR_STARTS] + starts[20:20 + task_eval.NEAR_STARTS]
+    kept = [d for d in drawn["rio nams"] if d in near]
+    assert len(kept) >= len(drawn["rio nams"]) // 2  # the rest: diversify with rejection (r = 0.25)
+    assert len({json.dumps(d, sort_keys=True) for d in kept}) > 4  # many designs, not two answers
+    assert not any(d in answers for d in drawn["rio nams"])
+    assert not any(d in starts[task_eval.NEAR_STARTS:20] for d in drawn["rio nams"])  # below the cut
+    row = result["runs"][run]["rio"]
+    assert row["designs"] == answers and row["near"] == task_eval.NEAR_STARTS and row["space"] == "overhead-towns-v3"
+    line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| rio"))
+    assert f"population of each group's {task_eval.NEAR_STARTS} best-ranked designs" in line
+    assert (tmp_path / f"realism-overhead-towns-v3-scene-near{task_eval.NEAR_STARTS}.png").is_file()
+    with pytest.raises(MetaSimError, match=":near"):
+        task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                              only={"overhead-towns-v3:nearby"})
+
+
 def test_a_harness_without_nams_draws_from_its_datasets_space():
     from meta_sim.experiments.task_eval import Harness
     from meta_sim.pipeline.dataset import DatasetConfig

@@ -19,6 +19,7 @@ from meta_sim.nams import (
     design_table,
     dr_predict,
     exhaustive_search,
+    near_designs,
     search,
     time_search,
     train_dr,
@@ -239,6 +240,32 @@ def test_continuous_parameters_use_the_adjoint_search():
     _assert_finite(results, space)
     assert all(0.3 <= r.design["density"] <= 0.9 for r in results)
     assert set(results[0].votes) == {"p0"}  # continuous parameters have a mean, not a vote
+
+
+def test_the_adjoint_ranks_its_kept_starts_and_near_designs_keep_their_spread():
+    space = _space(3, continuous=True)
+    simulate = FakeSimulator(space, seed=2)
+    designs, features = simulate(space.sample(np.random.default_rng(1), 200))
+    fit = train_nams(designs, features, NAMSConfig(space.dim, FEATURES, hidden=(16, 16)),
+                     TrainConfig(max_epochs=5))
+    results = adjoint_search(fit.model, torch.zeros(2, FEATURES), space, generator=_gen(), **FAST)
+    for r in results:
+        assert len(r.ranked) == FAST["S"] and r.ranked[0][1] == r.best_loss
+        losses = [loss for _, loss in r.ranked]
+        assert losses == sorted(losses) and math.isclose(np.mean(losses), r.mean_loss, rel_tol=1e-9)
+        assert all(space.validate(d) == d for d, _ in r.ranked)
+        # The answer summarises its starts: the mean of their continuous value, the vote's share of each choice.
+        assert math.isclose(np.mean([d["density"] for d, _ in r.ranked]), r.design["density"], rel_tol=1e-6)
+        picks = [d["p0"] for d, _ in r.ranked]
+        assert r.votes["p0"] == {c: picks.count(c) / len(picks) for c in r.votes["p0"]}
+    near = near_designs(results, 3)
+    assert near == [d for r in results for d, _ in r.ranked[:3]] and len(near) == 6
+    assert near_designs(results, 100) == [d for r in results for d, _ in r.ranked]  # all there are
+    dr = train_dr(designs, features, DRConfig(FEATURES, space.dim, hidden=(16,)), TrainConfig(max_epochs=2))
+    regressed = dr_predict(dr.model, torch.zeros(2, FEATURES), space)
+    assert near_designs(regressed, 5) == [r.design for r in regressed]  # nothing ranked: the answer alone
+    with pytest.raises(MetaSimError, match="at least 1"):
+        near_designs(results, 0)
 
 
 def test_auto_prefers_exhaustive_for_small_discrete_spaces_and_refuses_huge_ones(toy):
