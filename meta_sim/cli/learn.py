@@ -169,11 +169,14 @@ def _search_options(command):
 @click.option("--profile", type=click.Choice(["fast", "balanced", "paper"]), default=None,
               help="recommended search settings (fast/balanced: exhaustive; paper: adjoint M=1000, 200 "
                    "iterations, 8 views); options given explicitly win")
+@click.option("--population-near", "near", type=int, default=0, show_default=True,
+              help="population.json's designs to render from: each group's N best-ranked designs of the search "
+                   "(the spread of what the search could not tell apart) instead of its one answer (0)")
 @_search_options
 @click.pass_context
 @_torch_threads
 def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views, weights, seed, method, profile,
-                  M, k, S, iterations, lr, r):
+                  near, M, k, S, iterations, lr, r):
     """Infer rooftop designs for a folder of target images; write presets and a report."""
     from ..pipeline.infer import InferSettings, infer
 
@@ -190,7 +193,7 @@ def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views
         group_size = group_size if "group_size" in given else chosen.group_size
     settings = InferSettings(group_size=group_size, method=method, M=M, k=k, S=S, iterations=iterations, lr=lr,
                              r=r, seed=seed, gsd=gsd, views=int(views) if views else None,
-                             weights=str(weights) if weights else None)
+                             weights=str(weights) if weights else None, near=near)
     bars = _Bars()
     try:
         report = infer(target_dir, model, out, settings, bars, overwrite=overwrite)

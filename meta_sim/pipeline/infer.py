@@ -46,6 +46,7 @@ class InferSettings(SearchOptions):
     gsd: float | None = None
     views: int | None = None  # default: what the model was trained with
     weights: str | None = None  # backbone weights, when the model's extractor needs them
+    near: int = 0  # > 0: the population's designs are each group's ``near`` best-ranked designs
 
     def check(self) -> None:
         """MetaSimError for any setting ``infer`` would refuse, before an image is read."""
@@ -56,6 +57,8 @@ class InferSettings(SearchOptions):
         super().check(self.method)
         if isinstance(self.group_size, bool) or not isinstance(self.group_size, int) or self.group_size < 1:
             raise MetaSimError(f"--group-size must be at least 1, not {self.group_size!r}")
+        if isinstance(self.near, bool) or not isinstance(self.near, int) or not 0 <= self.near <= self.S:
+            raise MetaSimError(f"--population-near must be between 0 and --keep/-S ({self.S}), not {self.near!r}")
         if self.gsd is not None and not (math.isfinite(self.gsd) and 0.01 <= self.gsd <= 100):
             raise MetaSimError(f"--gsd must be between 0.01 and 100 metres per pixel, not {self.gsd}")
         if self.views is not None and self.views not in VIEW_COUNTS:
@@ -77,7 +80,8 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     the tiles, in file-name order, form groups of ``settings.group_size``. Each group's features
     (the checkpoint's extractor, averaged over tiles and views) are normalised and searched, and
     ``out_dir`` gets ``presets/<folder>-NNN.json`` (one design preset per group, with its vote
-    shares), ``population.json`` (the distribution of the groups' designs), and ``report.json``,
+    shares), ``population.json`` (the distribution of the groups' designs; with ``settings.near`` its designs to
+    sample are each group's ``near`` best-ranked ones), and ``report.json``,
     ``report.md`` and ``report.png`` (each group's first tile beside the textures of its design,
     for the first 12 groups). The returned dict is what ``report.json`` holds: counts, skipped
     files, model id, method, seconds, the population and each group's design and confidence.
@@ -158,7 +162,7 @@ class _Run:
         self.ckpt, self.extractor, self.settings, self.stem = ckpt, extractor, settings, stem
         self.views = settings.views or int(ckpt.extra.get("views", 8))
         self.generator = torch.Generator().manual_seed(settings.seed)
-        self.presets, self.thumbnails, self.tiles = [], [], 0
+        self.presets, self.thumbnails, self.tiles, self.near = [], [], 0, []
         self.seconds = {"features": 0.0, "search": 0.0}
         self.method = settings.method
         self.evidence_reference = evidence_reference(ckpt.extra)
@@ -166,7 +170,7 @@ class _Run:
 
     def search(self, groups: list, out_dir: Path) -> None:
         """Features, search and one preset file per group, for one batch of groups."""
-        from ..nams import search
+        from ..nams import near_designs, search
         from .features import features_for_groups
 
         started = time.perf_counter()
@@ -176,6 +180,8 @@ class _Run:
         results = search(self.ckpt.model, self.ckpt.feature_norm.apply(feats), self.ckpt.space, self.settings.method,
                          generator=self.generator, colour=self.colour, **self.settings.search_options())
         self.seconds["search"] += time.perf_counter() - started
+        if self.settings.near:
+            self.near += near_designs(results, self.settings.near)
         evidence = roof_evidence(feats, self.extractor) or {}
         for k, (group, result) in enumerate(zip(groups, results)):
             index = len(self.presets)
@@ -201,7 +207,9 @@ class _Run:
         """The population preset and the report, once every group is written; returns the report."""
         ckpt, presets = self.ckpt, self.presets
         images = len([p for p in paths if p not in {s for s, _ in skipped}])
-        pop = population(presets, ckpt.space, f"{self.stem}-population", ckpt.model_id)
+        near = self.settings.near
+        pop = population(presets, ckpt.space, f"{self.stem}-population", ckpt.model_id,
+                         self.near if near else None, near)
         save_preset(out_dir / "population.json", pop)
         evidence = [p.roof_evidence() for p in presets]
         outside = {kind: {end: sum(e[kind]["outside"] == end for e in evidence) for end in ("low", "high")}
@@ -215,7 +223,8 @@ class _Run:
                   "groups_far_from_every_design": sum(bool(p.search.get("far")) for p in presets),
                   "seconds": {"read_and_features": self.seconds["features"], "search": self.seconds["search"],
                               "search_per_group": self.seconds["search"] / len(presets)},
-                  "population": pop.distribution,
+                  "population": pop.distribution, "population_designs": len(pop.designs),
+                  "population_near": near,
                   "roof_pixels_range": {k: list(span) for k, span in self.evidence_reference.items()},
                   "groups_outside_roof_pixels_range": outside,
                   "groups": [{"name": p.name, "design": p.design, "far": bool(p.search.get("far")),

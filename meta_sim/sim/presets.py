@@ -234,18 +234,25 @@ def load_preset(path: str | Path, space: DesignSpace | None = None, extra: Mappi
         raise MetaSimError(f"{path}: {exc}") from None
 
 
-def population(presets: list[DesignPreset], space: DesignSpace, name: str, model_id: str = "") -> DesignPreset:
-    """The distribution of the groups' designs; its own design is the most common value per parameter."""
+def population(presets: list[DesignPreset], space: DesignSpace, name: str, model_id: str = "",
+               near: list[dict] | None = None, near_per_group: int = 0) -> DesignPreset:
+    """The distribution of the groups' designs; its own design is the most common value per parameter.
+    Its ``designs`` (what `render --population` samples) are the groups' designs, or with ``near`` those
+    designs instead (each group's ``near_per_group`` best-ranked designs of the search, ``nams.near_designs``)."""
     if not presets:
         raise MetaSimError("a population needs at least one group preset")
+    if near is not None and not near:
+        raise MetaSimError("a population drawn from near designs needs at least one")
     distribution, design = {}, {}
     for param in space.names:
         counts = Counter(str(p.design[param]) for p in presets)
         distribution[param] = {value: n / len(presets) for value, n in counts.most_common()}
         design[param] = next(p.design[param] for p in presets if str(p.design[param]) == counts.most_common(1)[0][0])
-    combos = Counter(json.dumps(p.design, sort_keys=True) for p in presets)
+    combos = Counter(json.dumps(d, sort_keys=True) for d in (near if near is not None else
+                                                            [p.design for p in presets]))
     return DesignPreset(kind="population", name=name, design_space=space.name, design=design,
                         vote_shares=distribution, distribution=distribution,
                         designs=[{"design": json.loads(k), "count": n} for k, n in combos.most_common()],
                         source_images=sorted({s for p in presets for s in p.source_images}),
-                        model_id=model_id, search={"groups": len(presets)})
+                        model_id=model_id, search={"groups": len(presets),
+                                                   **({"near": near_per_group} if near is not None else {})})

@@ -300,6 +300,31 @@ def test_infer_writes_presets_population_and_report(evaluated, tiny_env, tmp_pat
     assert set(report["roof_pixels_range"]) == {"flat", "sloped"}
     assert set(report["groups_outside_roof_pixels_range"]) == {"flat", "sloped"}
     assert (tmp_path / "inferred" / "report.png").stat().st_size > 1000
+    assert report["population_near"] == 0 and report["population_designs"] == len(population.designs)
+
+
+def test_infer_population_near_renders_from_each_groups_best_ranked_designs(evaluated, tiny_env, tmp_path):
+    """--population-near 3: population.json's designs are the groups' 3 best-ranked designs each (the group
+    presets and the distribution are the answers, as without it); --population-near above -S is refused."""
+    out, _ = evaluated
+    folder = _target_folder(tmp_path, tiny_env)
+    runs = {}
+    for near in (0, 3):
+        runs[near] = tmp_path / f"near{near}"
+        result = _cli("infer", folder, "--model", out / "nams.pt", "--out", runs[near], "--group-size", 2,
+                      "--population-near", near)
+        assert result.exit_code == 0, result.output
+    plain, near = (load_preset(runs[n] / "population.json") for n in (0, 3))
+    assert sum(d["count"] for d in plain.designs) == 2 and sum(d["count"] for d in near.designs) == 6
+    assert near.search == {"groups": 2, "near": 3} and near.distribution == plain.distribution
+    assert {json.dumps(d["design"], sort_keys=True) for d in plain.designs} <= {
+        json.dumps(d["design"], sort_keys=True) for d in near.designs}  # each group's answer ranks first
+    assert sorted(p.read_text() for p in (runs[0] / "presets").glob("*.json")) == sorted(
+        p.read_text() for p in (runs[3] / "presets").glob("*.json"))
+    assert json.loads((runs[3] / "report.json").read_text())["population_near"] == 3
+    refused = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "bad", "--population-near", 51)
+    assert refused.exit_code != 0 and "--population-near must be between 0 and --keep/-S (50)" in refused.output
+    assert not (tmp_path / "bad").exists()
 
 
 def test_infer_warns_when_a_groups_roof_evidence_is_outside_the_training_cities(evaluated, tiny_env, tmp_path):

@@ -81,6 +81,14 @@ def test_population_counts_designs(space):
     assert DesignPreset.from_dict(pop.to_dict(), space).distribution == pop.distribution
     with pytest.raises(MetaSimError):
         population([], space, "none")
+    # With near designs: the distribution stays the groups', the designs to sample are the near ones.
+    near = [groups[0].design, groups[2].design, groups[2].design]
+    spread = population(groups, space, "all", near=near, near_per_group=1)
+    assert spread.distribution == pop.distribution and spread.search == {"groups": 3, "near": 1}
+    assert spread.designs == [{"design": groups[2].design, "count": 2}, {"design": groups[0].design, "count": 1}]
+    assert DesignPreset.from_dict(spread.to_dict(), space).designs == spread.designs
+    with pytest.raises(MetaSimError, match="at least one"):
+        population(groups, space, "all", near=[])
 
 
 def test_a_preset_of_overhead_v2_carries_its_ground_albedo_and_an_unfit_one_is_refused(tmp_path):
