@@ -145,12 +145,13 @@ def test_a_built_in_space_named_in_the_runs_adds_its_realism_run_without_joining
 
     monkeypatch.setattr(task_eval, "make_harness", harness)
     monkeypatch.setattr(task_eval, "run_sim_only",
-                        lambda h, out, realness: {"domains": {"banepa": {"space": h.dataset.space}}})
+                        lambda h, out, realness, near=0: {"domains": {"banepa": {"space": h.dataset.space,
+                                                                                 "near": near}}})
     dataset = DatasetConfig()
     result = task_eval.run_realism(dataset, ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2"})
     assert trained == [("overhead-v2", 2 * dataset.designs)]  # trained like the overhead-v1 run
-    assert result["runs"] == {"overhead-v2": {"banepa": {"space": "overhead-v2"}}}
+    assert result["runs"] == {"overhead-v2": {"banepa": {"space": "overhead-v2", "near": 0}}}  # one design a group
     assert result["nams_models"] == {"overhead-v2": "m2"} and "nams_model" not in result
     assert "overhead-v2" not in task_eval.realism_runs() and task_eval.REALISM_SPACES == ("overhead-v1",)
 
@@ -173,7 +174,7 @@ def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the
                                methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
 
     monkeypatch.setattr(task_eval, "make_harness", harness)
-    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness: {"domains": {"banepa": {
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, near=0: {"domains": {"banepa": {
         "space": h.dataset.space, "colour_augment": h.settings.train.colour}}})
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2+scene"})
