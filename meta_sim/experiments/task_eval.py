@@ -480,8 +480,9 @@ def colour_stats(pool: Pool) -> dict:
     renders and real imagery differ in plain colour, before any shape or texture. And per image (the median
     over the pool): the building share and how dark its darkest pixels are, the 5th percentile of linear
     luminance over its median (shadows and dark canopy bring it down)."""
+    tails = [t for t in (_dark_tail(i) for i in pool.images) if np.isfinite(t)]  # images with enough lit pixels
     out = {"image": {"building_share": float(np.median([m.mean() for m in pool.masks])),
-                     "dark_tail": float(np.median([_dark_tail(i) for i in pool.images]))}}
+                     "dark_tail": float(np.median(tails)) if tails else None}}
     for part, pick in (("building", True), ("ground", False)):
         pixels = np.concatenate([i[m == pick] for i, m in zip(pool.images, pool.masks)])
         if not len(pixels):
@@ -490,6 +491,11 @@ def colour_stats(pool: Pool) -> dict:
         out[part] = {"brightness": float(pixels.mean()),
                      "saturation": float(np.mean(np.where(high > 0, (high - low) / np.maximum(high, 1e-6), 0.0)))}
     return out
+
+
+def _share(value) -> str:
+    """A colour statistic in a table cell ("-" where the pool had none)."""
+    return "-" if value is None else f"{value:.2f}"
 
 
 def _dark_tail(display: np.ndarray) -> float:
@@ -748,7 +754,7 @@ def realism_markdown(result: dict) -> str:
                   "|---|---|---|---|---|---|---|---|---|---|---|"]
         for domain, row in coloured:
             real, rendered = row["colour"]["real"], row["colour"]["rendered"]
-            cells = [f"{real[part][key]:.2f} / {rendered[part][key]:.2f}" if part in real and part in rendered
+            cells = [f"{_share(real[part][key])} / {_share(rendered[part][key])}" if part in real and part in rendered
                      else "-" for part in ("building", "ground", "image")
                      for key in {"image": ("building_share", "dark_tail")}.get(part, ("brightness", "saturation"))]
             lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "

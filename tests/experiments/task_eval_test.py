@@ -276,6 +276,12 @@ def test_colour_stats_give_the_building_share_and_how_dark_the_shadows_are_and_o
     lit[:8] = 0.2
     assert colour_stats(Pool("p", [srgb(lit).astype(np.float32)], [mask], 0.6, ["a"]))["image"]["dark_tail"] == \
         pytest.approx(1.0, rel=1e-3)
+    # An image with too few lit pixels (no-data black) has no dark tail and leaves the pool's median alone.
+    blank = np.zeros((40, 40, 3), np.float32)
+    two = Pool("p", [srgb(lit).astype(np.float32), blank], [mask, mask], 0.6, ["a", "b"])
+    assert colour_stats(two)["image"]["dark_tail"] == pytest.approx(1.0, rel=1e-3)
+    none = colour_stats(Pool("p", [blank], [mask], 0.6, ["b"]))["image"]
+    assert none["dark_tail"] is None and json.loads(json.dumps(none)) == none  # plain JSON, no NaN
     part = {"brightness": 0.5, "saturation": 0.25}
     row = {"rendered_only": {"iou": 0.5, "iou_std": 0.01}, "other_real": {"iou": 0.4, "iou_std": 0.02},
            "other_domains": ["rio"], "all_building": 0.3, "sensor": "drone",
@@ -290,6 +296,9 @@ def test_colour_stats_give_the_building_share_and_how_dark_the_shadows_are_and_o
     banepa = [line for line in lines if line.startswith("| banepa")][-1]
     kampala = [line for line in lines if line.startswith("| kampala")][-1]
     assert banepa.endswith("| 0.25 / 0.50 | 0.10 / 0.45 |") and kampala.endswith("| - | - |")
+    row["colour"]["real"]["image"] = {"building_share": 0.25, "dark_tail": None}
+    assert [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1].endswith(
+        "| 0.25 / 0.50 | - / 0.45 |")
     assert len(banepa.split(" | ")) == len(header.split(" | ")) == len(kampala.split(" | "))
 
 
