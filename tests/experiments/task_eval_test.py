@@ -318,30 +318,19 @@ def test_the_realism_picture_shows_real_scenes_and_renders_on_the_same_ground():
     assert np.array_equal(shown[1], render[40:151, 40:151])
 
 
-def test_a_uniform_only_realism_run_trains_no_nams_model_and_scores_the_renders_of_uniform_designs(
-        tmp_path, monkeypatch):
-    """"overhead-v2+scene:uniform": a harness without NAMS (no model trained, no design inferred); its rows have
-    no rendered-only IoU, and the table's difference to all building is the uniform designs'."""
+def _stub_realism_work(monkeypatch, on_render):
+    """A realism run without renders, segmenters or real imagery: every set is one flat pool (``on_render(h, name,
+    jobs)`` sees what was asked for), segmenters of renders score 0.3 and of real imagery 0.6, the classifier
+    0.75, and each domain has two grey scenes."""
     from meta_sim.experiments import task_eval
-    from meta_sim.pipeline.dataset import DatasetConfig
-    from meta_sim.pipeline.workflow import ModelSettings
     from meta_sim.task.data import Pool
 
-    made = []
-
-    def harness(dataset, models_settings, settings, root, realdata, bars, infer=True):
-        made.append((dataset.space, settings.train.colour, infer))
-        return task_eval.Harness(None, dataset, models_settings, settings, tmp_path, REALDATA, None)
-
-    monkeypatch.setattr(task_eval, "make_harness", harness)
-    monkeypatch.setattr(task_eval, "_infer_real", lambda *a: pytest.fail("a uniform-only run inferred a design"))
     image, mask = np.full((64, 64, 3), 0.5, np.float32), np.zeros((64, 64), bool)
     mask[8:24, 8:24] = True
-    rendered = Pool("uniform", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
-    drawn = []
+    rendered = Pool("r", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
 
     def render_set(h, name, jobs, *args):
-        drawn.append((name, h.space.name, len(jobs)))
+        on_render(h, name, jobs)
         return rendered
 
     monkeypatch.setattr(task_eval, "render_set", render_set)
@@ -351,6 +340,26 @@ def test_a_uniform_only_realism_run_trains_no_nams_model_and_scores_the_renders_
     monkeypatch.setattr(task_eval.realdomains, "scenes",
                         lambda domain, realdata: [realdomains.Scene(f"{domain}{k}", image, mask, 0.6)
                                                   for k in range(2)])
+
+
+def test_a_uniform_only_realism_run_trains_no_nams_model_and_scores_the_renders_of_uniform_designs(
+        tmp_path, monkeypatch):
+    """"overhead-v2+scene:uniform": a harness without NAMS (no model trained, no design inferred); its rows have
+    no rendered-only IoU, and the table's difference to all building is the uniform designs'."""
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    made = []
+
+    def harness(dataset, models_settings, settings, root, realdata, bars, infer=True):
+        made.append((dataset.space, settings.train.colour, infer))
+        return task_eval.Harness(None, dataset, models_settings, settings, tmp_path, REALDATA, None)
+
+    monkeypatch.setattr(task_eval, "make_harness", harness)
+    monkeypatch.setattr(task_eval, "_infer_real", lambda *a: pytest.fail("a uniform-only run inferred a design"))
+    drawn = []
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: drawn.append((name, h.space.name, len(jobs))))
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2+scene:uniform"})
     assert made == [("overhead-v2", "scene", False)] and result["nams_models"] == {}
@@ -379,7 +388,6 @@ def test_a_near_realism_run_draws_each_domains_renders_from_its_groups_best_rank
     from meta_sim.pipeline.dataset import DatasetConfig
     from meta_sim.pipeline.workflow import ModelSettings
     from meta_sim.sim.design import DesignSpace
-    from meta_sim.task.data import Pool
 
     space = DesignSpace.load("overhead-towns-v3")
     rng = np.random.default_rng(0)
@@ -395,22 +403,8 @@ def test_a_near_realism_run_draws_each_domains_renders_from_its_groups_best_rank
         return {"nams": list(answers)}
 
     monkeypatch.setattr(task_eval, "_infer_real", infer_real)
-    image, mask = np.full((64, 64, 3), 0.5, np.float32), np.zeros((64, 64), bool)
-    mask[8:24, 8:24] = True
-    rendered = Pool("r", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
     drawn = {}
-
-    def render_set(h, name, jobs, *args):
-        drawn[name] = [job.design for job in jobs]
-        return rendered
-
-    monkeypatch.setattr(task_eval, "render_set", render_set)
-    monkeypatch.setattr(task_eval, "_scored",
-                        lambda h, real, synthetic, label, pools: [[_counts(0.3 if real is None else 0.6)]] * 2)
-    monkeypatch.setattr(task_eval, "_realness", lambda *a: {"accuracy": 0.75, "accuracy_std": 0.0})
-    monkeypatch.setattr(task_eval.realdomains, "scenes",
-                        lambda domain, realdata: [realdomains.Scene(f"{domain}{k}", image, mask, 0.6)
-                                                  for k in range(2)])
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: drawn.update({name: [job.design for job in jobs]}))
     run = "overhead-towns-v3+scene:near"
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={run})

@@ -227,12 +227,18 @@ def test_one_parameter_with_one_choice():
         _assert_finite(results, space)
 
 
-def test_continuous_parameters_use_the_adjoint_search():
+def _continuous_toy(epochs: int):
+    """A 3-choice space with a continuous "density", 200 simulations and a small NAMS trained for ``epochs``."""
     space = _space(3, continuous=True)
     simulate = FakeSimulator(space, seed=2)
     designs, features = simulate(space.sample(np.random.default_rng(1), 200))
     fit = train_nams(designs, features, NAMSConfig(space.dim, FEATURES, hidden=(16, 16)),
-                     TrainConfig(max_epochs=2))
+                     TrainConfig(max_epochs=epochs))
+    return space, designs, features, fit
+
+
+def test_continuous_parameters_use_the_adjoint_search():
+    space, _, _, fit = _continuous_toy(2)
     assert resolve_method(space, "auto") == "adjoint"
     with pytest.raises(MetaSimError, match="continuous"):
         exhaustive_search(fit.model, torch.zeros(1, FEATURES), space)
@@ -243,11 +249,7 @@ def test_continuous_parameters_use_the_adjoint_search():
 
 
 def test_the_adjoint_ranks_its_kept_starts_and_near_designs_keep_their_spread():
-    space = _space(3, continuous=True)
-    simulate = FakeSimulator(space, seed=2)
-    designs, features = simulate(space.sample(np.random.default_rng(1), 200))
-    fit = train_nams(designs, features, NAMSConfig(space.dim, FEATURES, hidden=(16, 16)),
-                     TrainConfig(max_epochs=5))
+    space, designs, features, fit = _continuous_toy(5)
     results = adjoint_search(fit.model, torch.zeros(2, FEATURES), space, generator=_gen(), **FAST)
     for r in results:
         assert len(r.ranked) == FAST["S"] and r.ranked[0][1] == r.best_loss
