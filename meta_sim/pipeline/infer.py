@@ -287,6 +287,9 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
     lines += ["", "Population (share of groups per choice):", ""]
     for name, shares in report["population"].items():
         lines.append(f"- {name}: " + ", ".join(f"{k} {v:.0%}" for k, v in shares.items()))
+    drawn_from = (f"each group's {report['population_near']} best-ranked designs of the search"
+                  if report.get("population_near") else "the groups' designs")
+    lines += ["", f"`render --population` samples {report['population_designs']} distinct designs: {drawn_from}."]
     write_text_atomic(out_dir / "report.md", "\n".join(lines) + "\n")
 
     banks = [ensure_default_bank(), *ensure_heldout_banks()]

@@ -322,6 +322,9 @@ def test_infer_population_near_renders_from_each_groups_best_ranked_designs(eval
     assert sorted(p.read_text() for p in (runs[0] / "presets").glob("*.json")) == sorted(
         p.read_text() for p in (runs[3] / "presets").glob("*.json"))
     assert json.loads((runs[3] / "report.json").read_text())["population_near"] == 3
+    assert f"samples {len(near.designs)} distinct designs: each group's 3 best-ranked designs" in (
+        runs[3] / "report.md").read_text()
+    assert f"samples {len(plain.designs)} distinct designs: the groups' designs." in (runs[0] / "report.md").read_text()
     refused = _cli("infer", folder, "--model", out / "nams.pt", "--out", tmp_path / "bad", "--population-near", 51)
     assert refused.exit_code != 0 and "--population-near must be between 0 and --keep/-S (50)" in refused.output
     assert not (tmp_path / "bad").exists()
