@@ -364,7 +364,7 @@ def run_real(h: Harness, out: Path) -> dict:
 
 
 def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "none",
-                 roof_jitter: float = 0.0, ground: str = "plain", near: int = 0) -> dict:
+                 roof_jitter: float = 0.0, ground: str = "plain", near: int = 0, method: str = "nams") -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
     domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
     designs in the same cities (what inferring the domain's design adds). With ``realness`` also the accuracy
@@ -380,7 +380,9 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     inferred, the row's "rendered_only" is None, and the classifier, the colours and the picture take the
     renders of uniform designs.
     ``near`` > 0 draws each domain's renders from its groups' ``near`` best-ranked designs of NAMS's search
-    (``nams.near_designs``) instead of one design per group; the row keeps the groups' designs."""
+    (``nams.near_designs``) instead of one design per group; the row keeps the groups' designs.
+    ``method`` "dr" takes each group's design from the DR baseline trained beside NAMS (the same training
+    set and features) instead of NAMS's search; the row says so under "method"."""
     from ..nams import near_designs
     from ..task.data import merge
     from ..task.score import all_building
@@ -396,9 +398,9 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
             uniform[seen_by] = render_set(h, "uniform", synthetic_jobs(h, None, s.r_real, s.target_seed), seen_by,
                                           roof_jitter, ground)
         found = {}
-        designs = _infer_real(h, adapt, s.target_seed, domain, found)["nams"] if infer else None
+        designs = _infer_real(h, adapt, s.target_seed, domain, found)[method] if infer else None
         population = near_designs(found["nams"], near) if infer and near else designs
-        rendered = (render_set(h, f"{domain} nams", synthetic_jobs(h, population, s.r_real, s.target_seed), seen_by,
+        rendered = (render_set(h, f"{domain} {method}", synthetic_jobs(h, population, s.r_real, s.target_seed), seen_by,
                                roof_jitter, ground) if infer else uniform[seen_by])
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
@@ -414,6 +416,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
                         "ground": ground, "space": space.name, "colour_augment": s.train.colour,
                         **({"near": near} if infer and near else {}),
+                        **({"method": method} if infer and method != "nams" else {}),
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
@@ -442,6 +445,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += "" if s.train.colour == "light" else f"-{s.train.colour}"
         tag += "" if infer else UNIFORM_ONLY.replace(":", "-")
         tag += f"-near{near}" if infer and near else ""
+        tag += f"-{method}" if infer and method != "nams" else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 
@@ -633,6 +637,10 @@ UNIFORM_ONLY = ":uniform"
 # its groups' NEAR_STARTS best-ranked designs (``run_sim_only``'s ``near``) instead of one design per group.
 NEAR_POPULATION = ":near"
 NEAR_STARTS = 16
+# A space's run with this suffix (e.g. "overhead-towns-v3+scene:dr") takes each group's design from the DR
+# baseline (``run_sim_only``'s ``method``): whether a better inverse than NAMS's search in that space makes
+# better training data.
+DR_DESIGNS = ":dr"
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -648,14 +656,14 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
 
     augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
-                for suffix in (UNIFORM_ONLY, NEAR_POPULATION)}
+                for suffix in (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS)}
     spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | suffixed) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
-                           f"{SCENE_AUGMENTED} and/or {UNIFORM_ONLY} or {NEAR_POPULATION} after it")
+                           f"{SCENE_AUGMENTED} and/or {UNIFORM_ONLY}, {NEAR_POPULATION} or {DR_DESIGNS} after it")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
@@ -668,14 +676,15 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for run in spaces:
         infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
-        named = run.removesuffix(UNIFORM_ONLY).removesuffix(NEAR_POPULATION)
+        method = "dr" if run.endswith(DR_DESIGNS) else "nams"
+        named = run.removesuffix(UNIFORM_ONLY).removesuffix(NEAR_POPULATION).removesuffix(DR_DESIGNS)
         space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
         run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
         other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
         if infer:
             models[space] = other.methods.nams.model_id
-        result["runs"][run] = run_sim_only(other, out, True, near=near)["domains"]
+        result["runs"][run] = run_sim_only(other, out, True, near=near, method=method)["domains"]
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
                   seconds=time.perf_counter() - started, nams_models=models,
                   **({"nams_model": models[dataset.space]} if dataset.space in models else {}))
@@ -687,7 +696,8 @@ def _space_cell(row: dict) -> str:
     augment = row.get("colour_augment", "light")
     return (row.get("space", "rooftops-v1") + ("" if augment == "light" else f", {augment} augmentation")
             + (", uniform designs only" if row.get("rendered_only", {}) is None else "")
-            + (f", population of each group's {row['near']} best-ranked designs" if row.get("near") else ""))
+            + (f", population of each group's {row['near']} best-ranked designs" if row.get("near") else "")
+            + (", designs inferred by DR" if row.get("method") == "dr" else ""))
 
 
 def _g(value) -> str:

@@ -144,9 +144,8 @@ def test_a_built_in_space_named_in_the_runs_adds_its_realism_run_without_joining
         return SimpleNamespace(dataset=dataset, methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
 
     monkeypatch.setattr(task_eval, "make_harness", harness)
-    monkeypatch.setattr(task_eval, "run_sim_only",
-                        lambda h, out, realness, near=0: {"domains": {"banepa": {"space": h.dataset.space,
-                                                                                 "near": near}}})
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, near=0, method="nams": {
+        "domains": {"banepa": {"space": h.dataset.space, "near": near}}})
     dataset = DatasetConfig()
     result = task_eval.run_realism(dataset, ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2"})
@@ -174,7 +173,8 @@ def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the
                                methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
 
     monkeypatch.setattr(task_eval, "make_harness", harness)
-    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, near=0: {"domains": {"banepa": {
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, near=0, method="nams": {"domains": {
+        "banepa": {
         "space": h.dataset.space, "colour_augment": h.settings.train.colour}}})
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2+scene"})
@@ -422,6 +422,37 @@ def test_a_near_realism_run_draws_each_domains_renders_from_its_groups_best_rank
     with pytest.raises(MetaSimError, match=":near"):
         task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                               only={"overhead-towns-v3:nearby"})
+
+
+def test_a_dr_realism_run_renders_each_domain_from_the_designs_dr_infers(tmp_path, monkeypatch):
+    """"overhead-towns-v3+scene:dr": the domain's training cities take the DR baseline's designs for its groups,
+    not NAMS's; the row and the table say so, and the picture has its own name."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+    from meta_sim.sim.design import DesignSpace
+
+    space = DesignSpace.load("overhead-towns-v3")
+    rng = np.random.default_rng(1)
+    nams, dr = space.sample(rng, 2), space.sample(rng, 2)
+    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
+    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
+        methods, dataset, models, settings, tmp_path, REALDATA, None))
+    monkeypatch.setattr(task_eval, "_infer_real", lambda h, adapt, seed, name, found=None: {"nams": list(nams),
+                                                                                            "dr": list(dr)})
+    drawn = {}
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: drawn.update({name: [job.design for job in jobs]}))
+    run = "overhead-towns-v3+scene:dr"
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={run})
+    assert any(d in dr for d in drawn["kampala dr"]) and not any(d in nams for d in drawn["kampala dr"])
+    row = result["runs"][run]["kampala"]
+    assert row["designs"] == dr and row["method"] == "dr" and "near" not in row
+    line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| kampala"))
+    assert "overhead-towns-v3, scene augmentation, designs inferred by DR" in line
+    assert (tmp_path / "realism-overhead-towns-v3-scene-dr.png").is_file()
 
 
 def test_a_harness_without_nams_draws_from_its_datasets_space():
