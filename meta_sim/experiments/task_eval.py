@@ -364,7 +364,8 @@ def run_real(h: Harness, out: Path) -> dict:
 
 
 def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "none",
-                 roof_jitter: float = 0.0, ground: str = "plain", near: int = 0, method: str = "nams") -> dict:
+                 roof_jitter: float = 0.0, ground: str = "plain", near: int = 0, method: str = "nams",
+                 matched: bool = False) -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
     domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
     designs in the same cities (what inferring the domain's design adds). With ``realness`` also the accuracy
@@ -382,7 +383,10 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     ``near`` > 0 draws each domain's renders from its groups' ``near`` best-ranked designs of NAMS's search
     (``nams.near_designs``) instead of one design per group; the row keeps the groups' designs.
     ``method`` "dr" takes each group's design from the DR baseline trained beside NAMS (the same training
-    set and features) instead of NAMS's search; the row says so under "method"."""
+    set and features) instead of NAMS's search; the row says so under "method". ``matched`` brings each
+    render of the domain's training set to the colour statistics of its ``adapt`` scenes
+    (``sim.colourmatch``: what the target folder shows, no labels) before anything trains on it, the
+    uniform designs' renders too."""
     from ..nams import near_designs
     from ..task.data import merge
     from ..task.score import all_building
@@ -406,10 +410,13 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
         test_pool = _real_pool(f"{domain} test", test, s.train)
         adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
+        flat_pool = uniform[seen_by]
+        if matched:
+            rendered, flat_pool = _colour_matched(rendered, adapt_pool), _colour_matched(flat_pool, adapt_pool)
         pools = (test_pool, adapt_pool)
         sim = _scored(h, None, rendered, f"{domain} rendered only", pools) if infer else (None, None)
         real = _scored(h, other, None, f"{'+'.join(others)}", pools)
-        flat = _scored(h, None, uniform[seen_by], "uniform designs", pools)
+        flat = _scored(h, None, flat_pool, "uniform designs", pools)
         rows[domain] = {"rendered_only": _mean_iou(sim[0]), "uniform_designs": _mean_iou(flat[0]),
                         "other_real": _mean_iou(real[0]), "other_domains": others,
                         "all_building": all_building(test_pool.masks).iou(), "designs": designs,
@@ -417,6 +424,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "ground": ground, "space": space.name, "colour_augment": s.train.colour,
                         **({"near": near} if infer and near else {}),
                         **({"method": method} if infer and method != "nams" else {}),
+                        **({"colour_matched": True} if matched else {}),
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
@@ -446,8 +454,18 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += "" if infer else UNIFORM_ONLY.replace(":", "-")
         tag += f"-near{near}" if infer and near else ""
         tag += f"-{method}" if infer and method != "nams" else ""
+        tag += "-matched" if matched else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
+
+
+def _colour_matched(rendered: Pool, real: Pool) -> Pool:
+    """``rendered`` with every image brought to ``real``'s colour statistics (``sim.colourmatch``)."""
+    from ..sim.colourmatch import ColourStats, match_colours
+
+    stats = ColourStats.of_images(real.images)
+    return Pool(rendered.name, [match_colours(image, stats) for image in rendered.images], rendered.masks,
+                rendered.pixel_size_m, rendered.sources)
 
 
 def _scored(h: Harness, real: Pool | None, synthetic: Pool | None, label: str, pools) -> list[list]:
@@ -641,6 +659,10 @@ NEAR_STARTS = 16
 # baseline (``run_sim_only``'s ``method``): whether a better inverse than NAMS's search in that space makes
 # better training data.
 DR_DESIGNS = ":dr"
+# A space's run with this suffix (e.g. "overhead-towns-v3+scene:matched") brings each domain's renders to the
+# colour statistics of its adapt scenes (``run_sim_only``'s ``matched``) before the segmenters and the
+# classifier see them.
+COLOUR_MATCHED = ":matched"
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -656,14 +678,15 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
 
     augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
-                for suffix in (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS)}
+                for suffix in (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)}
     spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | suffixed) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
     if unknown:
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
-                           f"{SCENE_AUGMENTED} and/or {UNIFORM_ONLY}, {NEAR_POPULATION} or {DR_DESIGNS} after it")
+                           f"{SCENE_AUGMENTED} and/or one of {UNIFORM_ONLY}, {NEAR_POPULATION}, {DR_DESIGNS}, "
+                           f"{COLOUR_MATCHED} after it")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
@@ -676,15 +699,18 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for run in spaces:
         infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
-        method = "dr" if run.endswith(DR_DESIGNS) else "nams"
-        named = run.removesuffix(UNIFORM_ONLY).removesuffix(NEAR_POPULATION).removesuffix(DR_DESIGNS)
+        method, matched = "dr" if run.endswith(DR_DESIGNS) else "nams", run.endswith(COLOUR_MATCHED)
+        named = run
+        for suffix in (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED):
+            named = named.removesuffix(suffix)
         space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
         run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
         other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
         if infer:
             models[space] = other.methods.nams.model_id
-        result["runs"][run] = run_sim_only(other, out, True, near=near, method=method)["domains"]
+        result["runs"][run] = run_sim_only(other, out, True, near=near, method=method,
+                                           matched=matched)["domains"]
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
                   seconds=time.perf_counter() - started, nams_models=models,
                   **({"nams_model": models[dataset.space]} if dataset.space in models else {}))
@@ -697,7 +723,8 @@ def _space_cell(row: dict) -> str:
     return (row.get("space", "rooftops-v1") + ("" if augment == "light" else f", {augment} augmentation")
             + (", uniform designs only" if row.get("rendered_only", {}) is None else "")
             + (f", population of each group's {row['near']} best-ranked designs" if row.get("near") else "")
-            + (", designs inferred by DR" if row.get("method") == "dr" else ""))
+            + (", designs inferred by DR" if row.get("method") == "dr" else "")
+            + (", renders colour-matched to the adapt scenes" if row.get("colour_matched") else ""))
 
 
 def _g(value) -> str:

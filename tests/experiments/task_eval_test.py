@@ -144,8 +144,8 @@ def test_a_built_in_space_named_in_the_runs_adds_its_realism_run_without_joining
         return SimpleNamespace(dataset=dataset, methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
 
     monkeypatch.setattr(task_eval, "make_harness", harness)
-    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, near=0, method="nams": {
-        "domains": {"banepa": {"space": h.dataset.space, "near": near}}})
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, **options: {
+        "domains": {"banepa": {"space": h.dataset.space, "near": options["near"]}}})
     dataset = DatasetConfig()
     result = task_eval.run_realism(dataset, ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2"})
@@ -173,9 +173,8 @@ def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the
                                methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
 
     monkeypatch.setattr(task_eval, "make_harness", harness)
-    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, near=0, method="nams": {"domains": {
-        "banepa": {
-        "space": h.dataset.space, "colour_augment": h.settings.train.colour}}})
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, **options: {"domains": {
+        "banepa": {"space": h.dataset.space, "colour_augment": h.settings.train.colour}}})
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2+scene"})
     assert seen == [("overhead-v2", "scene")] and set(result["runs"]) == {"overhead-v2+scene"}
@@ -453,6 +452,53 @@ def test_a_dr_realism_run_renders_each_domain_from_the_designs_dr_infers(tmp_pat
     line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| kampala"))
     assert "overhead-towns-v3, scene augmentation, designs inferred by DR" in line
     assert (tmp_path / "realism-overhead-towns-v3-scene-dr.png").is_file()
+
+
+def test_a_matched_realism_run_brings_the_renders_to_the_adapt_scenes_colours(tmp_path, monkeypatch):
+    """"overhead-towns-v3+scene:matched": every render the domain's segmenters, classifier and colour table see
+    (the inferred designs' and the uniform designs') has the adapt scenes' channel means and spreads."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+    from meta_sim.sim.colourmatch import ColourStats
+    from meta_sim.sim.design import DesignSpace
+
+    space = DesignSpace.load("overhead-towns-v3")
+    designs = space.sample(np.random.default_rng(2), 2)
+    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
+    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
+        methods, dataset, models, settings, tmp_path, REALDATA, None))
+    monkeypatch.setattr(task_eval, "_infer_real", lambda h, adapt, seed, name, found=None: {"nams": list(designs)})
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: None)
+    rng = np.random.default_rng(3)
+    scenes = {d: [realdomains.Scene(f"{d}{k}", np.clip(rng.normal(0.2 + 0.2 * i, 0.1, (64, 64, 3)), 0, 1)
+                                    .astype(np.float32), np.zeros((64, 64), bool), 0.6) for k in range(2)]
+              for i, d in enumerate(realdomains.DOMAINS)}
+    monkeypatch.setattr(task_eval.realdomains, "scenes", lambda domain, realdata: scenes[domain])
+    seen = []
+    monkeypatch.setattr(task_eval, "_scored", lambda h, real, synthetic, label, pools: seen.append(
+        (label, synthetic)) or [[_counts(0.3 if real is None else 0.6)]] * 2)
+    run = "overhead-towns-v3+scene:matched"
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={run})
+    assert len(seen) == 3 * len(realdomains.DOMAINS)  # per domain: its renders, the other real domains, uniform
+    for index, domain in enumerate(realdomains.DOMAINS):
+        adapt, _ = realdomains.split(scenes[domain])
+        want = ColourStats.of_images(task_eval._real_pool("a", adapt, task_eval.TaskEvalSettings().train).images)
+        (mine, rendered), (_, none), (flat, uniform) = seen[3 * index:3 * index + 3]
+        assert mine == f"{domain} rendered only" and none is None and flat == "uniform designs"
+        for pool in (rendered, uniform):
+            got = ColourStats.of_images(pool.images)
+            assert np.allclose(got.mean, want.mean, atol=0.02), (domain, got, want)
+        row = result["runs"][run][domain]
+        assert row["colour_matched"] is True
+        colour = row["colour"]
+        assert abs(colour["rendered"]["ground"]["brightness"] - colour["real"]["ground"]["brightness"]) < 0.05
+    line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| rio"))
+    assert "renders colour-matched to the adapt scenes" in line
+    assert (tmp_path / "realism-overhead-towns-v3-scene-matched.png").is_file()
 
 
 def test_a_harness_without_nams_draws_from_its_datasets_space():
