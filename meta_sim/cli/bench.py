@@ -91,20 +91,32 @@ def bench_nams_command(out, docs, targets, adjoint_targets, cache):
 
 @bench.command("appearance")
 @_docs_option
-@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/appearance.json"), show_default=True)
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="[default: benchmarks/appearance.json, or appearance-SPACE.json for another --space]")
 @click.option("--targets", type=int, default=100, show_default=True, help="target groups")
-@click.option("--pictures", type=click.Path(path_type=Path), default=Path("benchmarks/appearance"),
-              show_default=True, help="folder for sheet.png (targets beside their inferred designs)")
+@click.option("--pictures", type=click.Path(path_type=Path), default=None,
+              help="folder for sheet.png (targets beside their inferred designs) [default: benchmarks/appearance, "
+                   "or benchmarks/appearance/SPACE]")
+@click.option("--space", default="overhead-v1", show_default=True,
+              help="a built-in design space with appearance parameters (overhead-towns-v3: the realism run's model)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
-def bench_appearance_command(out, docs, targets, pictures, cache):
-    """E1 in overhead-v1: how well NAMS infers a target's look (ground, vegetation, sun, sensor, city style)."""
-    from ..experiments.bench import bench_appearance, format_appearance_table
+def bench_appearance_command(out, docs, targets, pictures, space, cache):
+    """E1 in overhead-v1 (or --space): how well NAMS infers a target's look (ground, vegetation, sun, sensor,
+    city style)."""
+    from ..experiments.bench import APPEARANCE_SPACE, bench_appearance, format_appearance_table
+    from ..sim.design import builtin_spaces
 
+    if space not in builtin_spaces():
+        raise MetaSimError(f"--space must be a built-in design space ({', '.join(builtin_spaces())}), not {space!r}")
+    other = space != APPEARANCE_SPACE
+    out = out or Path(f"benchmarks/appearance-{space}.json" if other else "benchmarks/appearance.json")
+    pictures = pictures or Path("benchmarks/appearance") / (space if other else "")
     bars = _Bars()
-    result = bench_appearance(targets=targets, root=cache, bars=bars, out=pictures)
+    result = bench_appearance(targets=targets, root=cache, bars=bars, out=pictures, space=space)
     bars.close()
-    _publish(result, out, format_appearance_table(result), "appearance", docs, Path(pictures) / "sheet.png")
+    _publish(result, out, format_appearance_table(result), f"appearance-{space}" if other else "appearance", docs,
+             Path(pictures) / "sheet.png")
 
 
 @bench.command("stability")

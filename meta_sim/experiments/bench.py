@@ -599,8 +599,9 @@ APPEARANCE_SPACE = "overhead-v1"
 
 
 def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = None, bars: Bars | None = None,
-                     out: Path | None = None, designs: int = 1200) -> dict:
-    """E1 in ``overhead-v1``: can NAMS infer a target's look (ground, greenness, sun, brightness, roof
+                     out: Path | None = None, designs: int = 1200, space: str = APPEARANCE_SPACE) -> dict:
+    """E1 in ``space`` (``overhead-v1``; a realism space such as ``overhead-towns-v3`` shares the model of
+    `bench realism`'s run in it): can NAMS infer a target's look (ground, greenness, sun, brightness, roof
     jitter, sensor, city style, densities) as well as its roofs? A model trained on ``designs`` random
     designs of the space (twice the default training set: more parameters to learn), scored on
     ``targets`` groups of target ``seed`` (11: no setting was chosen on it) against uniform guessing
@@ -612,7 +613,7 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
     from ..sim.textures import ensure_default_bank, ensure_heldout_bank
     from .evaluate import CONTINUOUS_SEARCH, EvalSettings, bootstrap_intervals, rankings, run_eval, score
 
-    dataset = DatasetConfig(space=APPEARANCE_SPACE, designs=designs)
+    dataset = DatasetConfig(space=space, designs=designs)
     settings = EvalSettings(targets=targets, seed=seed, ms2=False, sbi=False, **CONTINUOUS_SEARCH)
     import shutil
 
@@ -622,7 +623,7 @@ def bench_appearance(targets: int = 100, seed: int = 11, root: Path | None = Non
             Path(out).mkdir(parents=True, exist_ok=True)
             shutil.copy2(Path(scratch) / "sheet.png", Path(out) / "sheet.png")
     result["seed"] = seed
-    space = DesignSpace.load(APPEARANCE_SPACE)
+    space = DesignSpace.load(space)
     ranks = rankings("e1", ensure_default_bank(), ensure_heldout_bank())
     rows = [score(t["predicted"]["nams_adjoint"], t["truth"], ranks, space) for t in result["targets_detail"]]
     result["nams_intervals"] = bootstrap_intervals(rows)
@@ -636,7 +637,8 @@ def format_appearance_table(result: dict) -> str:
     methods = result["methods"]
     keys = [k for k in methods["nams_adjoint"] if k.endswith(("_top1", "_top10", "_hit", "_error"))]
     names = [m for m in ("uniform", "dr", "nams_adjoint") if m in methods]
-    lines = [f"E1 in `{APPEARANCE_SPACE}` ({result['targets']} target groups of {result['tiles_per_target']} tiles, "
+    space = result.get("space", {}).get("name", APPEARANCE_SPACE)
+    lines = [f"E1 in `{space}` ({result['targets']} target groups of {result['tiles_per_target']} tiles, "
              f"target seed {result.get('seed', 11)}; a model trained on {result['training']['designs']} designs x "
              f"{result['training']['tiles']} tiles). Roofs: rate of inferring one of the n nearest textures; "
              "categorical parameters: rate of the true choice (`hit`); continuous ones: mean absolute error as a "

@@ -50,6 +50,7 @@ BAD = [
     ("eval", "e1", "--out", "{tmp}/out", "--split", "test", "--seed", "3", "--cache", "{tmp}/cache"),
     ("eval", "e2", "--out", "{tmp}/out", "--split", "test", "--targets", "1001", "--cache", "{tmp}/cache"),
     ("bench", "nams", "--targets", "0", "--no-docs", "--out", "{tmp}/nams.json", "--cache", "{tmp}/cache"),
+    ("bench", "appearance", "--space", "overhead-v9", "--no-docs", "--out", "{tmp}/a.json", "--cache", "{tmp}/cache"),
     ("jobs", "plan", *DESIGN, "--tiles", "0", "--out", "{tmp}/job.json"),
     ("jobs", "status", "{tmp}/missing.json"),
     ("jobs", "run", "{tmp}/missing.json"),

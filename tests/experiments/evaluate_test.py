@@ -133,8 +133,11 @@ def test_appearance_table_lists_every_metric_with_the_nams_interval():
     assert "| ground hit | 0.250 | 0.800 | 0.800 | [0.750, 0.850] |" in table
     assert "| greenness error | 0.330 | 0.120 | 0.120 | [0.070, 0.170] |" in table
     assert "flat top1" in table and "seconds" not in table.split("\n")[3] and "1.5 min" in table
+    assert table.startswith("E1 in `overhead-v1` (100 target groups")
     result["training"]["seconds"] = {"render": 1.0}
     assert "from the cache" in format_appearance_table(result)
+    result["space"] = {"name": "overhead-towns-v3"}  # --space: the table names the space it measured
+    assert format_appearance_table(result).startswith("E1 in `overhead-towns-v3` (100 target groups")
 
 
 def test_bootstrap_intervals_hold_the_mean_and_narrow_with_more_groups():
