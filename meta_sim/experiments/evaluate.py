@@ -481,9 +481,11 @@ def prepare_eval(experiment: str, dataset, models_settings, settings: EvalSettin
                        methods.sbi)
 
 
-def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50, found: dict | None = None) -> dict:
+def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50, found: dict | None = None,
+                bars: Bars | None = None) -> dict:
     """Method name -> a function returning one design per target (searches batched over targets). NAMS's
-    searches also keep their ``SearchResult`` lists in ``found`` (by method name) when it is given."""
+    searches also keep their ``SearchResult`` lists in ``found`` (by method name) when it is given; the
+    neural-adjoint search shows its steps on ``bars``."""
     import torch
 
     from ..nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
@@ -515,7 +517,7 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
         return [r.design for r in results]
 
     runs["nams_adjoint"] = lambda: kept("nams_adjoint", adjoint_search(
-        ctx.nams.model, normed, space, generator=generator, colour=colour, **adjoint_settings))
+        ctx.nams.model, normed, space, generator=generator, colour=colour, bars=bars, **adjoint_settings))
     if discrete(space):  # the exhaustive search enumerates every design
         runs["nams_exhaustive"] = lambda: kept("nams_exhaustive", exhaustive_search(ctx.nams.model, normed, space,
                                                                                     S=S, colour=colour))
@@ -615,7 +617,7 @@ def run_eval(experiment: str, out: Path, dataset, models_settings, settings: Eva
     ctx = prepare_eval(experiment, dataset, models_settings, settings, root, bars)
     adjoint = settings.search_options()
     methods, predictions = {}, {}
-    for name, run in method_runs(ctx, settings.seed, adjoint, settings.S).items():
+    for name, run in method_runs(ctx, settings.seed, adjoint, settings.S, bars=bars).items():
         methods[name], predictions[name] = score_method(ctx, run)
     if "sbi_nre" in methods:
         methods["sbi_nre"]["train_seconds"] = ctx.sbi.extra["seconds"]

@@ -478,6 +478,11 @@ def test_a_model_without_roof_colour_is_scored_on_the_defaults_features(evaluate
     same = score_other_model(ctx, ctx.nams, seed=1)
     own, _ = score_method(ctx, method_runs(ctx, 1, {})["nams_exhaustive"])
     assert {k: same[k] for k in ("flat_top1", "sloped_top10")} == {k: own[k] for k in ("flat_top1", "sloped_top10")}
+    # The neural-adjoint search of an evaluation shows its steps (minutes in a large space).
+    opened, steps = [], []
+    method_runs(ctx, 1, {"M": 4, "S": 2, "iterations": 3}, bars=lambda name, total: opened.append((name, total))
+                or steps.append)["nams_adjoint"]()
+    assert opened == [("search", 3)] and sum(steps) == 3
 
 
 def test_a_stage_that_finds_everything_cached_shows_no_bar(capsys):
