@@ -485,7 +485,7 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
                 bars: Bars | None = None) -> dict:
     """Method name -> a function returning one design per target (searches batched over targets). NAMS's
     searches also keep their ``SearchResult`` lists in ``found`` (by method name) when it is given; the
-    neural-adjoint search shows its steps on ``bars``."""
+    neural-adjoint search shows its steps on ``bars`` (a "bars" in ``adjoint_settings`` wins)."""
     import torch
 
     from ..nams import adjoint_search, dr_predict, exhaustive_search, ms2_search, uniform_predict
@@ -517,7 +517,7 @@ def method_runs(ctx: EvalContext, seed: int, adjoint_settings: dict, S: int = 50
         return [r.design for r in results]
 
     runs["nams_adjoint"] = lambda: kept("nams_adjoint", adjoint_search(
-        ctx.nams.model, normed, space, generator=generator, colour=colour, bars=bars, **adjoint_settings))
+        ctx.nams.model, normed, space, generator=generator, colour=colour, **{"bars": bars, **adjoint_settings}))
     if discrete(space):  # the exhaustive search enumerates every design
         runs["nams_exhaustive"] = lambda: kept("nams_exhaustive", exhaustive_search(ctx.nams.model, normed, space,
                                                                                     S=S, colour=colour))
