@@ -663,6 +663,7 @@ DR_DESIGNS = ":dr"
 # colour statistics of its adapt scenes (``run_sim_only``'s ``matched``) before the segmenters and the
 # classifier see them.
 COLOUR_MATCHED = ":matched"
+RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)  # at most one, after any +scene
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -678,7 +679,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
 
     augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
-                for suffix in (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)}
+                for suffix in RUN_SUFFIXES}
     spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | suffixed) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
@@ -701,7 +702,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
         method, matched = "dr" if run.endswith(DR_DESIGNS) else "nams", run.endswith(COLOUR_MATCHED)
         named = run
-        for suffix in (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED):
+        for suffix in RUN_SUFFIXES:
             named = named.removesuffix(suffix)
         space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
