@@ -65,9 +65,15 @@ bench-exposure: setup
 # profile renders 15,300 tiles). Reads benchmarks/render.json (render cost), benchmarks/nams.json (the search
 # methods' rows), benchmarks/adjoint.json (the adjoint's settings) and benchmarks/ablations.json (the variants'):
 # run bench-render, bench-nams, bench-adjoint and bench-ablations first. The paper profile's adjoint search runs on
-# 10 target groups per split, as bench-adjoint's (about a minute per group on 2 CPUs).
+# 10 target groups per split, as bench-adjoint's (about a minute per group on 2 CPUs). Longer than a working
+# session on 2 CPUs: measure it in parts, each merged into the last (the weights of a training set trained again
+# are checked to be the same), e.g.
+#   make bench-tradeoff TRADEOFF_ARGS="--training-sets 150x4,300x2,300x4,600x2,600x4 --presets fast --profiles fast,balanced"
+#   make bench-tradeoff TRADEOFF_ARGS="--merge --training-sets '' --presets balanced --profiles ''"
+#   make bench-tradeoff TRADEOFF_ARGS="--merge --training-sets 1700x9 --presets '' --profiles paper"
+TRADEOFF_ARGS ?=
 bench-tradeoff: setup
-	$(BIN)/meta-sim bench tradeoff --adjoint-targets 10 --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png
+	$(BIN)/meta-sim bench tradeoff --adjoint-targets 10 --out benchmarks/tradeoff.json --plot benchmarks/tradeoff.png $(TRADEOFF_ARGS)
 
 bench-farm: setup
 	$(BIN)/meta-sim bench farm --out benchmarks/farm.json

@@ -215,23 +215,41 @@ def bench_objective_command(out, docs, targets, cache):
 @click.option("--presets", default="fast,balanced", show_default=True, help="render presets to compare")
 @click.option("--profiles", default="fast,balanced,paper", show_default=True,
               help="profiles measured end to end (paper renders 15,300 tiles)")
+@click.option("--training-sets", default=None,
+              help="training sets compared, DESIGNSxTILES,... (default: 150x4,300x2,300x4,600x2,600x4,1700x9)")
+@click.option("--merge", is_flag=True,
+              help="add this run's points to those of --out (same targets; the rows it did not measure again are "
+                   "kept): the study measured in parts")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
-def bench_tradeoff_command(out, docs, plot, targets, adjoint_targets, presets, profiles, cache):
+def bench_tradeoff_command(out, docs, plot, targets, adjoint_targets, presets, profiles, training_sets, merge, cache):
     """E1 accuracy against time for every knob that costs time, and the fast/balanced/paper profiles, on the
-    test split (reported) and the validation split (where the profiles are chosen) beside it."""
+    test split (reported) and the validation split (where the profiles are chosen) beside it. Hours on 2 CPUs:
+    measure it in parts with --training-sets, --presets, --profiles and --merge."""
     from ..core.extras import require
-    from ..experiments.tradeoff import bench_tradeoff, format_tradeoff_table, plot_tradeoff
+    from ..experiments.tradeoff import (
+        bench_tradeoff,
+        format_tradeoff_table,
+        merge_results,
+        parse_training_sets,
+        plot_tradeoff,
+        read_tradeoff,
+    )
     from ..pipeline.profiles import get_profile
 
     names = [p for p in profiles.split(",") if p]
     for name in names:
         get_profile(name)
-    require("matplotlib", "the trade-off plot")  # before hours of measuring, not after
+    sets = parse_training_sets(training_sets)
+    earlier = read_tradeoff(out) if merge else None  # before hours of measuring, not after
+    require("matplotlib", "the trade-off plot")
     bars = _Bars()
     result = bench_tradeoff(targets=targets, adjoint_targets=adjoint_targets, root=cache,
-                            presets=[p for p in presets.split(",") if p], profiles=names, bars=bars)
+                            presets=[p for p in presets.split(",") if p], profiles=names, training_sets=sets,
+                            bars=bars)
     bars.close()
+    if earlier is not None:
+        result = merge_results(earlier, result)
     plot_tradeoff(result, plot)
     _publish(result, out, format_tradeoff_table(result), "tradeoff", docs, plot)
 

@@ -30,10 +30,18 @@ renders, target groups of 9 tiles, exhaustive search):
 
 ``PROFILES`` names three recommended combinations -- fast, balanced and
 paper-faithful -- and the bench measures each end to end.
+
+The whole study takes longer than a working session on 2 CPUs (the balanced preset's renders and the paper
+profile's 15,300 tiles), so it can be measured in parts: each run measures the default model's points and the
+training sets, presets and profiles it is given, and ``merge_results`` adds them to an earlier run's on the
+same targets. Every measured point names the weights of its model (``weights_id``): a training set trained
+again in a later part must give the same weights, or the merge refuses.
 """
 
 from __future__ import annotations
 
+import datetime
+import hashlib
 import io
 import json
 import math
@@ -59,6 +67,23 @@ SPLITS = tuple(get_split("e1", name) for name in SPLIT_NAMES)
 REPORTED = "test"
 # Plotted against the one-off cost; the others per group.
 ONE_OFF_KNOBS = ("training set", "render preset", "roof finder steps", "training epochs")
+# The table's and the plot's order of the knobs (a merged result's points are put back in it).
+KNOB_ORDER = ("tiles per target group", "search", "architecture", "roof colour", "roof finder",
+              "roof weight power", "roof finder steps", "training epochs", "training set", "render preset", "profile")
+
+
+def weights_id(model) -> str:
+    """The first 12 hex digits of the sha256 of a model's tensors (names, shapes, dtypes and values): equal for
+    two trainings exactly when they learnt the same weights (a checkpoint's ``model_id`` also covers its
+    training time, which differs every run)."""
+    import torch
+
+    digest = hashlib.sha256()
+    for name, tensor in sorted(model.state_dict().items()):
+        tensor = tensor.detach().cpu().contiguous()
+        digest.update(f"{name}:{tuple(tensor.shape)}:{tensor.dtype};".encode())
+        digest.update(tensor.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()[:12]
 
 
 @dataclass
@@ -102,11 +127,12 @@ class _Experiment:
         from ..sim.textures import ensure_default_bank, ensure_heldout_bank
         from .evaluate import rankings, render_split_targets, store_target_features, stored_target_features
 
-        self.dataset = dataset
+        self.dataset, self.views = dataset, views
         # E1 targets whose design the training set lacks are also scored alone ("unseen").
         self.training_designs = sample_designs(DesignSpace.load(dataset.space), dataset.designs, dataset.seed)
         models = ensure_models(dataset, ModelSettings(views=views), root, bars)
         self.nams = load_checkpoint(models.nams_path, "nams")
+        self.weights = weights_id(self.nams.model)
         self.colour = search_colour(self.nams)
         self.per_seed = targets
         extractor = checkpoint_extractor(self.nams)
@@ -174,7 +200,8 @@ class _Experiment:
                      {"search_seconds_per_group": round(search_seconds, 5),
                       "feature_seconds_per_tile": round(self.feature_seconds_per_tile, 5),
                       "train_seconds": round(self.train_seconds, 1),
-                      "dataset": asdict(self.dataset)})
+                      "dataset": asdict(self.dataset), "views": self.views, "weights": self.weights,
+                      "measured_on": datetime.datetime.now(datetime.timezone.utc).date().isoformat()})
 
 
 def _views_check() -> dict:
@@ -354,6 +381,89 @@ def bench_tradeoff(targets: int = 100, adjoint_targets: int = 20, root: Path | N
             "machine": {"torch_threads": torch.get_num_threads()}}
 
 
+def parse_training_sets(text: str | None) -> tuple[tuple[int, int], ...]:
+    """``--training-sets``: "DESIGNSxTILES,..." (None: ``TRAINING_SETS``; "": none), each a positive whole
+    number of designs and of tiles per design; MetaSimError naming a malformed one."""
+    if text is None:
+        return TRAINING_SETS
+    sets = []
+    for item in (part.strip() for part in text.split(",")):
+        if not item:
+            continue
+        match = re.fullmatch(r"([1-9]\d{0,5})x([1-9]\d{0,2})", item)
+        if match is None:
+            raise MetaSimError(f"a training set is DESIGNSxTILES (say 600x2), not {item!r}")
+        sets.append((int(match[1]), int(match[2])))
+    return tuple(dict.fromkeys(sets))
+
+
+def read_tradeoff(path: Path) -> dict:
+    """An earlier ``bench tradeoff`` result to merge into (``--merge``); MetaSimError if it cannot be read."""
+    try:
+        result = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise MetaSimError(f"cannot read the earlier trade-off result {path} ({exc}); run without --merge") from None
+    if not isinstance(result, dict) or not isinstance(result.get("points"), list):
+        raise MetaSimError(f"{path} is not a trade-off result; run without --merge")
+    return result
+
+
+# What two parts of the study must share to be one table.
+_SHARED = ("experiment", "splits", "reported", "targets_per_seed", "adjoint_targets", "tiles_per_target_group_default")
+
+
+def _knob_rank(point: dict) -> tuple:
+    """A point's place in the table: its knob's in ``KNOB_ORDER``, a training set's rows by designs x tiles."""
+    knob = point["knob"]
+    rank = KNOB_ORDER.index(knob) if knob in KNOB_ORDER else len(KNOB_ORDER)
+    sizes = re.fullmatch(r"(\d+) x (\d+)", point["setting"]) if knob == "training set" else None
+    return (rank, (int(sizes[1]) * int(sizes[2]), int(sizes[1])) if sizes else (0, 0))
+
+
+def merge_results(old: dict, new: dict) -> dict:
+    """``new`` (a run of part of the study) with the points of ``old`` it did not measure again. Both must be
+    on the same targets (splits, groups per seed, the adjoint's groups); a point of ``old`` whose training set
+    (and views) ``new`` trained again must have been measured with the same weights, or the two parts are not
+    one model's table: MetaSimError, as for other targets or an ``old`` from before the splits."""
+    if "splits" not in old:
+        raise MetaSimError("the earlier trade-off result predates the validation and test splits; measure the "
+                           "whole study again (without --merge)")
+    differ = [key for key in _SHARED if old.get(key) != new.get(key)]
+    if differ:
+        raise MetaSimError(f"the earlier trade-off result was measured on other targets ({', '.join(differ)} "
+                           "differ); measure the whole study again (without --merge)")
+    models = {}
+    for point in new["points"]:
+        detail = point.get("detail", {})
+        if "weights" in detail:
+            models[json.dumps([detail["dataset"], detail.get("views")], sort_keys=True)] = detail["weights"]
+    measured = {(p["knob"], p["setting"]) for p in new["points"]}
+    kept = []
+    for point in old["points"]:
+        if (point["knob"], point["setting"]) in measured:
+            continue
+        detail = point.get("detail", {})
+        if "weights" in detail:
+            again = models.get(json.dumps([detail["dataset"], detail.get("views")], sort_keys=True))
+            if again is not None and again != detail["weights"]:
+                raise MetaSimError(f"the training set of row '{point['knob']} {point['setting']}' was trained again "
+                                   f"and learnt other weights ({again}, not {detail['weights']}): the parts are "
+                                   "not one model's; measure the whole study again (without --merge)")
+        elif "from" in detail:
+            continue  # another bench's row: every run reads those files again
+        else:
+            raise MetaSimError(f"row '{point['knob']} {point['setting']}' of the earlier trade-off result does not "
+                               "name its model's weights (it predates measuring in parts); measure the whole "
+                               "study again (without --merge)")
+        kept.append(point)
+    return {**new, "points": sorted([*kept, *new["points"]], key=_knob_rank)}
+
+
+def measured_dates(result: dict) -> list[str]:
+    """The days (UTC) on which a result's own points were measured, in order."""
+    return sorted({p["detail"]["measured_on"] for p in result["points"] if "measured_on" in p.get("detail", {})})
+
+
 def accuracy(metrics: dict) -> float:
     """The plot's single accuracy figure: mean of flat and sloped top-1."""
     return (metrics["flat_top1"] + metrics["sloped_top1"]) / 2
@@ -395,6 +505,10 @@ def format_tradeoff_table(result: dict) -> str:
                 f"{result['tiles_per_target_group_default']} tiles per seed, the neural-adjoint rows on "
                 f"{result['adjoint_targets']} of each split's. The {result['reported']} rows report; the profiles "
                 "and defaults are chosen on the validation rows only.")
+        dates = measured_dates(result)
+        if len(dates) > 1:
+            note += (f" Measured in parts (`--merge`, each training set's weights checked to be the same in every "
+                     f"part) on {', '.join(dates)}.")
     elif "split" in result:
         note = (f"E1 on its validation split alone (seeds {', '.join(map(str, result['split']['seeds']))}), "
                 "measured before the test split was.")

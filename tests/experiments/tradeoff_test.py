@@ -274,6 +274,7 @@ def test_a_tiny_experiment_measures_every_point_on_both_splits(tmp_path):
         assert set(point.metrics) == {s.name for s in SPLITS}
         assert all(0 <= m[k] <= 1 for m in point.metrics.values() for k in ("flat_top1", "sloped_top10"))
         assert point.seconds_per_group > 0 and point.one_off_seconds >= 24 * 0.1  # at least the rendering
+        assert point.detail["weights"] == experiment.weights and point.detail["views"] == 8
     again = _Experiment(dataset, 8, 2, tmp_path / "cache", render)  # a rerun reads the kept features
     assert again.feature_seconds_per_tile == experiment.feature_seconds_per_tile
     assert all(torch.equal(again.targets[name][2], features) for name, (_, _, features) in experiment.targets.items())
@@ -340,3 +341,88 @@ def test_the_fastest_adjoint_setting_is_chosen_on_validation_rows_and_the_table_
     result["e2_intervals"] = "held-out textures"
     assert "or the held-out textures of the roof kind" in format_nams_table(result)
     assert "stage (E4)" not in table  # no training timed: no stage times
+
+
+def _measured(point, weights, dataset=None, day="2026-12-04"):
+    """``point`` as a run of this bench measures it: its model's weights and training set, and the day."""
+    point["detail"] = {"dataset": dataset or {"designs": 600, "tiles": 2}, "views": 8, "weights": weights,
+                       "measured_on": day}
+    return point
+
+
+def test_training_sets_are_parsed_from_the_option_and_malformed_ones_are_clear_errors():
+    from meta_sim.experiments.tradeoff import TRAINING_SETS, parse_training_sets
+
+    assert parse_training_sets(None) == TRAINING_SETS
+    assert parse_training_sets("") == ()
+    assert parse_training_sets("150x4, 1700x9,150x4") == ((150, 4), (1700, 9))
+    for bad in ("600", "0x2", "600x0", "-5x2", "600x2x2", "ax2", "1e3x2"):
+        with pytest.raises(MetaSimError, match="DESIGNSxTILES"):
+            parse_training_sets(bad)
+
+
+def test_a_part_of_the_study_is_merged_into_an_earlier_one_on_the_same_targets():
+    from meta_sim.experiments.tradeoff import merge_results
+
+    small = {"designs": 150, "tiles": 4}
+    earlier = _result([_measured(_point("tiles per target group", "9", 0.9, 0.09, 300), "aaa"),
+                       {**_point("search", "dr", 0.8, 0.07, 300), "detail": {"from": "bench-nams row dr"}},
+                       _measured(_point("training set", "150 x 4", 0.6, 0.08, 100), "bbb", small, "2026-12-03"),
+                       _measured(_point("training set", "600 x 2", 0.9, 0.08, 300), "aaa"),
+                       _measured(_point("profile", "fast", 0.85, 0.08, 200), "ccc", {"designs": 300, "tiles": 2})])
+    part = _result([_measured(_point("tiles per target group", "9", 0.9, 0.09, 300), "aaa", day="2026-12-05"),
+                    {**_point("search", "exhaustive", 0.9, 0.07, 300), "detail": {"from": "bench-nams row x"}},
+                    _measured(_point("render preset", "balanced", 0.95, 0.09, 900), "ddd",
+                              {"designs": 600, "tiles": 2, "preset": "balanced"}, "2026-12-05"),
+                    _measured(_point("training set", "1700 x 9", 0.97, 0.08, 2000), "eee",
+                              {"designs": 1700, "tiles": 9}, "2026-12-05")])
+    merged = merge_results(earlier, part)
+    assert [(p["knob"], p["setting"]) for p in merged["points"]] == [
+        ("tiles per target group", "9"), ("search", "exhaustive"), ("training set", "150 x 4"),
+        ("training set", "600 x 2"), ("training set", "1700 x 9"), ("render preset", "balanced"), ("profile", "fast")]
+    # The measured point is the new one; the other bench's old row is not kept (each run reads those again).
+    assert merged["points"][0]["detail"]["measured_on"] == "2026-12-05"
+    table = format_tradeoff_table(merged)
+    assert "Measured in parts" in table and "2026-12-03, 2026-12-04, 2026-12-05" in table
+    assert "Measured in parts" not in format_tradeoff_table(part)  # one day: one run
+    # A training set trained again with other weights: not one model's table.
+    other = _result([_measured(_point("tiles per target group", "1", 0.5, 0.01, 300), "zzz")])
+    with pytest.raises(MetaSimError, match="other weights"):
+        merge_results(earlier, other)
+    # Other targets, or an earlier result from before measuring in parts or before the splits.
+    with pytest.raises(MetaSimError, match="targets_per_seed"):
+        merge_results(earlier, {**part, "targets_per_seed": 50})
+    with pytest.raises(MetaSimError, match="predates measuring in parts"):
+        merge_results(_result(), part)
+    with pytest.raises(MetaSimError, match="predates the validation and test splits"):
+        merge_results({k: v for k, v in earlier.items() if k != "splits"}, part)
+
+
+def test_the_weights_id_names_the_learnt_weights_not_the_run():
+    from meta_sim.experiments.tradeoff import weights_id
+
+    def model(seed):
+        torch.manual_seed(seed)
+        return torch.nn.Sequential(torch.nn.Linear(4, 3), torch.nn.BatchNorm1d(3)).to(torch.bfloat16)
+
+    assert weights_id(model(0)) == weights_id(model(0)) and len(weights_id(model(0))) == 12
+    assert weights_id(model(0)) != weights_id(model(1))
+    changed = model(0)
+    with torch.no_grad():
+        changed[0].weight[0, 0] += 0.5
+    assert weights_id(changed) != weights_id(model(0))
+
+
+def test_merging_into_an_unreadable_result_fails_before_any_measuring(tmp_path):
+    from click.testing import CliRunner
+
+    from meta_sim.cli import main
+
+    out = tmp_path / "tradeoff.json"
+    out.write_text("{not json")
+    result = CliRunner().invoke(main, ["bench", "tradeoff", "--merge", "--no-docs", "--out", str(out),
+                                       "--cache", str(tmp_path / "cache")])
+    assert result.exit_code != 0 and "cannot read the earlier trade-off result" in result.output
+    assert out.read_text() == "{not json" and not (tmp_path / "cache").exists()
+    result = CliRunner().invoke(main, ["bench", "tradeoff", "--training-sets", "600", "--no-docs", "--out", str(out)])
+    assert result.exit_code != 0 and "DESIGNSxTILES" in result.output
