@@ -7,8 +7,10 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
-from ..experiments.publish import DOCS, publish
+from ..experiments.publish import DOCS, publish, publish_section
 from .base import _Bars, _torch_threads, main
+
+README = Path("README.md")
 
 
 def _docs_option(command):
@@ -229,6 +231,7 @@ def bench_tradeoff_command(out, docs, plot, targets, adjoint_targets, presets, p
     from ..core.extras import require
     from ..experiments.tradeoff import (
         bench_tradeoff,
+        format_profiles_table,
         format_tradeoff_table,
         merge_results,
         parse_training_sets,
@@ -252,6 +255,8 @@ def bench_tradeoff_command(out, docs, plot, targets, adjoint_targets, presets, p
         result = merge_results(earlier, result)
     plot_tradeoff(result, plot)
     _publish(result, out, format_tradeoff_table(result), "tradeoff", docs, plot)
+    if docs:  # the profiles' measured rows in the README too
+        click.echo(f"wrote {publish_section(README, 'profiles', format_profiles_table(result))}")
 
 
 @bench.command("farm")

@@ -523,6 +523,31 @@ def format_tradeoff_table(result: dict) -> str:
     return "\n".join(lines)
 
 
+def format_profiles_table(result: dict, names=tuple(PROFILES)) -> str:
+    """The README's table of what each profile measured in a trade-off result: E1 top-1 and top-10 on the
+    reported split, top-1 on validation beside them, inference and one-off cost ("-" for a profile the result
+    lacks)."""
+    splits, points = _by_split(result)
+    reported, other = splits[0], splits[1] if len(splits) > 1 else None
+    rows = {p["setting"]: p for p in points if p["knob"] == "profile"}
+    lines = [f"| profile | E1 top-1 flat / sloped, {reported} | top-10, {reported} | top-1, {other or '-'} | "
+             "s per target group | one-off min | targets |", "|---" * 7 + "|"]
+    for name in names:
+        p = rows.get(name)
+        if p is None:
+            lines.append(f"| {name} | not measured yet | - | - | - | - | - |")
+            continue
+
+        def pair(split, k, p=p):
+            m = p["metrics"].get(split)
+            return "-" if m is None else f"{m[f'flat_{k}']:.3f} / {m[f'sloped_{k}']:.3f}"
+
+        lines.append(f"| {name} | {pair(reported, 'top1')} | {pair(reported, 'top10')} | "
+                     f"{pair(other, 'top1') if other else '-'} | {p['seconds_per_group']:.3f} | "
+                     f"{p['one_off_seconds'] / 60:.1f} | {p['targets'].get(reported, '-')} |")
+    return "\n".join(lines)
+
+
 LABEL_GID = "tradeoff-label"  # the gid of the plot's point labels
 _LABELS = {"tiles per target group": "group of {}", "training set": "set {}", "render preset": "{} renders",
            "profile": "profile {}", "architecture": "{} architecture", "roof finder": "{} roof finder",

@@ -426,3 +426,26 @@ def test_merging_into_an_unreadable_result_fails_before_any_measuring(tmp_path):
     assert out.read_text() == "{not json" and not (tmp_path / "cache").exists()
     result = CliRunner().invoke(main, ["bench", "tradeoff", "--training-sets", "600", "--no-docs", "--out", str(out)])
     assert result.exit_code != 0 and "DESIGNSxTILES" in result.output
+
+
+def test_the_readme_gets_each_profiles_measured_row_and_says_which_are_not_measured(tmp_path):
+    from pathlib import Path
+
+    from meta_sim.experiments.publish import publish_section
+    from meta_sim.experiments.tradeoff import format_profiles_table
+
+    table = format_profiles_table(_result())
+    assert "| fast | 0.700 / 0.600 | 1.000 / 0.900 | 0.900 / 0.800 | 0.090 | 5.0 | 300 |" in table
+    assert "| balanced | not measured yet |" in table and "| paper | not measured yet |" in table
+    assert table.splitlines()[0].startswith("| profile | E1 top-1 flat / sloped, test |")
+    readme = tmp_path / "README.md"
+    readme.write_text("intro\n<!-- bench:profiles -->\nold\n<!-- /bench:profiles -->\nafter\n")
+    publish_section(readme, "profiles", table)
+    text = readme.read_text()
+    assert "old" not in text and table in text and text.startswith("intro\n") and text.endswith("after\n")
+    readme.write_text("no markers\n")
+    with pytest.raises(MetaSimError, match="no section"):
+        publish_section(readme, "profiles", table)
+    assert readme.read_text() == "no markers\n"
+    # The project's own README has the section bench-tradeoff fills.
+    assert "<!-- bench:profiles -->" in (Path(__file__).parents[2] / "README.md").read_text()
