@@ -432,11 +432,10 @@ def merge_results(old: dict, new: dict) -> dict:
     if differ:
         raise MetaSimError(f"the earlier trade-off result was measured on other targets ({', '.join(differ)} "
                            "differ); measure the whole study again (without --merge)")
-    models = {}
-    for point in new["points"]:
-        detail = point.get("detail", {})
-        if "weights" in detail:
-            models[json.dumps([detail["dataset"], detail.get("views")], sort_keys=True)] = detail["weights"]
+    def model(detail: dict) -> str:  # which training set (and views) a point's model learnt from
+        return json.dumps([detail["dataset"], detail.get("views")], sort_keys=True)
+
+    models = {model(p["detail"]): p["detail"]["weights"] for p in new["points"] if "weights" in p.get("detail", {})}
     measured = {(p["knob"], p["setting"]) for p in new["points"]}
     kept = []
     for point in old["points"]:
@@ -444,7 +443,7 @@ def merge_results(old: dict, new: dict) -> dict:
             continue
         detail = point.get("detail", {})
         if "weights" in detail:
-            again = models.get(json.dumps([detail["dataset"], detail.get("views")], sort_keys=True))
+            again = models.get(model(detail))
             if again is not None and again != detail["weights"]:
                 raise MetaSimError(f"the training set of row '{point['knob']} {point['setting']}' was trained again "
                                    f"and learnt other weights ({again}, not {detail['weights']}): the parts are "
