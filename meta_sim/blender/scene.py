@@ -52,6 +52,7 @@ from ..sim.quality import (
     sun_studio_light,
     workbench_direction,
 )
+from ..sim.water import WATER_COLOURS
 
 LABEL_ATTRIBUTE = "label"
 UV_NAME = "UVMap"
@@ -454,6 +455,13 @@ class CityScene:
             arrays = meshes.detail_mesh(flat["pavings"], flat["pools"], flat["markings"],
                                         meshes.road_top(n_roads) + 0.005)
             _new_mesh_object(arrays, materials, self.collection, key)
+        waters = self._visible(lambda *r: lay.details_in_rect("waters", *r), 0.0)
+        self.n_details["waters"] = len(waters)
+        if waters:  # one colour per city (``sim/water.py``)
+            lake = _image_material("lake", _rgb_image("lake", surfaces.lake_image(WATER_COLOURS[waters[0].colour]),
+                                                      key), key, roughness=0.1)
+            _new_mesh_object(meshes.water_mesh(waters, meshes.road_top(n_roads) + 0.015), [lake], self.collection,
+                             key)
         if cars:
             paints = [_image_material(f"car-{name}", _noise_image(f"car-{name}", colour, 0.03, 9, key), key, 0.4)
                       for name, colour in surfaces.CAR_PAINT.items()]

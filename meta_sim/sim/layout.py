@@ -62,6 +62,7 @@ from .clutter import (
     through_sidewalks,
 )
 from .draws import pick, sign
+from .water import Water, flood, water_bodies
 
 LAYOUT_VERSION = 1
 # What a city of the richer scene (a style other than the suburban grid, or roof furniture) shows, beyond
@@ -274,6 +275,10 @@ class LayoutParams:
         radius 6-30 m, placed at random): fields, gardens and groves, where the town's trees and bushes
         grow as in its other gaps. Its roofs lose a little more than the share (houses cannot lean on a
         patch's edge). 0 packs the town as always; a larger share keeps the patches of a smaller one.
+    water_share: 0..0.9, the share of the city under open water (rivers, lagoons, coasts: chains of discs
+        from the city's edge, ``sim/water.py``). The water lies over the ground and the roads, and takes
+        away the buildings, pools, cars and bushes it touches and the trees standing in it; the rest of the
+        city stays as it was. In cities of every style.
     roof_furniture: 0..1, how much stands on the roofs (``sim/furniture.py``):
         parapet rims, HVAC units, skylights, hatches, stair housings and
         solar rows on flat roofs, chimneys, roof windows and solar panels on
@@ -295,11 +300,13 @@ class LayoutParams:
     shrub_density: float = 0.0
     roof_furniture: float = 0.0
     open_share: float = 0.0
+    water_share: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
         for name in ("car_density", "pool_share", "shrub_density", "roof_furniture", "open_share"):
             object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
+        object.__setattr__(self, "water_share", _check_number(owner, "water_share", self.water_share, 0.0, 0.9))
         if not isinstance(self.tree_size, str) or self.tree_size not in TREE_SIZES:
             raise MetaSimError(f"{owner}.tree_size must be one of {', '.join(TREE_SIZES)}, got {self.tree_size!r}")
         if not isinstance(self.street_details, (bool, np.bool_)):
@@ -373,7 +380,7 @@ def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
 
 # The knobs added after the first layouts: `to_dict` writes them only when set.
 _CLUTTER_DEFAULTS = {"tree_size": "small", "street_details": False, "car_density": 0.0, "pool_share": 0.0,
-                     "shrub_density": 0.0, "roof_furniture": 0.0, "open_share": 0.0}
+                     "shrub_density": 0.0, "roof_furniture": 0.0, "open_share": 0.0, "water_share": 0.0}
 
 
 @dataclass(frozen=True)
@@ -589,7 +596,8 @@ def _in_rect(items: tuple[Any, ...], boxes: np.ndarray, x0: float, y0: float, x1
     return [items[i] for i in np.flatnonzero(hit)]
 
 
-_DETAILS = {"pavings": Paving, "markings": Marking, "cars": Car, "pools": Pool, "shrubs": Shrub}
+_CLUTTER = {"pavings": Paving, "markings": Marking, "cars": Car, "pools": Pool, "shrubs": Shrub}
+_DETAILS = {**_CLUTTER, "waters": Water}
 
 
 @dataclass(frozen=True)
@@ -610,6 +618,7 @@ class CityLayout:
     cars: tuple[Car, ...] = ()
     pools: tuple[Pool, ...] = ()
     shrubs: tuple[Shrub, ...] = ()
+    waters: tuple[Water, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         out = {
@@ -688,8 +697,8 @@ class CityLayout:
         return {name: _boxes(getattr(self, name)) for name in _DETAILS}
 
     def details_in_rect(self, name: str, x0: float, y0: float, x1: float, y1: float) -> list[Any]:
-        """Street details or clutter of one kind ("pavings", "markings", "cars", "pools", "shrubs")
-        whose bbox shares positive area with the rectangle."""
+        """Street details, clutter or water of one kind ("pavings", "markings", "cars", "pools", "shrubs",
+        "waters") whose bbox shares positive area with the rectangle."""
         return _in_rect(getattr(self, name), self._detail_boxes[name], x0, y0, x1, y1)
 
     def style_of(self, building: Building) -> str:
@@ -1592,7 +1601,7 @@ def _styled_clutter(seed: int, params: LayoutParams, width: float, height: float
     roofs = polygons.Occupancy([b.roof_outline for b in buildings])
     borders = polygons.Occupancy([road.polygon for road in through])
     taken = polygons.Occupancy()  # vehicles and bushes placed so far, in the world
-    out: dict[str, list] = {name: [] for name in _DETAILS}
+    out: dict[str, list] = {name: [] for name in _CLUTTER}
     trees: list[Tree] = []
 
     def plant(x: float, y: float, radius: float, height_m: float, window) -> None:
@@ -1691,8 +1700,20 @@ def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutPa
     width = _check_number("generate_layout", "width_m", width_m, MIN_CITY_M, MAX_CITY_M)
     height = _check_number("generate_layout", "height_m", height_m, MIN_CITY_M, MAX_CITY_M)
     params = LayoutParams() if params is None else params
-    if params.style != DEFAULT_STYLE:
-        return _styled_layout(int(seed), width, height, params)
+    layout = (_styled_layout(int(seed), width, height, params) if params.style != DEFAULT_STYLE
+              else _grid_layout(int(seed), width, height, params))
+    if params.water_share <= 0.0:
+        return layout
+    # The water's stream is the eighth: spawning eight leaves the seven streams of a styled city as they were.
+    waters = water_bodies(stage_generators(int(seed), 8)[7], width, height, params.water_share)
+    details = {name: getattr(layout, name) for name in _CLUTTER}
+    buildings, trees, details = flood(waters, layout.buildings, layout.trees, details)
+    return replace(layout, buildings=tuple(buildings), trees=tuple(trees),
+                   **{name: tuple(items) for name, items in details.items()}, waters=tuple(waters))
+
+
+def _grid_layout(seed: int, width: float, height: float, params: LayoutParams) -> CityLayout:
+    """A city of the suburban street grid alone (`generate_layout` without a style mix)."""
     # A sixth stream for clutter: spawning six leaves the first five streams as they were.
     road_rng, lot_rng, building_rng, roof_rng, tree_rng, clutter_rng = stage_generators(int(seed), 6)
 
@@ -1718,7 +1739,7 @@ def generate_layout(seed: int, width_m: float, height_m: float, params: LayoutPa
         trees = [tree for block in blocks for tree in _street_trees(tree_rng, block, params.tree_density)]
         for index, lot in enumerate(lots):
             trees += _yard_trees(tree_rng, lot, by_lot.get(index), params.tree_density)
-    details = {} if clutter is None else {name: getattr(clutter, name) for name in _DETAILS}
+    details = {} if clutter is None else {name: getattr(clutter, name) for name in _CLUTTER}
     return CityLayout(int(seed), _r(width), _r(height), params, tuple(roads), tuple(lots), tuple(buildings),
                       tuple(trees), **details)
 

@@ -321,6 +321,19 @@ def crown_mesh(trees, segments: int = 8) -> MeshArrays:
     return mesh
 
 
+def water_mesh(waters, z: float, sides: int = 32) -> MeshArrays:
+    """Open water (``sim/water.py``) as flat discs at `z` (above every road and painted line), the k-th a
+    tenth of a millimetre above the one before: overlapping discs are never coplanar (a path tracer's
+    shadow rays would hit the twin face). UVs are metres over ``surfaces.LAKE_REPEAT_M``."""
+    mesh = MeshArrays("water")
+    background = label_color(0, 0)
+    for k, w in enumerate(waters):
+        pts = polygons.disc(w.x, w.y, w.radius_m, sides)
+        mesh.add([(x, y, z + 1e-4 * k) for x, y in pts], 0,
+                 [(x / surfaces.LAKE_REPEAT_M, y / surfaces.LAKE_REPEAT_M) for x, y in pts], background)
+    return mesh
+
+
 def _box(mesh: MeshArrays, corners, z0, z1, slot: int, uv, label, top_corners=None,
          top_slot: int | None = None, side_slots=None, floor: bool = False, top_uv=None) -> None:
     """A prism from the outline `corners` (CCW) at z0 to `top_corners` (default the same) at z1,

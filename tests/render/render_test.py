@@ -919,6 +919,27 @@ def test_the_scene_of_a_styled_clutter_city_builds_only_what_the_tiles_see():
         scene.close()
 
 
+def test_open_water_lies_over_the_roads_in_its_colour_and_takes_away_the_houses_it_covers(space, bank, tmp_path):
+    from meta_sim.sim.water import WATER_COLOURS
+
+    town = {"style": "dense", "tree_size": "real", "car_density": 0.5}
+    wet = _styled_render(space, bank, tmp_path / "wet", "dense-water", {**town, "water_share": 0.5})
+    dry = _styled_render(space, bank, tmp_path / "dry", "dense-dry", town)
+    layout, (rect,) = layout_for_tiles(2, 1, 115.2, LayoutParams(**town, water_share=0.5))
+    water = _rasterise_polygons([polygons_disc(w) for w in layout.waters], rect, 384, 0.3)
+    water = _erode(water, 2) & ~_paint(layout, layout.trees, rect, 384, 0.3)  # crowns may reach over the bank
+    assert 0.2 < water.mean() < 0.9, water.mean()
+    assert not (wet.instance[water] > 0).any() and (dry.instance[water] > 0).sum() > 1000  # houses gone, labelled
+    assert ((wet.instance > 0) <= (dry.instance > 0)).all()  # nothing new is built
+    roads = water & _rasterise_polygons([r.polygon for r in layout.roads], rect, 384, 0.3)
+    assert roads.sum() > 500
+    colour = np.asarray(WATER_COLOURS[layout.waters[0].colour])
+    med_road, med_open = np.median(wet.rgb[roads], axis=0), np.median(wet.rgb[water & ~roads], axis=0)
+    assert np.allclose(med_road, med_open, rtol=0.1)  # the roads end at the bank: water lies over them
+    assert np.allclose(med_open / med_open.sum(), colour / colour.sum(), atol=0.05)  # in the water's colour
+    assert np.std(linear_luma(wet.rgb[water])) < 0.5 * np.std(linear_luma(dry.rgb[water]))
+
+
 def test_overhead_v3_renders_a_few_houses_among_trees_at_its_low_building_density(bank, tmp_path):
     # The sparse end overhead-v2 cannot reach (its building density starts at 0.4): a suburban town at
     # density 0.08 has a fraction of the buildings of one at 0.9, and more of it is green.
