@@ -940,6 +940,17 @@ def test_open_water_lies_over_the_roads_in_its_colour_and_takes_away_the_houses_
     assert np.std(linear_luma(wet.rgb[water])) < 0.5 * np.std(linear_luma(dry.rgb[water]))
 
 
+def test_the_scene_builds_only_the_water_the_tiles_see():
+    from meta_sim.blender.scene import CityScene
+
+    layout, rects = layout_for_tiles(SEED, 25, 115.2, LayoutParams(style="dense", water_share=0.4))
+    scene = CityScene(layout, [rects[12]], pixel_size_m=1.2, shadow_margin_m=20.0)
+    try:
+        assert len(layout.waters) > 10 and scene.n_details["waters"] < len(layout.waters) / 2
+    finally:
+        scene.close()
+
+
 def test_overhead_v3_renders_a_few_houses_among_trees_at_its_low_building_density(bank, tmp_path):
     # The sparse end overhead-v2 cannot reach (its building density starts at 0.4): a suburban town at
     # density 0.08 has a fraction of the buildings of one at 0.9, and more of it is green.
