@@ -29,7 +29,7 @@ TREE_CELLS = 12
 ASPHALT_REPEAT_M = 25.6
 CONCRETE_REPEAT_M = 6.4
 WATER_REPEAT_M = 4.8
-LAKE_REPEAT_M = 38.4  # open water (sim/water.py): 128 px at 0.3 m
+LAKE_REPEAT_M = 76.8  # open water (sim/water.py): 256 px at 0.3 m
 
 _TREE_GREENS = ((0.060, 0.13, 0.035), (0.080, 0.15, 0.040), (0.105, 0.16, 0.045), (0.045, 0.11, 0.040),
                 (0.120, 0.145, 0.050), (0.065, 0.125, 0.060))
@@ -147,11 +147,11 @@ def water_image(seed: int = 0, n: int = 64) -> np.ndarray:
 
 
 @_frozen
-def lake_image(colour: tuple[float, float, float], n: int = 128) -> np.ndarray:
+def lake_image(colour: tuple[float, float, float], n: int = 256) -> np.ndarray:
     """Tileable open water of ``LAKE_REPEAT_M`` in ``colour`` (linear RGB): broad patches of turbidity and
-    depth (+-12%) with faint wind ripples (+-3%), no caustics (too deep and too far for them)."""
+    depth (+-7%) with faint wind ripples (+-3%), no caustics (too deep and too far for them)."""
     rng = np.random.default_rng(47)
-    broad = 0.12 * _periodic_field(rng, n, 0.25 * n)
+    broad = 0.07 * _periodic_field(rng, n, 0.2 * n)
     ripple = 0.03 * _periodic_field(rng, n, 0.02 * n)
     rgb = np.asarray(colour, np.float32) * (1.0 + broad + ripple)[..., None]
     return np.clip(rgb, 0.0, 1.0).astype(np.float32)
