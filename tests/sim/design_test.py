@@ -281,6 +281,19 @@ def test_overhead_towns_v3_is_towns_v2_with_open_ground_and_deeper_shadows():
         assert look.shadow_depth == design["shadow_depth"] == look.header()["shadow_depth"]
 
 
+def test_overhead_towns_v4_is_towns_v3_with_open_water():
+    from meta_sim.sim.layout import LayoutParams
+
+    v3, v4 = DesignSpace.load("overhead-towns-v3"), DesignSpace.load("overhead-towns-v4")
+    water = v4.parameter("water_share")
+    assert (water.layout_field, water.low, water.high) == ("water_share", 0.0, 0.4)
+    assert v4.parameters[:-1] == v3.parameters and v4.parameters[-1] == water
+    assert v4.layout == v3.layout
+    for design in v4.sample(np.random.default_rng(5), 5):
+        overrides = v4.layout_overrides(design)
+        assert LayoutParams(**overrides).water_share == design["water_share"] == overrides["water_share"]
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),
