@@ -390,7 +390,9 @@ def bench_roof_finder_command(out, docs, spaces, finders, realdata, cache):
                    "designs), or with :near (overhead-towns-v3+scene:near: each domain's renders drawn from its "
                    "groups' best-ranked designs of the search, not one design per group), or with :dr (each group's "
                    "design from the DR baseline trained beside NAMS), or with :matched (each domain's renders "
-                   "brought to the colour statistics of its adapt scenes); their rows replace those "
+                   "brought to the colour statistics of its adapt scenes), or with :rSHARE (overhead-towns-v4+scene:"
+                   "r0.5: that share of each domain's cities drawn uniformly instead of from its inferred designs; "
+                   "0.25 otherwise); their rows replace those "
                    "in --out and the other rows stay (default: every run)")
 def bench_realism_command(out, docs, pictures, quick, realdata, cache, runs):
     """How close renders are to each real domain: sim-only building IoU against the other real domains

@@ -425,6 +425,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         **({"near": near} if infer and near else {}),
                         **({"method": method} if infer and method != "nams" else {}),
                         **({"colour_matched": True} if matched else {}),
+                        **({"r": s.r_real} if infer and s.r_real != TaskEvalSettings.r_real else {}),
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
@@ -455,6 +456,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += f"-near{near}" if infer and near else ""
         tag += f"-{method}" if infer and method != "nams" else ""
         tag += "-matched" if matched else ""
+        tag += f"-r{s.r_real:g}" if infer and s.r_real != TaskEvalSettings.r_real else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 
@@ -664,6 +666,25 @@ DR_DESIGNS = ":dr"
 # classifier see them.
 COLOUR_MATCHED = ":matched"
 RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)  # at most one, after any +scene
+# A space's run ending in ":r" and a share (e.g. "overhead-towns-v4+scene:r0.5") renders each domain's training set
+# with that diversify-with-rejection rate (the share of cities drawn uniformly instead of from the inferred
+# designs; ``TaskEvalSettings.r_real``, the paper's 0.25 otherwise): how far to trust an inferred design.
+DIVERSIFY = ":r"
+
+
+def diversify_share(run: str) -> float | None:
+    """The diversify-with-rejection rate a run's name ends with (``DIVERSIFY``), None for a run without one;
+    MetaSimError for a share that is not a number from 0 to 1."""
+    head, sep, tail = run.rpartition(DIVERSIFY)
+    if not sep or not head or not tail or not (tail[0].isdigit() or tail[0] == "."):
+        return None
+    try:
+        share = float(tail)
+    except ValueError:
+        raise MetaSimError(f"realism run {run!r}: {DIVERSIFY} takes a share from 0 to 1, not {tail!r}") from None
+    if not 0.0 <= share <= 1.0:
+        raise MetaSimError(f"realism run {run!r}: {DIVERSIFY} takes a share from 0 to 1, not {tail!r}")
+    return share
 
 
 def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path, root: Path | None = None,
@@ -680,6 +701,8 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
                 for suffix in RUN_SUFFIXES}
+    suffixed |= {run for run in only or () if diversify_share(run) is not None
+                 and run.rpartition(DIVERSIFY)[0] in {*builtin_spaces(), *augmentable}}
     spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | suffixed) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
@@ -687,7 +710,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
                            f"{SCENE_AUGMENTED} and/or one of {UNIFORM_ONLY}, {NEAR_POPULATION}, {DR_DESIGNS}, "
-                           f"{COLOUR_MATCHED} after it")
+                           f"{COLOUR_MATCHED}, {DIVERSIFY}SHARE after it")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
@@ -701,12 +724,15 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     for run in spaces:
         infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
         method, matched = "dr" if run.endswith(DR_DESIGNS) else "nams", run.endswith(COLOUR_MATCHED)
-        named = run
+        named, share = run, diversify_share(run)
+        if share is not None:
+            named = run.rpartition(DIVERSIFY)[0]
         for suffix in RUN_SUFFIXES:
             named = named.removesuffix(suffix)
         space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
         run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
+        run_settings = run_settings if share is None else replace(run_settings, r_real=share)
         other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
         if infer:
             models[space] = other.methods.nams.model_id
@@ -725,7 +751,8 @@ def _space_cell(row: dict) -> str:
             + (", uniform designs only" if row.get("rendered_only", {}) is None else "")
             + (f", population of each group's {row['near']} best-ranked designs" if row.get("near") else "")
             + (", designs inferred by DR" if row.get("method") == "dr" else "")
-            + (", renders colour-matched to the adapt scenes" if row.get("colour_matched") else ""))
+            + (", renders colour-matched to the adapt scenes" if row.get("colour_matched") else "")
+            + (f", {row['r']:.0%} of the cities uniform designs" if row.get("r") is not None else ""))
 
 
 def _g(value) -> str:

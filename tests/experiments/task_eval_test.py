@@ -454,6 +454,49 @@ def test_a_dr_realism_run_renders_each_domain_from_the_designs_dr_infers(tmp_pat
     assert (tmp_path / "realism-overhead-towns-v3-scene-dr.png").is_file()
 
 
+def test_a_diversified_realism_run_draws_that_share_of_its_cities_uniformly(tmp_path, monkeypatch):
+    """"overhead-towns-v3+scene:r0.75": three quarters of each domain's training cities take uniform designs
+    instead of the inferred ones (the paper's 0.25 without the suffix); the row, the table and the picture's
+    name say so, and a share outside 0..1 is refused before any work."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+    from meta_sim.sim.design import DesignSpace
+
+    space = DesignSpace.load("overhead-towns-v3")
+    inferred = space.sample(np.random.default_rng(2), 2)
+    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
+    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
+        methods, dataset, models, settings, tmp_path, REALDATA, None))
+    monkeypatch.setattr(task_eval, "_infer_real", lambda h, adapt, seed, name, found=None: {"nams": list(inferred)})
+    drawn = {}
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: drawn.update({name: [job.design for job in jobs]}))
+    kept = {}
+    for run in ("overhead-towns-v3+scene", "overhead-towns-v3+scene:r0.75"):
+        result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                       only={run})
+        kept[run] = np.mean([d in inferred for d in drawn["rio nams"]])
+        row = result["runs"][run]["rio"]
+        line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| rio"))
+        if run.endswith(":r0.75"):
+            assert row["r"] == 0.75 and "75% of the cities uniform designs" in line
+            assert (tmp_path / "realism-overhead-towns-v3-scene-r0.75.png").is_file()
+        else:
+            assert "r" not in row and "uniform designs |" not in line.split("|")[2]
+    assert kept["overhead-towns-v3+scene"] > 0.6 and kept["overhead-towns-v3+scene:r0.75"] < 0.45
+    assert task_eval.diversify_share("overhead-v2+scene:r.5") == 0.5
+    assert task_eval.diversify_share("overhead-v2+scene:dr") is None
+    for bad in ("overhead-towns-v3+scene:r1.5", "overhead-towns-v3:r0.5x"):
+        with pytest.raises(MetaSimError, match="takes a share from 0 to 1"):
+            task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                  only={bad})
+    with pytest.raises(MetaSimError, match="unknown realism run"):
+        task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                              only={"overhead-v9+scene:r0.5"})
+
+
 def test_a_matched_realism_run_brings_the_renders_to_the_adapt_scenes_colours(tmp_path, monkeypatch):
     """"overhead-towns-v3+scene:matched": every render the domain's segmenters, classifier and colour table see
     (the inferred designs' and the uniform designs') has the adapt scenes' channel means and spreads."""
