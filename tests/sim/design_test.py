@@ -294,6 +294,21 @@ def test_overhead_towns_v4_is_towns_v3_with_open_water():
         assert LayoutParams(**overrides).water_share == design["water_share"] == overrides["water_share"]
 
 
+def test_overhead_towns_v5_is_towns_v4_with_deeper_shadows():
+    from meta_sim.sim.appearance import Appearance
+
+    v4, v5 = DesignSpace.load("overhead-towns-v4"), DesignSpace.load("overhead-towns-v5")
+    depth = v5.parameter("shadow_depth")
+    assert (depth.appearance, depth.low, depth.high) == ("shadow_depth", 0.75, 0.95)
+    assert v4.parameter("shadow_depth").low == 0.55
+    assert [p for p in v5.parameters if p.name != "shadow_depth"] == [p for p in v4.parameters
+                                                                       if p.name != "shadow_depth"]
+    assert [p.name for p in v5.parameters] == [p.name for p in v4.parameters] and v5.layout == v4.layout
+    for design in v5.sample(np.random.default_rng(3), 20):
+        look = Appearance().with_design(v5, design)
+        assert 0.75 <= look.shadow_depth == design["shadow_depth"] <= 0.95
+
+
 @pytest.mark.parametrize("patch, message", [
     ({"format": "other"}, "not a design-space file"),
     ({"version": 99}, "version 99 is not supported"),
