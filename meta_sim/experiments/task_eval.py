@@ -842,6 +842,7 @@ def realism_markdown(result: dict) -> str:
                          f"{100 * v['roof_pixels']['flat']:.1f} / {100 * t['roof_pixels']['flat']:.1f} | "
                          f"{100 * v['roof_pixels']['sloped']:.1f} / {100 * t['roof_pixels']['sloped']:.1f} | "
                          + " | ".join(pair(k) for k in ("building_share", "iou", "precision", "recall")) + " |")
-    lines += ["", f"Renders: the `{result['render_preset']}` preset; {result['seconds'] / 60:.0f} min of wall time over "
-                  f"all the runs in the tables (a run measured again replaces its rows, not its time)."]
+    minutes = result["seconds"] / 60
+    lines += ["", f"Renders: the `{result['render_preset']}` preset; {minutes:.0f} min of wall time over all the runs "
+                  f"in the tables (a run measured again replaces its rows, not its time)."]
     return "\n".join(lines) + "\n"
