@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from meta_sim.core.errors import MetaSimError
 from meta_sim.experiments import realdomains
 from meta_sim.experiments.task_eval import TaskEvalSettings, paired_difference, summarise, task_markdown
+from meta_sim.sim.design import DesignSpace
 from meta_sim.task.score import Counts
 
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
@@ -454,23 +455,29 @@ def test_a_dr_realism_run_renders_each_domain_from_the_designs_dr_infers(tmp_pat
     assert (tmp_path / "realism-overhead-towns-v3-scene-dr.png").is_file()
 
 
+def _stub_inferring_harness(monkeypatch, tmp_path, designs):
+    """A towns-v3 harness whose NAMS "infers" ``designs`` for every domain (no model, no real imagery read)."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+
+    space = DesignSpace.load("overhead-towns-v3")
+    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
+    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
+        methods, dataset, models, settings, tmp_path, REALDATA, None))
+    monkeypatch.setattr(task_eval, "_infer_real", lambda h, adapt, seed, name, found=None: {"nams": list(designs)})
+
+
 def test_a_diversified_realism_run_draws_that_share_of_its_cities_uniformly(tmp_path, monkeypatch):
     """"overhead-towns-v3+scene:r0.75": three quarters of each domain's training cities take uniform designs
     instead of the inferred ones (the paper's 0.25 without the suffix); the row, the table and the picture's
     name say so, and a share outside 0..1 is refused before any work."""
-    from types import SimpleNamespace
-
     from meta_sim.experiments import task_eval
     from meta_sim.pipeline.dataset import DatasetConfig
     from meta_sim.pipeline.workflow import ModelSettings
-    from meta_sim.sim.design import DesignSpace
 
-    space = DesignSpace.load("overhead-towns-v3")
-    inferred = space.sample(np.random.default_rng(2), 2)
-    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
-    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
-        methods, dataset, models, settings, tmp_path, REALDATA, None))
-    monkeypatch.setattr(task_eval, "_infer_real", lambda h, adapt, seed, name, found=None: {"nams": list(inferred)})
+    inferred = DesignSpace.load("overhead-towns-v3").sample(np.random.default_rng(2), 2)
+    _stub_inferring_harness(monkeypatch, tmp_path, inferred)
     drawn = {}
     _stub_realism_work(monkeypatch, lambda h, name, jobs: drawn.update({name: [job.design for job in jobs]}))
     kept = {}
@@ -500,20 +507,13 @@ def test_a_diversified_realism_run_draws_that_share_of_its_cities_uniformly(tmp_
 def test_a_matched_realism_run_brings_the_renders_to_the_adapt_scenes_colours(tmp_path, monkeypatch):
     """"overhead-towns-v3+scene:matched": every render the domain's segmenters, classifier and colour table see
     (the inferred designs' and the uniform designs') has the adapt scenes' channel means and spreads."""
-    from types import SimpleNamespace
-
     from meta_sim.experiments import task_eval
     from meta_sim.pipeline.dataset import DatasetConfig
     from meta_sim.pipeline.workflow import ModelSettings
     from meta_sim.sim.colourmatch import ColourStats
-    from meta_sim.sim.design import DesignSpace
 
-    space = DesignSpace.load("overhead-towns-v3")
-    designs = space.sample(np.random.default_rng(2), 2)
-    methods = SimpleNamespace(nams=SimpleNamespace(space=space, model_id="m1"), extractor=object())
-    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, *a: task_eval.Harness(
-        methods, dataset, models, settings, tmp_path, REALDATA, None))
-    monkeypatch.setattr(task_eval, "_infer_real", lambda h, adapt, seed, name, found=None: {"nams": list(designs)})
+    designs = DesignSpace.load("overhead-towns-v3").sample(np.random.default_rng(2), 2)
+    _stub_inferring_harness(monkeypatch, tmp_path, designs)
     _stub_realism_work(monkeypatch, lambda h, name, jobs: None)
     rng = np.random.default_rng(3)
     scenes = {d: [realdomains.Scene(f"{d}{k}", np.clip(rng.normal(0.2 + 0.2 * i, 0.1, (64, 64, 3)), 0, 1)
