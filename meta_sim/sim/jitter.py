@@ -59,12 +59,21 @@ def _each_roof(rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, ci
     """A copy of ``rgb`` with ``change(rng, pixels)`` applied to each building's roof pixels; ``rng`` is
     seeded by the city, the building and ``stream``, and a change that returns None leaves its roof."""
     out = rgb.astype(np.float32).copy()
-    roofs = (roof_class > 0) & (instance > 0)
-    for building in np.unique(instance[roofs]):
-        where = roofs & (instance == building)
-        changed = change(np.random.default_rng([int(city_seed), int(building), stream]), out[where])
+    pixels = out.reshape(-1, out.shape[-1])  # a view: the copy is contiguous
+    roofs = np.flatnonzero((roof_class > 0) & (instance > 0))
+    if not roofs.size:
+        return out
+    # The roof pixels grouped by building in one sort, not one pass over the tile per building; the stable
+    # sort keeps each building's pixels in raster order, as a mask would list them.
+    ids = instance.reshape(-1)[roofs]
+    order = np.argsort(ids, kind="stable")
+    ids, roofs = ids[order], roofs[order]
+    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
+    for start, end in zip(starts, np.append(starts[1:], len(ids))):
+        where = roofs[start:end]
+        changed = change(np.random.default_rng([int(city_seed), int(ids[start]), stream]), pixels[where])
         if changed is not None:
-            out[where] = changed
+            pixels[where] = changed
     return out
 
 

@@ -85,7 +85,7 @@ class Sensor:
         display8 = np.clip(np.floor(display * 255.0 + 0.5), 0, 255).astype(np.uint8)
         if self.jpeg_quality:
             display8 = jpeg_round_trip(display8, self.jpeg_quality)
-        return _decode(display8.astype(np.float32) / 255.0)
+        return _DECODED[display8]  # ``_decode`` of each 8-bit level, looked up
 
 
 def tone_curve(light: np.ndarray, knee: float, ceiling: float = 1.0) -> np.ndarray:
@@ -104,6 +104,9 @@ def _decode(display: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4)).astype(np.float32)
 
 
+_DECODED = _decode(np.arange(256, dtype=np.float32) / 255.0)  # linear light of each 8-bit display level
+
+
 def gaussian_blur(image: np.ndarray, sigma: float) -> np.ndarray:
     """Separable Gaussian blur of an (H, W, C) image, edges mirrored."""
     radius = max(1, int(np.ceil(3 * sigma)))
@@ -114,7 +117,13 @@ def gaussian_blur(image: np.ndarray, sigma: float) -> np.ndarray:
         pad = [(0, 0)] * out.ndim
         pad[axis] = (radius, radius)
         padded = np.pad(out, pad, mode="reflect" if out.shape[axis] > radius else "edge")
-        out = sum(taps[k] * np.take(padded, np.arange(k, k + out.shape[axis]), axis=axis) for k in range(len(taps)))
+        window = [slice(None)] * out.ndim
+        total = None
+        for k, tap in enumerate(taps):  # the taps in order, each shifted view of the padded image weighted
+            window[axis] = slice(k, k + out.shape[axis])
+            term = tap * padded[tuple(window)]
+            total = term if total is None else np.add(total, term, out=total)
+        out = total
     return out.astype(np.float32)
 
 
