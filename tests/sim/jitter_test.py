@@ -90,3 +90,30 @@ def test_a_bad_paint_share_is_refused(bad):
     rgb, instance, roof_class = _tile()
     with pytest.raises(MetaSimError, match="roof_paint"):
         roof_paint(rgb, instance, roof_class, 1, bad)
+
+
+def test_each_roof_is_changed_as_a_mask_per_building_would_change_it():
+    """The roof pixels are grouped by building in one sort; each building must still get its own generator and
+    its pixels in raster order, so the result is the one a boolean mask per building gives."""
+    from meta_sim.sim.jitter import _each_roof
+
+    rng = np.random.default_rng(4)
+    instance = rng.integers(0, 40, (48, 64)).astype(np.uint32)
+    roof_class = rng.integers(0, 3, (48, 64)).astype(np.uint32)
+    rgb = rng.random((48, 64, 3)).astype(np.float32)
+
+    def change(generator, pixels):  # depends on the generator, the pixels' order and their number
+        if generator.random() < 0.2:
+            return None
+        return pixels * generator.random() + np.cumsum(pixels, axis=0) / (1.0 + len(pixels))
+
+    expected = rgb.copy()
+    roofs = (roof_class > 0) & (instance > 0)
+    for building in np.unique(instance[roofs]):
+        where = roofs & (instance == building)
+        changed = change(np.random.default_rng([9, int(building), 3]), expected[where])
+        if changed is not None:
+            expected[where] = changed
+    out = _each_roof(rgb, instance, roof_class, 9, 3, change)
+    assert np.array_equal(out, expected) and not np.array_equal(out, rgb)
+    assert np.array_equal(_each_roof(rgb, instance * 0, roof_class, 9, 3, change), rgb)  # no roof: a copy
