@@ -393,6 +393,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
 
     s = h.settings
     infer = h.methods is not None
+    diversified = infer and s.r_real != TaskEvalSettings.r_real  # not the paper's share of uniform cities
     space = h.space
     rows, picture, uniform = {}, [], {}
     for index, domain in enumerate(realdomains.DOMAINS):
@@ -425,7 +426,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         **({"near": near} if infer and near else {}),
                         **({"method": method} if infer and method != "nams" else {}),
                         **({"colour_matched": True} if matched else {}),
-                        **({"r": s.r_real} if infer and s.r_real != TaskEvalSettings.r_real else {}),
+                        **({"r": s.r_real} if diversified else {}),
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
@@ -456,7 +457,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += f"-near{near}" if infer and near else ""
         tag += f"-{method}" if infer and method != "nams" else ""
         tag += "-matched" if matched else ""
-        tag += f"-r{s.r_real:g}" if infer and s.r_real != TaskEvalSettings.r_real else ""
+        tag += f"-r{s.r_real:g}" if diversified else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
 

@@ -117,13 +117,7 @@ def gaussian_blur(image: np.ndarray, sigma: float) -> np.ndarray:
         pad = [(0, 0)] * out.ndim
         pad[axis] = (radius, radius)
         padded = np.pad(out, pad, mode="reflect" if out.shape[axis] > radius else "edge")
-        window = [slice(None)] * out.ndim
-        total = None
-        for k, tap in enumerate(taps):  # the taps in order, each shifted view of the padded image weighted
-            window[axis] = slice(k, k + out.shape[axis])
-            term = tap * padded[tuple(window)]
-            total = term if total is None else np.add(total, term, out=total)
-        out = total
+        out = sum(taps[k] * np.take(padded, np.arange(k, k + out.shape[axis]), axis=axis) for k in range(len(taps)))
     return out.astype(np.float32)
 
 
