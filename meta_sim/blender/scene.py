@@ -60,6 +60,12 @@ UV_METRES = "UVMetres"  # the design-independent UVs; a design divides them by i
 CITY_TAG = "meta_sim_city"  # custom property: the key of the city a datablock belongs to
 ROLE_TAG = "meta_sim_role"
 TEXTURE_TAG = "meta_sim_texture"
+# The nadir camera looks down from CAMERA_HEIGHT_M; nothing of a city lies below the ground (z = 0), so the far
+# plane sits FAR_BELOW_GROUND_M under it. Workbench draws a shadow as a volume swept from each silhouette edge
+# away from the sun: a far plane 1 km down let every volume fill the frame to its edge, one just under the
+# ground cuts it where its shadow ends: far less to draw, the same shadows (``make bench-render``).
+CAMERA_HEIGHT_M = 1000.0
+FAR_BELOW_GROUND_M = 1.0
 
 
 def blender_version() -> str:
@@ -479,7 +485,7 @@ class CityScene:
     def _add_camera_and_sun(self) -> None:
         camera = _tagged(bpy.data.cameras.new("nadir"), self.key)
         camera.type = "ORTHO"
-        camera.clip_start, camera.clip_end = 1.0, 2000.0
+        camera.clip_start, camera.clip_end = 1.0, CAMERA_HEIGHT_M + FAR_BELOW_GROUND_M
         self.camera = _tagged(bpy.data.objects.new("nadir", camera), self.key)
         self.collection.objects.link(self.camera)
         sun = _tagged(bpy.data.lights.new("sun", "SUN"), self.key)
@@ -547,7 +553,7 @@ class CityScene:
         render.resolution_x, render.resolution_y = width, height
         camera = self.camera.data
         camera.ortho_scale = max(width, height) * self.pixel_size_m
-        self.camera.location = ((rect.x0 + rect.x1) / 2, (rect.y0 + rect.y1) / 2, 1000.0)
+        self.camera.location = ((rect.x0 + rect.x1) / 2, (rect.y0 + rect.y1) / 2, CAMERA_HEIGHT_M)
         self.camera.rotation_euler = (0.0, 0.0, 0.0)
         return width, height
 

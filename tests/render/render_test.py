@@ -633,6 +633,37 @@ def test_a_declared_shadow_depth_darkens_cast_shadows_and_leaves_sunlit_ground_a
     assert sky - 0.03 < deep[shade].mean() / plain[shade].mean() < 0.6
 
 
+def test_the_far_plane_just_under_the_ground_cuts_no_shadow_and_no_surface(space, bank):
+    """The nadir camera's far plane lies just below the ground, which cuts Workbench's shadow volumes where
+    their shadows end: a dense town with roof furniture, trees and cars renders as with the far plane a
+    kilometre down (depth rounding may flip a pixel), shadows and all, in the fast and a path-traced preset."""
+    from meta_sim.blender.scene import CAMERA_HEIGHT_M, FAR_BELOW_GROUND_M, CityScene
+    from meta_sim.render.loop import resolve_textures
+
+    layout, rects = layout_for_tiles(5, 1, 115.2, LayoutParams(**{**CLUTTER_KNOBS, "style": "dense",
+                                                                            "roof_furniture": 1.0}))
+    scene = CityScene(layout, rects, pixel_size_m=0.6, sun_elevation_deg=35.0)
+    try:
+        assert scene.camera.data.clip_end == CAMERA_HEIGHT_M + FAR_BELOW_GROUND_M
+        scene.set_roofs(resolve_textures(space, space.validate({"flat_roof": "flat-concrete-slab",
+                                                                 "sloped_roof": "sloped-seam-grey"}), [bank]))
+        renders = {}
+        for far in (scene.camera.data.clip_end, CAMERA_HEIGHT_M + 1000.0):
+            scene.camera.data.clip_end = far
+            for preset in ("fast", "balanced"):
+                renders[preset, far] = linear_luma(scene.render_rgb(scene.rects[0], get_preset(preset)))
+        _, roof_class = scene.render_labels(scene.rects[0])
+    finally:
+        scene.close()
+    near, deep = CAMERA_HEIGHT_M + FAR_BELOW_GROUND_M, CAMERA_HEIGHT_M + 1000.0
+    assert np.array_equal(renders["balanced", near], renders["balanced", deep])
+    changed = np.abs(renders["fast", near] - renders["fast", deep]) > 0.02
+    assert changed.mean() < 1e-3, changed.mean()
+    ground = renders["fast", near][roof_class == 0]
+    shaded = ground < 0.5 * np.percentile(ground, 90)
+    assert shaded.mean() > 0.1  # the shadows are there
+
+
 def test_the_ground_albedo_reaches_the_lawn_the_ground_covers_and_the_dirt_tracks_only():
     """What counts as ground: the ground quad's lawn or cover mix and the unpaved tracks' dirt. Walls, roads,
     pavings, yards, pools, cars and foliage keep their images; without the albedo every image is today's."""
