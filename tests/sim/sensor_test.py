@@ -47,6 +47,20 @@ def test_tone_curve_is_smooth_rising_and_below_its_ceiling():
         tone_curve(x, 0.95, 0.9)
 
 
+def test_the_sensors_float32_encoding_is_the_srgb_curve():
+    """The display values the sensor adds its noise to: ``linear_to_srgb`` to float32 precision, NaN and the
+    infinities included, and the input left as it was."""
+    from meta_sim.sim.sensor import _encode
+
+    x = np.concatenate([np.linspace(-0.1, 1.2, 100001), [np.nan, np.inf, -np.inf, 0.0031308]]).astype(np.float32)
+    kept = x.copy()
+    out = _encode(x)
+    assert out.dtype == np.float32 and np.array_equal(x, kept, equal_nan=True)
+    assert np.abs(out - linear_to_srgb(x)).max() < 1e-6
+    light = np.float32([0.2, 0.6, 3.0])
+    assert np.array_equal(tone_curve(light, 0.55, 0.9)[:1], light[:1]) and light[1] == np.float32(0.6)
+
+
 def test_blur_and_jpeg_keep_the_mean_and_change_the_detail():
     rgb = _scene()
     blurred = gaussian_blur(rgb, 1.5)
