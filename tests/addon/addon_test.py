@@ -110,6 +110,9 @@ def addon(zip_path, tmp_path_factory, bank, heldout_bank):
     import bpy  # isort: skip (first: it puts Blender's script modules, addon_utils among them, on the path)
     import addon_utils  # isort: skip
 
+    from meta_sim.blender.scene import remove_city
+
+    remove_city("worker")  # a render test before these leaves its worker city in the session, under the add-on's
     tmp = tmp_path_factory.mktemp("addon")
     saved = os.environ.get("BLENDER_USER_RESOURCES")
     os.environ["BLENDER_USER_RESOURCES"] = str(tmp / "user")  # extension_path_user lands here
