@@ -654,6 +654,8 @@ class CityScene:
             cycles.transmission_bounces = 0
             cycles.transparent_max_bounces = 0
             cycles.caustics_reflective = cycles.caustics_refractive = False
+            # A sun and a sky: nothing for the light tree to choose among, so it only costs time.
+            cycles.use_light_tree = False
             cycles.seed = int(self.layout.seed) % (2**31)
             # Spelled out: a new scene (the add-on's) would otherwise pick another pattern than the factory one
             # and its preview would not be the farm's pixels.
