@@ -50,13 +50,17 @@ _MAX_SIDE_PX = 32768
 MAX_WHOLE_PIXELS = 40_000_000
 
 
-def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
-    """Linear RGB -> sRGB-encoded float64 in [0, 1] (the standard transfer curve).
+def linear_to_srgb(linear: np.ndarray, dtype=np.float64) -> np.ndarray:
+    """Linear RGB -> sRGB-encoded values in [0, 1] (the standard transfer curve), computed in ``dtype``
+    (float32 where 8-bit quantisation follows: twice as fast).
 
     NaN -> 0 and the input is clipped to [0, 1] first (+Inf -> 1, -Inf -> 0).
     """
-    x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    x = np.clip(np.nan_to_num(np.asarray(linear, dtype=dtype), nan=0.0), 0.0, 1.0)
+    low = x <= dtype(0.0031308)
+    out = dtype(1.055) * np.power(x, dtype(1.0) / dtype(2.4)) - dtype(0.055)
+    out[low] = dtype(12.92) * x[low]
+    return out
 
 
 def read_image(path: str | Path) -> np.ndarray:

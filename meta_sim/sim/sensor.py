@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import MetaSimError
+from .imageio import linear_to_srgb
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,7 @@ class Sensor:
             light = (1.0 - self.haze) * light + self.haze * np.asarray(self.airlight, np.float32)
         if self.blur_px:
             light = gaussian_blur(light, self.blur_px)
-        display = _encode(tone_curve(light, self.knee, self.ceiling))
+        display = linear_to_srgb(tone_curve(light, self.knee, self.ceiling), np.float32)
         if self.read_noise or self.shot_noise:
             rng = np.random.default_rng(seed)
             sigma = np.sqrt(self.read_noise ** 2 + self.shot_noise * display)
@@ -97,16 +98,6 @@ def tone_curve(light: np.ndarray, knee: float, ceiling: float = 1.0) -> np.ndarr
     above = x > knee  # only these reach the shoulder
     x[above] = knee + span * (1.0 - np.exp(-(x[above] - knee) / span))
     return x
-
-
-def _encode(linear: np.ndarray) -> np.ndarray:
-    """``imageio.linear_to_srgb`` in float32 (the sensor's display values; float64 gains nothing before
-    8-bit quantisation and costs twice the time)."""
-    x = np.clip(np.nan_to_num(np.asarray(linear, np.float32), nan=0.0), 0.0, 1.0)
-    low = x <= np.float32(0.0031308)
-    out = np.float32(1.055) * np.power(x, np.float32(1.0 / 2.4)) - np.float32(0.055)
-    out[low] = np.float32(12.92) * x[low]
-    return out
 
 
 def _decode(display: np.ndarray) -> np.ndarray:
