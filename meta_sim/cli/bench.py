@@ -394,13 +394,23 @@ def bench_roof_finder_command(out, docs, spaces, finders, realdata, cache):
                    "r0.5: that share of each domain's cities drawn uniformly instead of from its inferred designs; "
                    "0.25 otherwise); their rows replace those "
                    "in --out and the other rows stay (default: every run)")
-def bench_realism_command(out, docs, pictures, quick, realdata, cache, runs):
+@click.option("--tables", is_flag=True,
+              help="measure nothing: write the tables again from the results in --out (after a change to them)")
+def bench_realism_command(out, docs, pictures, quick, realdata, cache, runs, tables):
     """How close renders are to each real domain: sim-only building IoU against the other real domains
     and the all-building answer, and a real-versus-rendered classifier's accuracy."""
     import json
 
     from ..experiments.task_eval import realism_markdown, run_realism
 
+    if tables:
+        if runs or quick:
+            raise click.UsageError("--tables measures nothing: it takes neither --runs nor --quick")
+        if not Path(out).is_file():
+            raise click.UsageError(f"--tables: no results at {out}; measure them first")
+        result = json.loads(Path(out).read_text())
+        _publish(result, out, realism_markdown(result), "realism", docs)
+        return
     dataset, models, settings = _task_configs(quick)
     only = {r.strip() for r in runs.split(",") if r.strip()} if runs else None
     bars = _Bars()

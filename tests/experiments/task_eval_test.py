@@ -550,3 +550,58 @@ def test_a_harness_without_nams_draws_from_its_datasets_space():
 
     h = Harness(None, DatasetConfig(space="overhead-v3"), None, TaskEvalSettings(), Path("."), REALDATA, None)
     assert h.space.name == "overhead-v3" and "building_density" in h.space.names
+
+
+def test_the_share_of_uniform_designs_is_chosen_per_domain_on_validation_and_read_against_the_targets():
+    from meta_sim.experiments.task_eval import chosen_shares, realism_markdown
+
+    def row(r, test, val, uniform_test=0.30, uniform_val=0.30, **extra):
+        iou = {"iou_std": 0.01, "precision": 0.5, "recall": 0.5}
+        return {"rendered_only": {**iou, "iou": test}, "uniform_designs": {**iou, "iou": uniform_test},
+                "other_real": {"iou": 0.40, "iou_std": 0.02}, "other_domains": ["rio"], "all_building": 0.20,
+                "sensor": "inferred", "space": "towns", "colour_augment": "scene", "realness": {"accuracy": 0.7,
+                                                                                              "accuracy_std": 0.1},
+                "validation": {"rendered_only": {**iou, "iou": val}, "uniform_designs": {**iou, "iou": uniform_val},
+                               "other_real": {**iou, "iou": 0.4}, "all_building": 0.2},
+                **({"r": r} if r is not None else {}), **extra}
+    # The best test IoU (0.50, share 0.25) is not chosen: validation prefers share 0.5.
+    result = {"runs": {"towns+scene": {"banepa": row(None, 0.50, 0.31)},
+                       "towns+scene:r0.5": {"banepa": row(0.5, 0.36, 0.33)},
+                       "towns+scene:near": {"banepa": row(None, 0.9, 0.9, near=16)},  # drawn another way: no part
+                       "old": {"banepa": row(None, 0.9, 0.9)}},
+              "settings": {"seeds": [0, 1], "r_real": 0.25}, "render_preset": "fast", "seconds": 60}
+    del result["runs"]["old"]["banepa"]["validation"]  # measured before validation: no part
+    [c] = chosen_shares(result)
+    assert (c["domain"], c["r"], c["run"], c["shares"]) == ("banepa", 0.5, "towns+scene:r0.5", [0.25, 0.5, 1.0])
+    assert c["over_all_building"] == pytest.approx(0.16) and c["under_other_real"] == pytest.approx(0.04)
+    assert c["met"] == {"over_all_building": True, "near_other_real": True, "beats_other_real": False,
+                        "realness": True}
+    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    assert line == ("| banepa | towns, scene augmentation | 0.25, 0.5, 1 | 0.5 | 33.0 | 36.0 +- 1.0 | +16.0 | +4.0 "
+                    "| 0.70 | yes / yes / yes |")
+    # Uniform designs in the same cities win on validation: share 1, and no classifier figure for them.
+    result["runs"]["towns+scene:r0.5"]["banepa"]["validation"]["uniform_designs"]["iou"] = 0.35
+    [c] = chosen_shares(result)
+    assert c["r"] == 1.0 and c["realness"] is None and c["met"]["realness"] is False
+    assert c["over_all_building"] == pytest.approx(0.10) and not c["met"]["over_all_building"]
+
+
+def test_bench_realism_tables_rewrites_the_tables_from_the_results_without_measuring(tmp_path, monkeypatch):
+    from meta_sim.cli import main
+    from meta_sim.experiments import task_eval
+
+    out = tmp_path / "realism.json"
+    row = {"rendered_only": {"iou": 0.5, "iou_std": 0.0}, "other_real": {"iou": 0.4, "iou_std": 0.0},
+           "other_domains": ["rio"], "all_building": 0.3, "sensor": "none"}
+    saved = {"runs": {"overhead-v1": {"banepa": row}}, "seconds": 60.0, "render_preset": "fast",
+             "settings": {"seeds": [0]}}
+    out.write_text(json.dumps(saved))
+    monkeypatch.setattr(task_eval, "run_realism", lambda *a, **k: pytest.fail("--tables measured"))
+    result = CliRunner().invoke(main, ["bench", "realism", "--tables", "--no-docs", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "| banepa | rooftops-v1 |" in result.output and json.loads(out.read_text()) == saved
+    for extra in (["--quick"], ["--runs", "overhead-v1"]):
+        refused = CliRunner().invoke(main, ["bench", "realism", "--tables", "--no-docs", "--out", str(out), *extra])
+        assert refused.exit_code != 0 and "measures nothing" in refused.output
+    missing = CliRunner().invoke(main, ["bench", "realism", "--tables", "--out", str(tmp_path / "none.json")])
+    assert missing.exit_code != 0 and "no results" in missing.output
