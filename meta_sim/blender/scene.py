@@ -9,7 +9,8 @@ runs inside ``blender -b`` and with the ``bpy`` module.
   the texture's physical repeat size.
 * Several adjacent tiles are rendered as one image and cut afterwards: an
   orthographic nadir camera makes that exact, and it spreads the per-render
-  overhead over the tiles.
+  overhead over the tiles. A city seen in perspective (``view_height_m``: a
+  drone's photo) is rendered tile by tile, each from over its own centre.
 * Labels come from a separate Workbench render with flat shading, no
   anti-aliasing and the per-polygon label colours of ``meshes.label_color``:
   every pixel is one exact instance id and roof class, independent of the
@@ -63,7 +64,8 @@ TEXTURE_TAG = "meta_sim_texture"
 # The nadir camera looks down from CAMERA_HEIGHT_M; nothing of a city lies below the ground (z = 0), so the far
 # plane sits FAR_BELOW_GROUND_M under it. Workbench draws a shadow as a volume swept from each silhouette edge
 # away from the sun: a far plane 1 km down let every volume fill the frame to its edge, one just under the
-# ground cuts it where its shadow ends: far less to draw, the same shadows (``make bench-render``).
+# ground cuts it where its shadow ends: far less to draw, the same shadows (``make bench-render``). A perspective
+# camera (a city's ``view_height_m``) looks down from that height instead, its far plane as far under the ground.
 CAMERA_HEIGHT_M = 1000.0
 FAR_BELOW_GROUND_M = 1.0
 
@@ -293,13 +295,17 @@ class CityScene:
     def __init__(self, layout, rects, *, pixel_size_m: float, shadow_margin_m: float = 40.0,
                  collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None,
                  greenness: float | None = None, sun_elevation_deg: float | None = None,
-                 ground_albedo: float | None = None, shadow_depth: float | None = None):
+                 ground_albedo: float | None = None, shadow_depth: float | None = None,
+                 view_height_m: float | None = None):
         self.layout = layout
         self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
         self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
         self.sun_elevation_deg = sun_elevation_deg  # None: drawn from the city seed
         self.ground_albedo = ground_albedo  # ``sim.appearance.ground_colours``; None: today's ground
         self.shadow_depth = shadow_depth  # share of the light a shadow takes; None: ``quality.SHADOW_DEPTH``
+        if view_height_m is not None and not 1.0 < float(view_height_m) < math.inf:
+            raise MetaSimError(f"a view height must be a number of metres above 1, not {view_height_m!r}")
+        self.view_height_m = None if view_height_m is None else float(view_height_m)  # None: orthographic
         self.pixel_size_m = pixel_size_m
         self._yard = None
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
@@ -552,8 +558,16 @@ class CityScene:
         render = self.scene.render
         render.resolution_x, render.resolution_y = width, height
         camera = self.camera.data
-        camera.ortho_scale = max(width, height) * self.pixel_size_m
-        self.camera.location = ((rect.x0 + rect.x1) / 2, (rect.y0 + rect.y1) / 2, CAMERA_HEIGHT_M)
+        span = max(width, height) * self.pixel_size_m
+        if self.view_height_m is None:  # every pixel straight down: adjacent rectangles join exactly
+            camera.type, camera.ortho_scale = "ORTHO", span
+            z = CAMERA_HEIGHT_M
+        else:  # a photo from over the rectangle's centre, the ground at its pixel size
+            camera.type, camera.sensor_fit = "PERSP", "AUTO"
+            camera.angle = 2.0 * math.atan(span / 2.0 / self.view_height_m)
+            z = self.view_height_m
+        camera.clip_end = z + FAR_BELOW_GROUND_M
+        self.camera.location = ((rect.x0 + rect.x1) / 2, (rect.y0 + rect.y1) / 2, z)
         self.camera.rotation_euler = (0.0, 0.0, 0.0)
         return width, height
 

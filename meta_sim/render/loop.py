@@ -6,7 +6,8 @@ Runs wherever ``bpy`` imports: the ``bpy`` module in a virtual environment
 
 Work is grouped by city: a city's geometry is built once and its labels are
 rendered once; each design then only swaps the roof materials. Tiles are
-rendered in blocks of up to 3 x 3 adjacent tiles and cut afterwards. A tile
+rendered in blocks of up to 3 x 3 adjacent tiles and cut afterwards (one by one
+when the design's view is a perspective one). A tile
 that already exists, reads back completely and carries the same metadata is
 skipped, so a rerun resumes an interrupted job.
 """
@@ -124,14 +125,17 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         summary.seconds["layout"] += time.perf_counter() - clock
         cols = _grid_columns(rects)
         needed = sorted({j for _, _, pending, _ in work for j in pending})
-        blocks = [b for b in blocks_of(settings.n_tiles, cols) if set(b) & set(needed)]
+        look = work[0][3]  # the jobs of one scene share ground, its albedo, greenness, sun, shadows and view
+        # A perspective view is a photo over each tile's centre: one render per tile, not per block.
+        blocks = ([b for b in blocks_of(settings.n_tiles, cols) if set(b) & set(needed)]
+                  if look.view_height_m is None else [[j] for j in needed])
         clock = time.perf_counter()
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
-        look = work[0][3]  # the jobs of one scene share ground, its albedo, greenness, sun and shadows
         scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
                           greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
-                          ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth)
+                          ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
+                          view_height_m=look.view_height_m)
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:

@@ -28,7 +28,7 @@ from .sensor import SENSORS, Sensor, get_sensor
 CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
 CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
                      "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0), "roof_paint": (0.0, 1.0),
-                     "shadow_depth": (0.0, 0.95)}
+                     "shadow_depth": (0.0, 0.95), "view_height_m": (30.0, 10_000.0)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
@@ -48,7 +48,10 @@ class Appearance:
     (``ground_colours``), so the ground can be darker or brighter than the roofs; ``roof_paint`` is the
     share of buildings whose roof is painted in place of its texture (``sim.jitter.roof_paint``);
     ``shadow_depth`` the share of a flat surface's light a shadow takes away, None for the presets' own
-    (``sim.quality.SHADOW_DEPTH`` in the fast preset, ``cycles_light`` in the path-traced ones).
+    (``sim.quality.SHADOW_DEPTH`` in the fast preset, ``cycles_light`` in the path-traced ones);
+    ``view_height_m`` the height of a perspective camera over each tile's centre (a drone's photo: walls show
+    and roofs lean out from the centre, the more the taller and the farther), None for today's orthographic
+    nadir view.
     """
 
     sensor: Sensor = Sensor()
@@ -60,6 +63,7 @@ class Appearance:
     ground_albedo: float | None = None
     roof_paint: float = 0.0
     shadow_depth: float | None = None
+    view_height_m: float | None = None
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -74,7 +78,8 @@ class Appearance:
 
     def scene_key(self) -> tuple:
         """What the Blender scene of a city depends on (the rest is applied to finished renders)."""
-        return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo, self.shadow_depth)
+        return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo, self.shadow_depth,
+                self.view_height_m)
 
     def header(self) -> dict:
         """The fields that differ from a plain render, for a tile's header (empty for a plain one)."""
@@ -97,6 +102,8 @@ class Appearance:
             out["roof_paint"] = self.roof_paint
         if self.shadow_depth is not None:
             out["shadow_depth"] = self.shadow_depth
+        if self.view_height_m is not None:
+            out["view_height_m"] = self.view_height_m
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,

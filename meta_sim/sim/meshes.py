@@ -160,7 +160,8 @@ def building_mesh(buildings) -> MeshArrays:
         footprint = _ccw([tuple(p) for p in b.footprint])
         roof_class = FLAT_ROOF if b.roof == "flat" else SLOPED_ROOF
         label = label_color(b.id, roof_class)
-        _walls(mesh, footprint, 0.0, b.height_m, label)
+        # Walls belong to their building but are no roof: seen only in a perspective view (a drone's photo)
+        _walls(mesh, footprint, 0.0, b.height_m, label_color(b.id, 0))
         if b.roof == "flat":
             mesh.add([(x, y, b.height_m) for x, y in footprint], FLAT_ROOF, footprint, label)
         else:

@@ -1190,3 +1190,69 @@ def test_fast_shadows_fall_away_from_each_citys_sun_and_lit_ground_keeps_its_bri
     assert lit.sum() > 1000
     ratio = linear_luma(low.rgb)[lit] / linear_luma(high.rgb)[lit]
     assert np.median(ratio) == pytest.approx(1.0, abs=0.01)
+
+
+VIEW = {"name": "view_height", "type": "continuous", "appearance": "view_height_m", "low": 60.0, "high": 800.0}
+
+
+def test_a_perspective_view_shows_walls_and_leans_roofs_out_from_each_tiles_centre(space, bank, tmp_path,
+                                                                                    monkeypatch):
+    """A design's view height puts a camera that high over each tile's centre: the ground keeps its pixel
+    size, roofs lean out from the centre (the farther and the taller, the more), walls show and are labelled
+    as their building, RGB and labels line up; each tile is one render of its own, and the header records it."""
+    from meta_sim.blender.scene import CityScene
+
+    view_space = DesignSpace.from_dict({**space.to_dict(), "name": "view",
+                                        "parameters": [*space.to_dict()["parameters"], VIEW]})
+    design = space.validate(_design(space, 5, 9))
+    params = dict(style="dense", building_density=1.0)
+    cluttered = DesignSpace.from_dict({**view_space.to_dict(), "layout": params})
+    framed = []
+    real_render = CityScene.render_rgb
+    monkeypatch.setattr(CityScene, "render_rgb", lambda self, rect, preset: framed.append(rect) or
+                        real_render(self, rect, preset))
+    settings = RenderSettings(space=cluttered, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "v",
+                              n_tiles=2, tile_px=192, pixel_size_m=0.6)
+    jobs = [single_job(cluttered, {**design, "view_height": h}, SEED) for h in (60.0, 800.0)]
+    summary = render_jobs(jobs, settings)
+    assert summary.written == 4 and summary.cities == 2  # the view is built into the scene
+    assert len(framed) == 4 and all(r.x1 - r.x0 == pytest.approx(115.2) for r in framed)  # tile by tile
+    flat = DesignSpace.from_dict({**space.to_dict(), "name": "flat", "layout": params})
+    ortho_settings = dataclasses.replace(settings, space=flat, out_dir=tmp_path / "o")
+    render_jobs([single_job(flat, design, SEED)], ortho_settings)
+    ortho = tiles.read_tile(tmp_path / "o" / f"{single_job(flat, design, SEED).name}_t00.exr")
+    low, high = (tiles.read_tile(tmp_path / "v" / f"{job.name}_t00.exr") for job in jobs)
+    assert low.meta["view_height_m"] == 60.0 and "view_height_m" not in ortho.meta
+    walls = [((t.instance > 0) & (t.roof_class == 0)).mean() for t in (ortho, high, low)]
+    assert walls[0] == 0.0 and walls[1] < 0.02 < 0.1 < walls[2], walls  # walls show from a low view
+
+    def lean(tile):
+        """Per building whose roof lies whole inside both views (40+ pixels), how much farther from the
+        tile's centre its roof is in ``tile`` than in the orthographic view: H / (H - roof height)."""
+        out = []
+        for i in np.unique(ortho.instance[ortho.roof_class > 0]):
+            here, there = (np.nonzero((t.instance == i) & (t.roof_class > 0)) for t in (tile, ortho))
+            if min(len(here[0]), len(there[0])) < 40 or any(min(a.min(), 191 - a.max()) < 2 for a in (*here, *there)):
+                continue
+            radius = [np.hypot(rows.mean() - 95.5, cols.mean() - 95.5) for rows, cols in (here, there)]
+            if radius[1] > 30:
+                out.append(radius[0] / radius[1])
+        return np.array(out)
+    steep, far = lean(low), lean(high)
+    assert len(steep) > 5 and len(far) > 5
+    assert 1.04 < np.median(steep) < 1.4 and np.median(far) == pytest.approx(1.0, abs=0.015)
+    # Near the centre a photo looks straight down: there the two views agree.
+    centre = (slice(80, 112), slice(80, 112))
+    agree = (low.building[centre] > 0) == (ortho.building[centre] > 0)
+    assert agree.mean() > 0.8
+    # RGB and labels line up: the image changes most where the labels do (roof to wall, wall to ground)
+    luma = linear_luma(low.rgb)
+    step = np.hypot(*np.gradient(luma))
+    label = low.instance.astype(np.int64) * 3 + low.roof_class
+    edge = np.zeros(label.shape, bool)
+    edge[:-1] |= label[:-1] != label[1:]
+    edge[:, :-1] |= label[:, :-1] != label[:, 1:]
+    inner = (slice(4, -4), slice(4, -4))
+    shifted = [step[inner][np.roll(edge, shift, axis=(0, 1))[inner]].mean()
+               for shift in ((3, 0), (-3, 0), (0, 3), (0, -3))]
+    assert step[inner][edge[inner]].mean() > 1.05 * max(shifted)  # the labels three pixels off fit worse
