@@ -296,12 +296,15 @@ class CityScene:
                  collection: bpy.types.Collection | None = None, key: str | None = None, ground: dict | None = None,
                  greenness: float | None = None, sun_elevation_deg: float | None = None,
                  ground_albedo: float | None = None, shadow_depth: float | None = None,
-                 view_height_m: float | None = None):
+                 view_height_m: float | None = None, ground_grain: float | None = None,
+                 road_dust: float | None = None):
         self.layout = layout
         self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
         self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
         self.sun_elevation_deg = sun_elevation_deg  # None: drawn from the city seed
         self.ground_albedo = ground_albedo  # ``sim.appearance.ground_colours``; None: today's ground
+        self.ground_grain = ground_grain  # ``sim.ground.grain_field``'s strength; None: today's smooth ground
+        self.road_dust = road_dust  # ``sim.surfaces.dusty``; None: today's roads and tracks
         self.shadow_depth = shadow_depth  # share of the light a shadow takes; None: ``quality.SHADOW_DEPTH``
         if view_height_m is not None and not 1.0 < float(view_height_m) < math.inf:
             raise MetaSimError(f"a view height must be a number of metres above 1, not {view_height_m!r}")
@@ -364,15 +367,20 @@ class CityScene:
         # The bare ground (lawn or cover mix, and the dirt tracks) in the design's colours and albedo:
         # a property of the scene, so shadows, trees and cars fall on it as on any ground.
         bare = ground_colours(self.greenness, self.ground_albedo)
-        if self.ground_mix:
-            ground = _image_material("ground", self._ground_image(region, seed + 1, bare), key)
+        covers = self.ground_mix or ({"lawn": 1.0} if self.ground_grain else None)  # grain on the plain lawn too
+        if covers:
+            ground = _image_material("ground", self._ground_image(region, seed + 1, bare, covers), key)
         else:
             ground = _image_material("ground", _noise_image("ground", bare["lawn"], 0.25, seed + 1, key), key)
+        dust = self.road_dust or 0.0
         if params.street_details:
-            road = _image_material("road", _rgb_image("asphalt", surfaces.asphalt_image(), key), key)
+            asphalt = surfaces.dusty(surfaces.asphalt_image(), dust) if dust else surfaces.asphalt_image()
+            road = _image_material("road", _rgb_image("asphalt", asphalt, key), key)
         else:
-            road = _image_material("road", _noise_image("road", (0.09, 0.09, 0.095), 0.15, seed + 2, key), key)
-        dirt = _image_material("dirt", _noise_image("dirt", bare["dirt"], 0.18, seed + 4, key), key)
+            road = _image_material("road", _noise_image("road", surfaces.dusty((0.09, 0.09, 0.095), dust), 0.15,
+                                                        seed + 2, key), key)
+        dirt = _image_material("dirt", _noise_image("dirt", surfaces.dusty(bare["dirt"], dust), 0.18, seed + 4, key),
+                               key)
         building_arrays = meshes.building_mesh(self.buildings)
         self.buildings_obj = None
         if building_arrays.n_polygons:
@@ -383,7 +391,7 @@ class CityScene:
             self.buildings_obj[ROLE_TAG] = "buildings"
         if params.roof_furniture > 0.0:
             self._build_furniture(params.roof_furniture)
-        _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(self.ground_mix)),
+        _new_mesh_object(meshes.ground_mesh(region.x0, region.y0, region.x1, region.y1, bool(covers)),
                          [ground], self.collection, key)
         if roads:
             repeat = surfaces.ASPHALT_REPEAT_M if params.street_details else 1.0
@@ -482,10 +490,11 @@ class CityScene:
         if shrubs:
             _new_mesh_object(meshes.shrub_mesh(shrubs), [foliage], self.collection, key, closed=True, smooth=True)
 
-    def _ground_image(self, region: Rect, seed: int, colours: dict) -> bpy.types.Image:
-        """The region's ground cover (``sim.ground``, its covers in ``colours``) as one image spanning
-        the ground quad."""
-        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, self.ground_mix, colours)
+    def _ground_image(self, region: Rect, seed: int, colours: dict, covers: dict) -> bpy.types.Image:
+        """The region's ground of ``covers`` (``sim.ground``, in ``colours``, with the city's grain) as one
+        image spanning the ground quad."""
+        rgb = ground_image(region.x1 - region.x0, region.y1 - region.y0, seed, covers, colours,
+                           self.ground_grain or 0.0)
         return _rgb_image("ground-cover", rgb, self.key)  # row 0 at the quad's south edge
 
     def _add_camera_and_sun(self) -> None:

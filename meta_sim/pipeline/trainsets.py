@@ -2,7 +2,7 @@
 real image/mask folders, with the same keys, so one training loop takes either or both.
 
 Each item is a dict: ``image`` float32 (3, H, W) in display sRGB (or linear light for rendered tiles),
-``mask`` uint8 (H, W), 1 on buildings; ``roof_class`` int64 (H, W), 0 background, 1 flat, 2 sloped;
+``mask`` uint8 (H, W), 1 on buildings; ``roof_class`` int64 (H, W), 0 background (or a wall), 1 flat, 2 sloped;
 ``instance`` int64 (H, W), the building id (0: none); ``meta``: the tile's path, pixel size and, for
 rendered tiles, design (JSON), city seed and tile index. Real masks tell buildings only: their
 ``roof_class`` and ``instance`` are 0 and ``meta["labels"]`` says "mask". Items are read when asked for,

@@ -135,7 +135,8 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
                           greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
                           ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
-                          view_height_m=look.view_height_m)
+                          view_height_m=look.view_height_m, ground_grain=look.ground_grain,
+                          road_dust=look.road_dust)
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:

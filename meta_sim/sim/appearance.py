@@ -28,7 +28,8 @@ from .sensor import SENSORS, Sensor, get_sensor
 CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
 CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
                      "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0), "roof_paint": (0.0, 1.0),
-                     "shadow_depth": (0.0, 0.95), "view_height_m": (30.0, 10_000.0)}
+                     "shadow_depth": (0.0, 0.95), "view_height_m": (30.0, 10_000.0), "ground_grain": (0.0, 1.0),
+                     "road_dust": (0.0, 1.0)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
@@ -51,7 +52,9 @@ class Appearance:
     (``sim.quality.SHADOW_DEPTH`` in the fast preset, ``cycles_light`` in the path-traced ones);
     ``view_height_m`` the height of a perspective camera over each tile's centre (a drone's photo: walls show
     and roofs lean out from the centre, the more the taller and the farther), None for today's orthographic
-    nadir view.
+    nadir view; ``ground_grain`` the strength of the bare ground's fine texture (``sim.ground.grain_field``),
+    None for today's smooth covers; ``road_dust`` how far the roads' and tracks' colour moves towards dust
+    (``sim.surfaces.dusty``), None for today's.
     """
 
     sensor: Sensor = Sensor()
@@ -64,6 +67,8 @@ class Appearance:
     roof_paint: float = 0.0
     shadow_depth: float | None = None
     view_height_m: float | None = None
+    ground_grain: float | None = None
+    road_dust: float | None = None
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -79,7 +84,7 @@ class Appearance:
     def scene_key(self) -> tuple:
         """What the Blender scene of a city depends on (the rest is applied to finished renders)."""
         return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo, self.shadow_depth,
-                self.view_height_m)
+                self.view_height_m, self.ground_grain, self.road_dust)
 
     def header(self) -> dict:
         """The fields that differ from a plain render, for a tile's header (empty for a plain one)."""
@@ -104,6 +109,10 @@ class Appearance:
             out["shadow_depth"] = self.shadow_depth
         if self.view_height_m is not None:
             out["view_height_m"] = self.view_height_m
+        if self.ground_grain is not None:
+            out["ground_grain"] = self.ground_grain
+        if self.road_dust is not None:
+            out["road_dust"] = self.road_dust
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,

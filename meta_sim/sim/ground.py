@@ -32,6 +32,12 @@ MIXES = {
     "arid": {"dry_grass": 0.25, "soil": 0.35, "sand": 0.25, "gravel": 0.15},
 }
 PIXEL_M = 0.5  # ground image resolution
+# Grain (``ground_image``'s ``grain``): the fine texture of real bare ground (clods, stones, tufts, litter),
+# multiplied into the covers at GRAIN_PIXEL_M, in log light: white noise per pixel and blobs of about 1 m and
+# 3 m, with these standard deviations at grain 1.
+GRAIN_PIXEL_M = 0.25
+GRAIN_SIGMAS = (0.35, 0.2, 0.15)
+GRAIN_SCALES_M = (1.0, 3.0)
 
 
 def get_mix(name: str | None) -> dict | None:
@@ -54,9 +60,35 @@ def _field(rng: np.random.Generator, h: int, w: int, scales_px) -> np.ndarray:
     return total
 
 
-def ground_image(width_m: float, height_m: float, seed: int, mix: dict, colours: dict | None = None) -> np.ndarray:
+def ground_image(width_m: float, height_m: float, seed: int, mix: dict, colours: dict | None = None,
+                 grain: float = 0.0) -> np.ndarray:
     """Linear RGB (H, W, 3) of the ground of a ``width_m`` x ``height_m`` region at ``PIXEL_M``;
-    ``colours`` replaces the colours of some covers (a greener or drier lawn)."""
+    ``colours`` replaces the colours of some covers (a greener or drier lawn). With ``grain`` (0 to 1)
+    the same ground at ``GRAIN_PIXEL_M`` with fine texture multiplied in (``grain_field``)."""
+    if not 0.0 <= grain <= 1.0:
+        raise MetaSimError(f"a ground's grain must be from 0 to 1, not {grain!r}")
+    image = _covers(width_m, height_m, seed, mix, colours)
+    if not grain:
+        return image
+    h, w = (max(2, int(round(m / GRAIN_PIXEL_M))) for m in (height_m, width_m))
+    return np.clip(resize(image, h, w) * grain_field(h, w, seed, grain)[:, :, None], 0.0, 1.0).astype(np.float32)
+
+
+def grain_field(h: int, w: int, seed: int, grain: float) -> np.ndarray:
+    """Multiplicative fine texture (H, W) at ``GRAIN_PIXEL_M``: lognormal, of mean about 1, its log the sum
+    of white noise and smooth noise at ``GRAIN_SCALES_M``, each with its ``GRAIN_SIGMAS`` times ``grain``."""
+    rng = np.random.default_rng([int(seed), 12])
+    fine, *smooth = GRAIN_SIGMAS
+    log = fine * rng.standard_normal((h, w)).astype(np.float32)
+    for sigma, scale_m in zip(smooth, GRAIN_SCALES_M):
+        field = _field(rng, h, w, (scale_m / GRAIN_PIXEL_M,))
+        log += sigma * field / max(float(field.std()), 1e-6)
+    variance = sum(sigma * sigma for sigma in GRAIN_SIGMAS) * grain * grain
+    return np.exp(grain * log - variance / 2.0).astype(np.float32)
+
+
+def _covers(width_m: float, height_m: float, seed: int, mix: dict, colours: dict | None) -> np.ndarray:
+    """``ground_image`` without grain."""
     unknown = [c for c in mix if c not in COVERS]
     if unknown or not mix or any(not 0 <= v for v in mix.values()) or sum(mix.values()) <= 0:
         raise MetaSimError(f"a ground mix gives shares (at least one positive) of {', '.join(COVERS)}; "

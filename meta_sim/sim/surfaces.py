@@ -22,6 +22,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..core.errors import MetaSimError
+
 ATLAS_CELLS = 4
 CELL_PX = 64
 CELL_M = 16.0
@@ -164,6 +166,19 @@ GLASS = (0.02, 0.025, 0.03)
 ROAD_PAINT = (0.62, 0.62, 0.60)
 COPING = (0.55, 0.53, 0.50)
 YARD_SHADE = 0.6  # paved commercial and industrial lots: concrete, weathered darker than sidewalks
+# The light grey-beige (linear RGB) of a road under dust, as in towns on dry ground (``dusty``).
+ROAD_DUST = (0.30, 0.285, 0.26)
+
+
+def dusty(rgb, dust: float) -> np.ndarray:
+    """A road surface (linear RGB, an image or one colour) under ``dust`` (0 to 1): its mean colour moved
+    that far towards `ROAD_DUST`, its texture (each pixel over the mean) kept."""
+    if not 0.0 <= dust <= 1.0:
+        raise MetaSimError(f"a road's dust must be from 0 to 1, not {dust!r}")
+    rgb = np.asarray(rgb, np.float32)
+    mean = rgb.reshape(-1, 3).mean(axis=0)
+    target = (1.0 - dust) * mean + dust * np.asarray(ROAD_DUST, np.float32)
+    return np.clip(rgb * (target / np.maximum(mean, 1e-6)), 0.0, 1.0).astype(np.float32)
 
 # Roof furniture (sim/furniture.py): colours (linear RGB) and roughness of its surfaces; "solar" panels and
 # HVAC lids are images (below).

@@ -4,7 +4,8 @@ One OpenEXR file per tile, written through OpenImageIO:
 
 * part ``rgb``: channels ``R, G, B`` (half float, linear scene-referred RGB as rendered);
 * part ``labels`` (uint32 channels): ``label.building`` (uint: 1 on building pixels, else 0),
-  ``label.roof_class`` (uint: 0 background, 1 flat roof, 2 sloped roof),
+  ``label.roof_class`` (uint: 0 background or a wall, 1 flat roof, 2 sloped roof; walls show only in a
+  perspective view and belong to their building in the other two channels),
   ``label.instance`` (uint: building instance id, 0 where there is no building).
   Labels are exact: one value per pixel, never averaged or anti-aliased;
 * header attributes ``metasim:*``: format version, design (JSON), design

@@ -1256,3 +1256,68 @@ def test_a_perspective_view_shows_walls_and_leans_roofs_out_from_each_tiles_cent
     shifted = [step[inner][np.roll(edge, shift, axis=(0, 1))[inner]].mean()
                for shift in ((3, 0), (-3, 0), (0, 3), (0, -3))]
     assert step[inner][edge[inner]].mean() > 1.05 * max(shifted)  # the labels three pixels off fit worse
+
+
+GRAIN = {"name": "grain", "type": "continuous", "appearance": "ground_grain", "low": 0.0, "high": 1.0}
+
+
+@pytest.mark.parametrize("ground", ["plain", "arid"])
+def test_a_declared_ground_grain_roughens_the_bare_ground_and_leaves_roofs_and_labels(space, bank, tmp_path,
+                                                                                       ground):
+    """A design's ground grain gives the bare ground (the plain lawn too) its fine texture in the scene; roofs
+    and labels stay as they were, and the header records it."""
+    grain_space = DesignSpace.from_dict({**space.to_dict(), "name": "grain",
+                                         "parameters": [*space.to_dict()["parameters"], GRAIN]})
+    design = space.validate(_design(space, 5, 9))
+    settings = RenderSettings(space=grain_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "g",
+                              n_tiles=1, ground=ground, tile_px=192, pixel_size_m=0.6)
+    jobs = [single_job(grain_space, {**design, "grain": g}, SEED) for g in (0.0, 1.0)]
+    assert render_jobs(jobs, settings).cities == 2  # the grain is built into the scene
+    smooth, grainy = (tiles.read_tile(tmp_path / "g" / f"{job.name}_t00.exr") for job in jobs)
+    assert grainy.meta["ground_grain"] == 1.0 and smooth.meta["ground_grain"] == 0.0
+    for name in ("instance", "roof_class", "building"):
+        assert np.array_equal(getattr(grainy, name), getattr(smooth, name))
+    px, gsd = 192, 0.6
+    layout, (rect,) = layout_for_tiles(SEED, 1, px * gsd, LayoutParams())
+    roads = _rasterise_polygons([r.polygon for r in layout.roads], rect, px, gsd)
+    crowns = _rasterise_polygons([polygons_disc(t) for t in layout.trees], rect, px, gsd)
+    bare = _erode((smooth.building == 0) & ~roads & ~crowns, 2)
+    roofs = _erode(smooth.building > 0, 4)
+    assert bare.sum() > 2000 and roofs.sum() > 300
+    step = [np.abs(np.diff(linear_luma(t.rgb), axis=1))[:, :-1] for t in (smooth, grainy)]  # left-right changes
+    inner = bare[:, :-1] & bare[:, 1:]
+    assert np.median(step[1][inner[:, :-1]]) > 1.5 * np.median(step[0][inner[:, :-1]])
+    # the roofs' pixels are their own (FXAA blends a few along the outlines with the busier ground beside)
+    assert (np.abs(grainy.rgb[roofs] - smooth.rgb[roofs]).max(axis=-1) < 2e-3).mean() > 0.97
+
+
+DUST = {"name": "dust", "type": "continuous", "appearance": "road_dust", "low": 0.0, "high": 1.0}
+
+
+def test_a_declared_road_dust_lightens_the_roads_and_leaves_roofs_and_labels(space, bank, tmp_path):
+    """A design's road dust takes the roads towards dust's light grey-beige in the scene; roofs and labels
+    stay as they were, and the header records it."""
+    from meta_sim.sim.surfaces import ROAD_DUST
+
+    dust_space = DesignSpace.from_dict({**space.to_dict(), "name": "dust",
+                                        "parameters": [*space.to_dict()["parameters"], DUST]})
+    design = space.validate(_design(space, 5, 9))
+    settings = RenderSettings(space=dust_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "d",
+                              n_tiles=1, tile_px=192, pixel_size_m=0.6)
+    jobs = [single_job(dust_space, {**design, "dust": d}, SEED) for d in (0.0, 1.0)]
+    assert render_jobs(jobs, settings).cities == 2
+    clean, dusty = (tiles.read_tile(tmp_path / "d" / f"{job.name}_t00.exr") for job in jobs)
+    assert dusty.meta["road_dust"] == 1.0
+    for name in ("instance", "roof_class", "building"):
+        assert np.array_equal(getattr(dusty, name), getattr(clean, name))
+    layout, (rect,) = layout_for_tiles(SEED, 1, 192 * 0.6, LayoutParams())
+    roads = _rasterise_polygons([r.polygon for r in layout.roads], rect, 192, 0.6)
+    crowns = _rasterise_polygons([polygons_disc(t) for t in layout.trees], rect, 192, 0.6)
+    road = _erode(roads & ~crowns & (clean.building == 0), 2)
+    roofs = _erode(clean.building > 0, 4)
+    assert road.sum() > 500 and roofs.sum() > 300
+    lit = road & (linear_luma(clean.rgb) > np.median(linear_luma(clean.rgb)[road]))  # out of the shadows
+    ratio = np.median(linear_luma(dusty.rgb)[lit]) / np.median(linear_luma(clean.rgb)[lit])
+    dust_luma = float(linear_luma(np.array(ROAD_DUST, np.float32)))
+    assert ratio > 0.8 * dust_luma / 0.09  # today's grey road is 0.09 (the tone curve bends the brightest)
+    assert (np.abs(dusty.rgb[roofs] - clean.rgb[roofs]).max(axis=-1) < 2e-3).mean() > 0.97

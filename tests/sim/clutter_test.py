@@ -214,6 +214,22 @@ def test_baked_surfaces_are_deterministic_and_tile():
     assert np.abs(asphalt[0] - asphalt[-1]).mean() < 2 * np.abs(np.diff(asphalt, axis=0)).mean()
 
 
+def test_dust_moves_a_roads_colour_towards_dust_and_keeps_its_texture():
+    asphalt = surfaces.asphalt_image(0)
+    assert np.array_equal(surfaces.dusty(asphalt, 0.0), asphalt)
+    for dust in (0.5, 1.0):
+        dusted = surfaces.dusty(asphalt, dust)
+        mean = asphalt.reshape(-1, 3).mean(axis=0)
+        want = (1 - dust) * mean + dust * np.array(surfaces.ROAD_DUST)
+        assert np.allclose(dusted.reshape(-1, 3).mean(axis=0), want, rtol=1e-3)
+        # the same cracks and patches: each pixel over the mean as before
+        assert np.allclose(dusted / dusted.reshape(-1, 3).mean(axis=0), asphalt / mean, atol=1e-4)
+    assert np.allclose(surfaces.dusty((0.09, 0.09, 0.095), 1.0), surfaces.ROAD_DUST)
+    for bad in (-0.5, 2.0):
+        with pytest.raises(MetaSimError, match="dust"):
+            surfaces.dusty(asphalt, bad)
+
+
 @pytest.mark.parametrize("kwargs,field", [
     ({"tree_size": "huge"}, "tree_size"),
     ({"tree_size": 3}, "tree_size"),
