@@ -95,7 +95,8 @@ bench-appearance: setup
 	META_SIM_THREADS=2 $(BIN)/meta-sim bench appearance --out benchmarks/appearance.json --pictures benchmarks/appearance
 
 # How close renders are to each real domain (`meta-sim bench realism --runs overhead-v1` remeasures one run and
-# keeps the other rows) (sim-only building IoU and a real-vs-rendered classifier);
+# keeps the other rows; `--tables` rewrites the tables from the JSON) (sim-only building IoU and a real-vs-rendered
+# classifier);
 # shares bench-task's cache of trained segmenters.
 bench-realism: setup
 	META_SIM_THREADS=2 $(BIN)/meta-sim bench realism --out benchmarks/realism.json --pictures benchmarks/realism
