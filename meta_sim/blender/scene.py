@@ -68,6 +68,7 @@ TEXTURE_TAG = "meta_sim_texture"
 # camera (a city's ``view_height_m``) looks down from that height instead, its far plane as far under the ground.
 CAMERA_HEIGHT_M = 1000.0
 FAR_BELOW_GROUND_M = 1.0
+VIEW_CLEARANCE_M = 5.0  # a perspective camera's least height over the tallest ridge in view (chimneys, stairs)
 
 
 def blender_version() -> str:
@@ -310,8 +311,14 @@ class CityScene:
             raise MetaSimError(f"a view height must be a number of metres above 1, not {view_height_m!r}")
         self.view_height_m = None if view_height_m is None else float(view_height_m)  # None: orthographic
         self.pixel_size_m = pixel_size_m
-        self._yard = None
         self.rects = [Rect(*r) if not isinstance(r, Rect) else r for r in rects]
+        if self.view_height_m is not None:  # a drone flies over the roofs it photographs, not among them
+            tallest = max((b.ridge_height_m for b in self._visible(layout.buildings_in_rect, 0.0)), default=0.0)
+            if self.view_height_m < tallest + VIEW_CLEARANCE_M:
+                raise MetaSimError(f"a view from {self.view_height_m:g} m is not {VIEW_CLEARANCE_M:g} m above the "
+                                   f"tallest roof in view ({tallest:.1f} m); give a view height of at least "
+                                   f"{math.ceil(tallest + VIEW_CLEARANCE_M)} m")
+        self._yard = None
         if collection is None:
             bpy.ops.wm.read_factory_settings(use_empty=True)
             self._scene = bpy.context.scene

@@ -132,11 +132,14 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         clock = time.perf_counter()
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
-        scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
-                          greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
-                          ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
-                          view_height_m=look.view_height_m, ground_grain=look.ground_grain,
-                          road_dust=look.road_dust)
+        try:
+            scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
+                              greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
+                              ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
+                              view_height_m=look.view_height_m, ground_grain=look.ground_grain,
+                              road_dust=look.road_dust)
+        except MetaSimError as exc:  # a look this city cannot take (a view below its towers): say whose
+            raise MetaSimError(f"job {work[0][0].name} (city seed {city_seed}): {exc}") from None
         summary.seconds["build"] += time.perf_counter() - clock
         summary.cities += 1
         try:

@@ -2,7 +2,9 @@
 
 import dataclasses
 import json
+import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -12,6 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from meta_sim.cli import main as cli
+from meta_sim.core.errors import MetaSimError
 from meta_sim.render.jobs import RenderSettings, single_job
 from meta_sim.render.loop import render_jobs
 from meta_sim.sim import tiles
@@ -1084,7 +1087,6 @@ def test_the_sun_studio_light_lights_flat_ground_as_the_studio_light_and_slopes_
 
 
 def test_sun_studio_light_files_name_the_sun_in_studio_light_axes_and_refuse_a_sun_below_the_horizon():
-    from meta_sim.core.errors import MetaSimError
     from meta_sim.sim.quality import SKY_SHARE, STUDIO_FLAT, sun_studio_light
 
     text = sun_studio_light(np.radians(90), 0.0)  # overhead: studio light y is up
@@ -1321,3 +1323,23 @@ def test_a_declared_road_dust_lightens_the_roads_and_leaves_roofs_and_labels(spa
     dust_luma = float(linear_luma(np.array(ROAD_DUST, np.float32)))
     assert ratio > 0.8 * dust_luma / 0.09  # today's grey road is 0.09 (the tone curve bends the brightest)
     assert (np.abs(dusty.rgb[roofs] - clean.rgb[roofs]).max(axis=-1) < 2e-3).mean() > 0.97
+
+
+def test_a_view_below_the_tallest_roof_in_view_is_refused_before_anything_is_built(space, bank, tmp_path):
+    """A drone flies over the roofs it photographs: a view height within VIEW_CLEARANCE_M of the tallest ridge
+    in the tiles is a clear error naming the height to give, before the scene is built; the render says whose."""
+    from meta_sim.blender.scene import VIEW_CLEARANCE_M, CityScene
+
+    layout, rects = layout_for_tiles(5, 1, 115.2, LayoutParams())  # a 97 m tower in its downtown
+    tallest = max(b.ridge_height_m for b in layout.buildings_in_rect(*rects[0]))
+    assert tallest > 90.0
+    needed = math.ceil(tallest + VIEW_CLEARANCE_M)
+    with pytest.raises(MetaSimError, match=rf"tallest roof in view \({tallest:.1f} m\).*at least {needed} m"):
+        CityScene(layout, rects, pixel_size_m=1.2, view_height_m=tallest)
+    view_space = DesignSpace.from_dict({**space.to_dict(), "name": "view",
+                                        "parameters": [*space.to_dict()["parameters"], VIEW]})
+    settings = RenderSettings(space=view_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path,
+                              n_tiles=1, tile_px=96, pixel_size_m=1.2)
+    job = single_job(view_space, {**space.validate(_design(space, 5, 9)), "view_height": 60.0}, 5)
+    with pytest.raises(MetaSimError, match=re.escape(f"job {job.name} (city seed 5): a view from 60 m")):
+        render_jobs([job], settings)
