@@ -572,18 +572,26 @@ def test_the_share_of_uniform_designs_is_chosen_per_domain_on_validation_and_rea
               "settings": {"seeds": [0, 1], "r_real": 0.25}, "render_preset": "fast", "seconds": 60}
     del result["runs"]["old"]["banepa"]["validation"]  # measured before validation: no part
     [c] = chosen_shares(result)
-    assert (c["domain"], c["r"], c["run"], c["shares"]) == ("banepa", 0.5, "towns+scene:r0.5", [0.25, 0.5, 1.0])
+    assert (c["domain"], c["r"], c["run"], c["tried"]) == ("banepa", 0.5, "towns+scene:r0.5",
+                                                           [("scene", 0.25), ("scene", 0.5), ("scene", 1.0)])
     assert c["over_all_building"] == pytest.approx(0.16) and c["under_other_real"] == pytest.approx(0.04)
     assert c["met"] == {"over_all_building": True, "near_other_real": True, "beats_other_real": False,
                         "realness": True}
     line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
-    assert line == ("| banepa | towns, scene augmentation | 0.25, 0.5, 1 | 0.5 | 33.0 | 36.0 +- 1.0 | +16.0 | +4.0 "
+    assert line == ("| banepa | towns | scene 0.25, 0.5, 1 | scene 0.5 | 33.0 | 36.0 +- 1.0 | +16.0 | +4.0 "
                     "| 0.70 | yes / yes / yes |")
     # Uniform designs in the same cities win on validation: share 1, and no classifier figure for them.
     result["runs"]["towns+scene:r0.5"]["banepa"]["validation"]["uniform_designs"]["iou"] = 0.35
     [c] = chosen_shares(result)
     assert c["r"] == 1.0 and c["realness"] is None and c["met"]["realness"] is False
     assert c["over_all_building"] == pytest.approx(0.10) and not c["met"]["over_all_building"]
+    # The same model's run with the light augmentation is a candidate too, and may win
+    result["runs"]["towns:r0.75"] = {"banepa": row(0.75, 0.38, 0.40, colour_augment="light")}
+    [c] = chosen_shares(result)
+    assert (c["colour_augment"], c["r"], c["run"]) == ("light", 0.75, "towns:r0.75")
+    assert ("light", 1.0) in c["tried"] and ("scene", 0.25) in c["tried"]
+    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    assert line.startswith("| banepa | towns | scene 0.25, 0.5, 1; light 0.75, 1 | light 0.75 | 40.0 | 38.0 +- 1.0 |")
 
 
 def test_bench_realism_tables_rewrites_the_tables_from_the_results_without_measuring(tmp_path, monkeypatch):
