@@ -381,8 +381,8 @@ class CityScene:
             ground = _image_material("ground", _noise_image("ground", bare["lawn"], 0.25, seed + 1, key), key)
         dust = self.road_dust or 0.0
         if params.street_details:
-            asphalt = surfaces.dusty(surfaces.asphalt_image(), dust) if dust else surfaces.asphalt_image()
-            road = _image_material("road", _rgb_image("asphalt", asphalt, key), key)
+            road = _image_material("road", _rgb_image("asphalt", surfaces.dusty(surfaces.asphalt_image(), dust), key),
+                                   key)
         else:
             road = _image_material("road", _noise_image("road", surfaces.dusty((0.09, 0.09, 0.095), dust), 0.15,
                                                         seed + 2, key), key)

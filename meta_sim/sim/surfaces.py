@@ -180,6 +180,7 @@ def dusty(rgb, dust: float) -> np.ndarray:
     target = (1.0 - dust) * mean + dust * np.asarray(ROAD_DUST, np.float32)
     return np.clip(rgb * (target / np.maximum(mean, 1e-6)), 0.0, 1.0).astype(np.float32)
 
+
 # Roof furniture (sim/furniture.py): colours (linear RGB) and roughness of its surfaces; "solar" panels and
 # HVAC lids are images (below).
 FURNITURE = {"coping": COPING, "metal": (0.50, 0.51, 0.52), "dark": (0.09, 0.09, 0.10), "dome": (0.62, 0.66, 0.68),
