@@ -647,9 +647,9 @@ def realism_runs(variants=REALISM_VARIANTS, spaces=None) -> list[str]:
 # Design spaces whose NAMS model infers each domain's look as well as its roofs (trained like the default
 # model, on a training set of that space twice the default's size: more parameters to learn).
 REALISM_SPACES = ("overhead-v1",)
-# A space's run with this suffix (e.g. "overhead-v2+scene") trains the segmenters on renders with the
-# "scene" colour augmentation (``task.data.COLOUR_AUGMENTS``) instead of the light one.
-SCENE_AUGMENTED = "+scene"
+# A space's run with one of these suffixes (e.g. "overhead-v2+scene") trains the segmenters on renders with
+# that colour augmentation (``task.data.COLOUR_AUGMENTS``) instead of the light one.
+AUGMENTED = ("+camera", "+scene")
 # A space's run with this suffix (e.g. "overhead-v2+scene:uniform") trains no NAMS model and infers no design:
 # it measures the space's renders alone, with segmenters trained on renders of uniform designs (minutes, not
 # the hours a NAMS model of a rich space takes on an empty cache).
@@ -666,7 +666,7 @@ DR_DESIGNS = ":dr"
 # colour statistics of its adapt scenes (``run_sim_only``'s ``matched``) before the segmenters and the
 # classifier see them.
 COLOUR_MATCHED = ":matched"
-RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)  # at most one, after any +scene
+RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)  # at most one, after any AUGMENTED
 # A space's run ending in ":r" and a share (e.g. "overhead-towns-v4+scene:r0.5") renders each domain's training set
 # with that diversify-with-rejection rate (the share of cities drawn uniformly instead of from the inferred
 # designs; ``TaskEvalSettings.r_real``, the paper's 0.25 otherwise): how far to trust an inferred design.
@@ -699,7 +699,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     lacks adds that space's run. MetaSimError for an unknown name."""
     import time
 
-    augmentable = {space + SCENE_AUGMENTED for space in builtin_spaces()}
+    augmentable = {space + suffix for space in builtin_spaces() for suffix in AUGMENTED}
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
                 for suffix in RUN_SUFFIXES}
     suffixed |= {run for run in only or () if diversify_share(run) is not None
@@ -710,7 +710,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     if unknown:
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
-                           f"{SCENE_AUGMENTED} and/or one of {UNIFORM_ONLY}, {NEAR_POPULATION}, {DR_DESIGNS}, "
+                           f"{' or '.join(AUGMENTED)} and/or one of {UNIFORM_ONLY}, {NEAR_POPULATION}, {DR_DESIGNS}, "
                            f"{COLOUR_MATCHED}, {DIVERSIFY}SHARE after it")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     spaces = [space for space in spaces if only is None or space in only]
@@ -730,9 +730,11 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
             named = run.rpartition(DIVERSIFY)[0]
         for suffix in RUN_SUFFIXES:
             named = named.removesuffix(suffix)
-        space, scene = named.removesuffix(SCENE_AUGMENTED), named.endswith(SCENE_AUGMENTED)
+        augment = next((suffix for suffix in AUGMENTED if named.endswith(suffix)), None)
+        space = named.removesuffix(augment) if augment else named
         wider = replace(dataset, space=space, designs=2 * dataset.designs)
-        run_settings = replace(settings, train=replace(settings.train, colour="scene")) if scene else settings
+        run_settings = (replace(settings, train=replace(settings.train, colour=augment.removeprefix("+")))
+                        if augment else settings)
         run_settings = run_settings if share is None else replace(run_settings, r_real=share)
         other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
         if infer:

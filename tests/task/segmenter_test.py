@@ -130,13 +130,15 @@ def test_real_versus_rendered_accuracy_is_high_for_unlike_images_and_chance_for_
 
 def test_scene_colour_augmentation_recolours_the_ground_apart_and_is_seeded():
     """"scene" changes the crops beyond "light" and, in most crops, the ground's colour apart from the buildings'
-    (the difference of their mean colours), which "light" keeps within its gain; the same for a seed; an unknown
-    augmentation is refused."""
+    (the difference of their mean colours), which "light" keeps within its gain; "camera" lies between: it
+    changes the crops more than "light" but keeps the hue of the ground against the buildings (the direction of
+    that difference); the same for a seed; an unknown augmentation is refused."""
     pool = _pool("p", n=8, px=64)
     crops = {colour: pool.crops(64, 48, torch.Generator().manual_seed(1), colour=colour)
-             for colour in (None, "light", "scene")}
-    again = pool.crops(64, 48, torch.Generator().manual_seed(1), colour="scene")
-    assert torch.equal(again.image, crops["scene"].image) and torch.equal(crops["scene"].mask, crops[None].mask)
+             for colour in (None, "light", "camera", "scene")}
+    for colour in ("camera", "scene"):
+        again = pool.crops(64, 48, torch.Generator().manual_seed(1), colour=colour)
+        assert torch.equal(again.image, crops[colour].image) and torch.equal(crops[colour].mask, crops[None].mask)
     mask = crops[None].mask
     both = (mask.sum(dim=(1, 2, 3)) > 50) & ((1 - mask).sum(dim=(1, 2, 3)) > 50)
 
@@ -153,6 +155,13 @@ def test_scene_colour_augmentation_recolours_the_ground_apart_and_is_seeded():
     assert (crops["light"].image - crops[None].image).abs().mean() < 0.1 < (
         crops["scene"].image - crops[None].image).abs().mean()
     assert moved("light").max() < 0.2 and (moved("scene") > 0.3).float().mean() > 0.5
+
+    def turned(colour):  # the cosine between the ground-minus-buildings colours after and before
+        return torch.nn.functional.cosine_similarity(contrast(crops[colour].image), base, dim=1)
+
+    change = {colour: (crops[colour].image - crops[None].image).abs().mean() for colour in ("light", "camera", "scene")}
+    assert change["light"] < change["camera"] < change["scene"]
+    assert turned("camera").min() > 0.95 and (turned("scene") < 0.95).float().mean() > 0.25
     with pytest.raises(MetaSimError, match="colour augmentation"):
         pool.crops(4, 32, torch.Generator(), colour="heavy")
     with pytest.raises(MetaSimError, match="--colour-augment"):
