@@ -384,8 +384,8 @@ def bench_roof_finder_command(out, docs, spaces, finders, realdata, cache):
 @_task_bench_options("realism", "folder for realism*.png (real scenes beside renders of their inferred designs)")
 @click.option("--runs", default=None,
               help="comma-separated runs to (re)measure, e.g. overhead-v1, or another built-in design space "
-                   "(e.g. overhead-v2) to add its run, or a space with +scene or +camera (overhead-v2+scene: its "
-                   "segmenters trained on renders with that colour augmentation), and any of these with :uniform "
+                   "(e.g. overhead-v2) to add its run, or a space with +scene, +ground or +camera (overhead-v2+scene: "
+                   "its segmenters trained on renders with that colour augmentation), and any of these with :uniform "
                    "(overhead-v2+scene:uniform: no NAMS model, the space's renders alone, from renders of uniform "
                    "designs), or with :near (overhead-towns-v3+scene:near: each domain's renders drawn from its "
                    "groups' best-ranked designs of the search, not one design per group), or with :dr (each group's "

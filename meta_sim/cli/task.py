@@ -36,11 +36,11 @@ def task():
               help="metres per pixel of real images whose files do not say (GeoTIFF, world file)")
 @click.option("--augment/--no-augment", default=True, show_default=True,
               help="random rotations, flips and colour balance of the crops")
-@click.option("--colour-augment", type=click.Choice(["light", "camera", "scene"]), default="light",
+@click.option("--colour-augment", type=click.Choice(["light", "ground", "camera", "scene"]), default="light",
               show_default=True,
               help="with --augment, of the rendered crops: light (a small colour balance and exposure change, as "
-                   "real crops get), camera (that, then another camera's exposure, contrast, gamma, blur and noise) "
-                   "or scene (camera, with the ground first recoloured apart from the buildings)")
+                   "real crops get), ground (that, then the ground recoloured apart from the buildings), camera "
+                   "(light, then another camera's exposure, contrast, gamma, blur and noise) or scene (both)")
 @click.option("--width", type=int, default=16, show_default=True, help="U-Net channels at the first level")
 @click.option("--depth", type=int, default=4, show_default=True, help="U-Net levels")
 @click.option("--encoder", type=click.Path(path_type=Path), default=None,

@@ -649,7 +649,7 @@ def realism_runs(variants=REALISM_VARIANTS, spaces=None) -> list[str]:
 REALISM_SPACES = ("overhead-v1",)
 # A space's run with one of these suffixes (e.g. "overhead-v2+scene") trains the segmenters on renders with
 # that colour augmentation (``task.data.COLOUR_AUGMENTS``) instead of the light one.
-AUGMENTED = ("+camera", "+scene")
+AUGMENTED = ("+ground", "+camera", "+scene")
 # A space's run with this suffix (e.g. "overhead-v2+scene:uniform") trains no NAMS model and infers no design:
 # it measures the space's renders alone, with segmenters trained on renders of uniform designs (minutes, not
 # the hours a NAMS model of a rich space takes on an empty cache).

@@ -109,18 +109,21 @@ def _recolour_roofs(rgb: torch.Tensor, shares: torch.Tensor, generator: torch.Ge
     return out
 
 
-def jitter_scene(rgb: torch.Tensor, shares: torch.Tensor | None, generator: torch.Generator) -> torch.Tensor:
+def jitter_scene(rgb: torch.Tensor, shares: torch.Tensor | None, generator: torch.Generator,
+                 camera: bool = True) -> torch.Tensor:
     """(B, 3, H, W) crops, ``SCENE_JITTER`` of them changed: the non-roof pixels (1 - ``shares`` (B, K, H, W)
     summed over its K kinds, e.g. the roof kinds, or one building mask) get
-    their own per-channel gain in [0.6, 1.4] and offset in [-0.15, 0.15]; then the whole crop
-    ``camera_jitter``. ``shares`` None keeps the ground's colour: the camera alone changes."""
+    their own per-channel gain in [0.6, 1.4] and offset in [-0.15, 0.15]; then (with ``camera``) the whole
+    crop ``camera_jitter``. ``shares`` None keeps the ground's colour: the camera alone changes."""
     b = rgb.shape[0]
     chosen = (torch.rand(b, 1, 1, 1, generator=generator) < SCENE_JITTER).float()
     x = rgb
     if shares is not None:
         ground = (1.0 - shares.sum(1, keepdim=True)).clamp(0.0, 1.0)
         x = rgb * (1 - ground) + _recolour_ground(rgb, generator) * ground
-    return rgb * (1 - chosen) + camera_jitter(x, generator) * chosen
+    if camera:
+        x = camera_jitter(x, generator)
+    return rgb * (1 - chosen) + x * chosen
 
 
 def _uniform(generator: torch.Generator, low: float, high: float, b: int, *shape: int) -> torch.Tensor:

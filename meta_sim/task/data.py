@@ -5,11 +5,11 @@ A ``Pool`` is one source of labelled images (a real domain, or a folder of rende
 once through the datasets of ``pipeline.trainsets``. ``Pool.crops`` draws random crops: an image with
 probability proportional to its area (so every ground pixel is equally likely), a position in it,
 then (with ``augment``) one of the 8 rotations and flips of the square and a colour augmentation
-(``COLOUR_AUGMENTS``, weakest first): "light", a small per-channel gain and offset (a sensor's colour balance
-and exposure); "camera", that, then most crops seen as another camera might (``pipeline.roofsegment.camera_jitter``:
-exposure, contrast, gamma, blur, noise), roofs and ground keeping their colours against each other; "scene", as
-"camera" with the ground (non-building) pixels of those crops first recoloured on their own, so that a segmenter
-learns buildings by shape more than by the renders' colours.
+(``COLOUR_AUGMENTS``): "light", a small per-channel gain and offset (a sensor's colour balance and exposure);
+"ground", that, then for most crops the ground (non-building) pixels recoloured on their own, so that a segmenter
+learns buildings by shape more than by the renders' ground colours; "camera", "light" then most crops seen as
+another camera might (``pipeline.roofsegment.camera_jitter``: exposure, contrast, gamma, blur, noise), roofs and
+ground keeping their colours against each other; "scene", both: the ground recoloured, then the other camera.
 Images smaller than a crop are padded, and the
 padding is marked invalid so the loss ignores it. Every draw comes from the ``torch.Generator``
 passed in, so a seed fixes the crops.
@@ -28,7 +28,7 @@ from ..core.progress import Bars
 
 GAIN = 0.1  # per-channel gain within 1 +- GAIN
 OFFSET = 0.04  # brightness offset within +- OFFSET
-COLOUR_AUGMENTS = ("light", "camera", "scene")  # weakest first
+COLOUR_AUGMENTS = ("light", "ground", "camera", "scene")
 
 
 @dataclass
@@ -106,10 +106,11 @@ class Pool:
             gain = 1.0 + GAIN * (2 * torch.rand(n, 3, 1, 1, generator=generator) - 1)
             offset = OFFSET * (2 * torch.rand(n, 1, 1, 1, generator=generator) - 1)
             images = (images * gain + offset).clamp(0.0, 1.0) * valid
-        if augment and colour in ("camera", "scene"):
+        if augment and colour in ("ground", "camera", "scene"):
             from ..pipeline.roofsegment import jitter_scene
 
-            images = jitter_scene(images, masks if colour == "scene" else None, generator) * valid
+            images = jitter_scene(images, masks if colour in ("ground", "scene") else None, generator,
+                                  camera=colour in ("camera", "scene")) * valid
         return Batch(images, masks, valid)
 
 

@@ -160,7 +160,7 @@ def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the
         tmp_path, monkeypatch):
     """"overhead-v2+scene": the overhead-v2 model and renders, the rendered crops augmented with "scene" (a model
     of real images alone keeps the light augmentation, so it is the run without the suffix's); the table says so;
-    "+camera" likewise, before a share of uniform designs."""
+    "+camera" and "+ground" likewise, before a share of uniform designs."""
     from types import SimpleNamespace
 
     from meta_sim.experiments import task_eval
@@ -184,6 +184,10 @@ def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={"overhead-v2+camera:r0.5"})
     assert seen == [("overhead-v2", "camera")] and set(result["runs"]) == {"overhead-v2+camera:r0.5"}
+    seen.clear()
+    task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                          only={"overhead-v2+ground:uniform"})
+    assert seen == [("overhead-v2", "ground")]
     row = {"space": "overhead-v2", "colour_augment": "scene"}
     assert task_eval._space_cell(row) == "overhead-v2, scene augmentation"
     assert task_eval._space_cell({"space": "overhead-v2"}) == "overhead-v2"

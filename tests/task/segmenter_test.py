@@ -130,13 +130,14 @@ def test_real_versus_rendered_accuracy_is_high_for_unlike_images_and_chance_for_
 
 def test_scene_colour_augmentation_recolours_the_ground_apart_and_is_seeded():
     """"scene" changes the crops beyond "light" and, in most crops, the ground's colour apart from the buildings'
-    (the difference of their mean colours), which "light" keeps within its gain; "camera" lies between: it
-    changes the crops more than "light" but keeps the hue of the ground against the buildings (the direction of
-    that difference); the same for a seed; an unknown augmentation is refused."""
+    (the difference of their mean colours), which "light" keeps within its gain; its halves: "ground" recolours
+    the ground alone (the buildings' pixels stay as "light" leaves them), "camera" changes the crops more than
+    "light" but keeps the hue of the ground against the buildings (the direction of that difference); the same
+    for a seed; an unknown augmentation is refused."""
     pool = _pool("p", n=8, px=64)
     crops = {colour: pool.crops(64, 48, torch.Generator().manual_seed(1), colour=colour)
-             for colour in (None, "light", "camera", "scene")}
-    for colour in ("camera", "scene"):
+             for colour in (None, "light", "ground", "camera", "scene")}
+    for colour in ("ground", "camera", "scene"):
         again = pool.crops(64, 48, torch.Generator().manual_seed(1), colour=colour)
         assert torch.equal(again.image, crops[colour].image) and torch.equal(crops[colour].mask, crops[None].mask)
     mask = crops[None].mask
@@ -162,6 +163,8 @@ def test_scene_colour_augmentation_recolours_the_ground_apart_and_is_seeded():
     change = {colour: (crops[colour].image - crops[None].image).abs().mean() for colour in ("light", "camera", "scene")}
     assert change["light"] < change["camera"] < change["scene"]
     assert turned("camera").min() > 0.95 and (turned("scene") < 0.95).float().mean() > 0.25
+    assert (turned("ground") < 0.95).float().mean() > 0.25
+    assert torch.equal(crops["ground"].image * mask, crops["light"].image * mask)
     with pytest.raises(MetaSimError, match="colour augmentation"):
         pool.crops(4, 32, torch.Generator(), colour="heavy")
     with pytest.raises(MetaSimError, match="--colour-augment"):
