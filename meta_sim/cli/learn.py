@@ -225,7 +225,7 @@ def _design_eval(experiment: str, summary: str):
                   help="target seed (and the searches'); E2 then draws from heldout-v1")
     @click.option("--split", "split_name", type=click.Choice(list(ALL_SPLIT_NAMES)), default=None,
                   help="the targets of a split instead of --seed: validation (choices may be made on it; E2 "
-                       "with heldout-v4), test (report only; E2 with heldout-v2) or check (report only, no "
+                       "with heldout-v5), test (report only; E2 with heldout-v2) or check (report only, no "
                        "bench runs it; E2 with heldout-v3), --targets groups of each of its seeds")
     @click.option("--ms2/--no-ms2", default=True, show_default=True,
                   help="run the MS2 baseline (computes and caches features of every training tile once)")

@@ -440,8 +440,9 @@ def ensure_default_bank(size: int = 256, cache_dir: str | os.PathLike | None = N
 def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = None,
                         name: str = procedural.FIRST_HELDOUT) -> TextureBank:
     """The cached held-out set ``name`` (textures not in the default bank), built on first use:
-    ``heldout-v4`` (E2's validation textures), ``heldout-v2`` (E2's test textures), ``heldout-v3`` (its check
-    textures) or ``heldout-v1`` (E2's validation textures until 2026-12-03, and a single seed's)."""
+    ``heldout-v5`` (E2's validation textures; ``heldout-v4``, those of a day, are among them), ``heldout-v2``
+    (E2's test textures), ``heldout-v3`` (its check textures) or ``heldout-v1`` (E2's validation textures until
+    2026-12-03, and a single seed's)."""
     return _ensure(heldout_bank_dir(size, cache_dir, name), lambda d: build_default_bank(d, size, heldout=name))
 
 
