@@ -37,9 +37,11 @@ demo: setup
 	@cat $(DEMO)/e1/results.md
 	@echo "Look at $(DEMO)/city/*_mosaic.png, $(DEMO)/e1/sheet.png and $(DEMO)/infer/report.png"
 
-# The fast default set plus one real end-to-end run (slow-marked tests run in `test-all`).
+# The fast default set plus one real end-to-end run (slow-marked tests run in `test-all`). The add-on's tests
+# run in a process of their own, as Blender runs the add-on: without torch, which the other tests load.
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q tests/addon
+	$(BIN)/python -m pytest -q --ignore=tests/addon
 
 # ruff (style, pyflakes, isort, bugbear) and import-linter (the layer rule in pyproject.toml).
 lint: setup
@@ -47,7 +49,8 @@ lint: setup
 	$(BIN)/lint-imports
 
 test-all: setup
-	$(BIN)/python -m pytest -q -m ''
+	$(BIN)/python -m pytest -q -m '' tests/addon
+	$(BIN)/python -m pytest -q -m '' --ignore=tests/addon
 
 # The Blender extension zip (Blender's own validator and builder, from the bpy wheel): dist/meta_sim-0.1.0.zip
 addon: setup
