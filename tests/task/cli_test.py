@@ -74,6 +74,12 @@ def test_train_then_eval_on_real_and_rendered_folders(tmp_path):
                                  "--colour-augment", "scene", "--out", str(tmp_path / "d.pt")])
     assert scene.exit_code == 0, scene.output
     assert load_segmenter(tmp_path / "d.pt").training["colour"] == "scene" and a.training["colour"] == "light"
+    # the command offers every augmentation the training knows
+    from meta_sim.cli.task import train_command
+    from meta_sim.task.data import COLOUR_AUGMENTS
+
+    option = next(p for p in train_command.params if p.name == "colour_augment")
+    assert tuple(option.type.choices) == COLOUR_AUGMENTS
 
 
 def test_bad_task_command_lines_fail_cleanly(tmp_path):
