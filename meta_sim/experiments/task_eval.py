@@ -781,9 +781,14 @@ def chosen_shares(result: dict) -> list[dict]:
     run without one) and, as the share 1, the uniform designs in the same cities. The choice looks only at
     validation IoU (the first of equal ones); its test IoU is then read against issue 18's targets. Runs from
     before validation, of uniform designs alone, or drawn another way (``near``, DR, colour-matched) take no
-    part."""
+    part, except that a run of uniform designs alone with the chosen augmentation gives the classifier's accuracy
+    when the uniform designs are chosen (its classifier saw those renders: the same cities)."""
     default_r = result.get("settings", {}).get("r_real", 0.25)
     groups: dict = {}
+    uniform_realness = {(row.get("space", "rooftops-v1"), domain, row.get("colour_augment", "light")):
+                        row["realness"]["accuracy"]
+                        for run in result["runs"].values() for domain, row in run.items()
+                        if "rendered_only" in row and row["rendered_only"] is None and "realness" in row}
     for name, run in result["runs"].items():
         for domain, row in run.items():
             if (row.get("rendered_only") is None or "validation" not in row or row.get("near")
@@ -800,7 +805,8 @@ def chosen_shares(result: dict) -> list[dict]:
         best = max(candidates, key=lambda c: c["validation"]["iou"])  # max keeps the first of equal ones
         row = best["row"]
         test, other, everything = best["test"]["iou"], row["other_real"]["iou"], row["all_building"]
-        realness = row.get("realness", {}).get("accuracy") if best["r"] < 1.0 else None
+        realness = (row.get("realness", {}).get("accuracy") if best["r"] < 1.0
+                    else uniform_realness.get((space, domain, best["augment"])))
         chosen.append({"space": space, "domain": domain, "r": best["r"], "colour_augment": best["augment"],
                        "run": best["run"], "tried": sorted({(c["augment"], c["r"]) for c in candidates}),
                        "validation_iou": best["validation"]["iou"], "test": best["test"],
@@ -832,7 +838,8 @@ def _chosen_markdown(result: dict) -> list[str]:
              "share 1 being the uniform designs in the same cities), scored on the test scenes: IoU (%) over all "
              f"building (target +{100 * OVER_ALL_BUILDING:.0f}) and under the other real domains' segmenter (target "
              f"at most {100 * UNDER_OTHER_REAL:.0f}; negative beats it), and the classifier's accuracy on that run's "
-             f"renders (target below {REALNESS_TARGET}; none for the uniform designs, which it did not score).", "",
+             f"renders (target below {REALNESS_TARGET}; for the uniform designs, that of the space's run of uniform "
+             "designs alone with the chosen augmentation, '-' without one).", "",
              "| domain | space | augmentation: shares tried | chosen | validation IoU | test IoU | over all building "
              "| under other real | classifier | targets met: +15 / within 5 / classifier |",
              "|---|---|---|---|---|---|---|---|---|---|"]
