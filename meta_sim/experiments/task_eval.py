@@ -368,9 +368,10 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                  matched: bool = False) -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
     domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
-    designs in the same cities (what inferring the domain's design adds). With ``realness`` also the accuracy
-    of a real-versus-rendered classifier (``task.realness``; held-out real scenes against renders in
-    held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them,
+    designs in the same cities (what inferring the domain's design adds); and ("own_real", test scenes only)
+    a segmenter trained on the domain's own labelled adapt scenes: how far this segmenter can reach there.
+    With ``realness`` also the accuracy of a real-versus-rendered classifier (``task.realness``; held-out
+    real scenes against renders in held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them,
     all cropped to one ground size.
     ``sensor`` is a sensor name for every domain's renders, or "auto" for the one matching the domain's
     imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation, ``ground``
@@ -418,9 +419,11 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         sim = _scored(h, None, rendered, f"{domain} rendered only", pools) if infer else (None, None)
         real = _scored(h, other, None, f"{'+'.join(others)}", pools)
         flat = _scored(h, None, flat_pool, "uniform designs", pools)
+        own = _scored(h, adapt_pool, None, f"{domain}'s own adapt scenes", (test_pool,))  # the instrument's reach
         rows[domain] = {"rendered_only": _mean_iou(sim[0]), "uniform_designs": _mean_iou(flat[0]),
                         "other_real": _mean_iou(real[0]), "other_domains": others,
-                        "all_building": all_building(test_pool.masks).iou(), "designs": designs,
+                        "all_building": all_building(test_pool.masks).iou(), "own_real": _mean_iou(own[0]),
+                        "designs": designs,
                         "test_tiles": len(test_pool), "sensor": seen_by, "roof_jitter": roof_jitter,
                         "ground": ground, "space": space.name, "colour_augment": s.train.colour,
                         **({"near": near} if infer and near else {}),
@@ -782,13 +785,16 @@ def chosen_shares(result: dict) -> list[dict]:
     validation IoU (the first of equal ones); its test IoU is then read against issue 18's targets. Runs from
     before validation, of uniform designs alone, or drawn another way (``near``, DR, colour-matched) take no
     part, except that a run of uniform designs alone with the chosen augmentation gives the classifier's accuracy
-    when the uniform designs are chosen (its classifier saw those renders: the same cities)."""
+    when the uniform designs are chosen (its classifier saw those renders: the same cities). ``own_real``: the
+    test IoU of the segmenter trained on the domain's own adapt scenes, from whichever run measured it."""
     default_r = result.get("settings", {}).get("r_real", 0.25)
     groups: dict = {}
     uniform_realness = {(row.get("space", "rooftops-v1"), domain, row.get("colour_augment", "light")):
                         row["realness"]["accuracy"]
                         for run in result["runs"].values() for domain, row in run.items()
                         if "rendered_only" in row and row["rendered_only"] is None and "realness" in row}
+    own_real = {domain: row["own_real"] for run in result["runs"].values() for domain, row in run.items()
+                if row.get("own_real")}
     for name, run in result["runs"].items():
         for domain, row in run.items():
             if (row.get("rendered_only") is None or "validation" not in row or row.get("near")
@@ -811,7 +817,7 @@ def chosen_shares(result: dict) -> list[dict]:
                        "run": best["run"], "tried": sorted({(c["augment"], c["r"]) for c in candidates}),
                        "validation_iou": best["validation"]["iou"], "test": best["test"],
                        "over_all_building": test - everything, "under_other_real": other - test,
-                       "realness": realness,
+                       "realness": realness, "own_real": own_real.get(domain),
                        "met": {"over_all_building": test - everything >= OVER_ALL_BUILDING,
                                "near_other_real": other - test <= UNDER_OTHER_REAL,
                                "beats_other_real": test > other,
@@ -839,17 +845,19 @@ def _chosen_markdown(result: dict) -> list[str]:
              f"building (target +{100 * OVER_ALL_BUILDING:.0f}) and under the other real domains' segmenter (target "
              f"at most {100 * UNDER_OTHER_REAL:.0f}; negative beats it), and the classifier's accuracy on that run's "
              f"renders (target below {REALNESS_TARGET}; for the uniform designs, that of the space's run of uniform "
-             "designs alone with the chosen augmentation, '-' without one).", "",
+             "designs alone with the chosen augmentation, '-' without one). Beside them, the test IoU of the same "
+             "segmenter trained on the domain's own labelled adapt scenes: what it can reach there with real "
+             "training data of the place itself ('-' until a run has measured it).", "",
              "| domain | space | augmentation: shares tried | chosen | validation IoU | test IoU | over all building "
-             "| under other real | classifier | targets met: +15 / within 5 / classifier |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| under other real | classifier | targets met: +15 / within 5 / classifier | own real scenes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in chosen:
         lines.append(f"| {c['domain']} | {c['space']} | {_tried(c['tried'])} | {c['colour_augment']} {c['r']:g} | "
                      f"{100 * c['validation_iou']:.1f} | {_iou_cell(c['test'])} | "
                      f"{100 * c['over_all_building']:+.1f} | {100 * c['under_other_real']:+.1f} | "
                      f"{'-' if c['realness'] is None else format(c['realness'], '.2f')} | "
                      f"{mark(c['met']['over_all_building'])} / {mark(c['met']['near_other_real'])} / "
-                     f"{mark(c['met']['realness'])} |")
+                     f"{mark(c['met']['realness'])} | {_iou_cell(c['own_real'])} |")
     return lines
 
 

@@ -535,12 +535,16 @@ def test_a_matched_realism_run_brings_the_renders_to_the_adapt_scenes_colours(tm
     run = "overhead-towns-v3+scene:matched"
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={run})
-    assert len(seen) == 3 * len(realdomains.DOMAINS)  # per domain: its renders, the other real domains, uniform
+    # per domain: its renders, the other real domains, uniform designs and its own adapt scenes
+    assert len(seen) == 4 * len(realdomains.DOMAINS)
     for index, domain in enumerate(realdomains.DOMAINS):
         adapt, _ = realdomains.split(scenes[domain])
         want = ColourStats.of_images(task_eval._real_pool("a", adapt, task_eval.TaskEvalSettings().train).images)
-        (mine, rendered), (_, none), (flat, uniform) = seen[3 * index:3 * index + 3]
+        (mine, rendered), (_, none), (flat, uniform), (own, nothing) = seen[4 * index:4 * index + 4]
         assert mine == f"{domain} rendered only" and none is None and flat == "uniform designs"
+        assert own == f"{domain}'s own adapt scenes" and nothing is None
+        row = result["runs"][run][domain]
+        assert row["own_real"]["iou"] == row["other_real"]["iou"]  # the stub scores every real-trained one alike
         for pool in (rendered, uniform):
             got = ColourStats.of_images(pool.images)
             assert np.allclose(got.mean, want.mean, atol=0.02), (domain, got, want)
@@ -588,7 +592,12 @@ def test_the_share_of_uniform_designs_is_chosen_per_domain_on_validation_and_rea
                         "realness": True}
     line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
     assert line == ("| banepa | towns | scene 0.25, 0.5, 1 | scene 0.5 | 33.0 | 36.0 +- 1.0 | +16.0 | +4.0 "
-                    "| 0.70 | yes / yes / yes |")
+                    "| 0.70 | yes / yes / yes | - |")
+    # the segmenter of the domain's own adapt scenes, from any run that measured it
+    result["runs"]["towns+scene"]["banepa"]["own_real"] = {"iou": 0.7, "iou_std": 0.02}
+    assert chosen_shares(result)[0]["own_real"]["iou"] == 0.7
+    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    assert line.endswith("| 0.70 | yes / yes / yes | 70.0 +- 2.0 |")
     # Uniform designs in the same cities win on validation: share 1, and no classifier figure for them.
     result["runs"]["towns+scene:r0.5"]["banepa"]["validation"]["uniform_designs"]["iou"] = 0.35
     [c] = chosen_shares(result)
