@@ -371,8 +371,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     designs in the same cities (what inferring the domain's design adds); and ("own_real", test scenes only)
     a segmenter trained on the domain's own labelled adapt scenes: how far this segmenter can reach there.
     With ``realness`` also the accuracy of a real-versus-rendered classifier (``task.realness``; held-out
-    real scenes against renders in held-out cities) and ``realism.png``: real scenes beside renders of the design inferred for them,
-    all cropped to one ground size.
+    real scenes against renders in held-out cities) and ``realism.png``: real scenes beside renders of the
+    design inferred for them, all cropped to one ground size.
     ``sensor`` is a sensor name for every domain's renders, or "auto" for the one matching the domain's
     imagery (``realdomains.SENSOR_OF``); ``roof_jitter`` the per-building roof variation, ``ground``
     the ground cover mix. Every segmenter is also scored on the domain's ``adapt`` scenes (row
