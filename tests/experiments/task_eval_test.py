@@ -640,3 +640,24 @@ def test_bench_realism_tables_rewrites_the_tables_from_the_results_without_measu
         assert refused.exit_code != 0 and "measures nothing" in refused.output
     missing = CliRunner().invoke(main, ["bench", "realism", "--tables", "--out", str(tmp_path / "none.json")])
     assert missing.exit_code != 0 and "no results" in missing.output
+
+
+def test_the_classifier_gets_its_own_seeds_more_than_the_segmenters(monkeypatch):
+    """The real-versus-rendered accuracy is the mean over ``REALNESS_SEEDS`` classifier seeds (0, 1, ...), not over
+    the segmenters' three: one seed's accuracy moves by 0.1 and more."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.task.data import Pool
+
+    seen = []
+    monkeypatch.setattr("meta_sim.task.realness.realness_accuracy",
+                        lambda real_train, train, real_test, test, settings, progress: seen.append(settings.seed)
+                        or 0.5 + 0.01 * settings.seed)
+    image, mask = np.zeros((96, 96, 3), np.float32), np.zeros((96, 96), bool)
+    pool = Pool("p", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
+    h = SimpleNamespace(settings=task_eval.TaskEvalSettings(), bars=None)
+    out = task_eval._realness(h, "rio", pool, pool, pool)
+    assert task_eval.REALNESS_SEEDS >= 10 > len(h.settings.seeds)
+    assert seen == list(range(task_eval.REALNESS_SEEDS)) and len(out["per_seed"]) == task_eval.REALNESS_SEEDS
+    assert out["accuracy"] == pytest.approx(np.mean([0.5 + 0.01 * k for k in seen]))
