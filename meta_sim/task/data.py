@@ -28,7 +28,10 @@ from ..core.progress import Bars
 
 GAIN = 0.1  # per-channel gain within 1 +- GAIN
 OFFSET = 0.04  # brightness offset within +- OFFSET
-COLOUR_AUGMENTS = ("light", "ground", "camera", "scene")
+# The augmentations beyond "light", by what they change (``pipeline.roofsegment.jitter_scene``): the ground's
+# colour apart from the buildings', and the camera.
+SCENE_PARTS = {"ground": (True, False), "camera": (False, True), "scene": (True, True)}
+COLOUR_AUGMENTS = ("light", *SCENE_PARTS)
 
 
 @dataclass
@@ -106,11 +109,11 @@ class Pool:
             gain = 1.0 + GAIN * (2 * torch.rand(n, 3, 1, 1, generator=generator) - 1)
             offset = OFFSET * (2 * torch.rand(n, 1, 1, 1, generator=generator) - 1)
             images = (images * gain + offset).clamp(0.0, 1.0) * valid
-        if augment and colour in ("ground", "camera", "scene"):
+        if augment and colour in SCENE_PARTS:
             from ..pipeline.roofsegment import jitter_scene
 
-            images = jitter_scene(images, masks if colour in ("ground", "scene") else None, generator,
-                                  camera=colour in ("camera", "scene")) * valid
+            ground, camera = SCENE_PARTS[colour]
+            images = jitter_scene(images, masks if ground else None, generator, camera=camera) * valid
         return Batch(images, masks, valid)
 
 
