@@ -42,6 +42,7 @@ from ..core.progress import Bars
 from ..render.jobs import Job
 from ..sim.design import builtin_spaces
 from ..task.data import Pool
+from ..task.realness import BLUR_PX
 from ..task.score import Counts
 from ..task.train import TrainSettings
 from . import realdomains
@@ -486,12 +487,15 @@ def _scored(h: Harness, real: Pool | None, synthetic: Pool | None, label: str, p
 # varies by 0.1 and more from seed to seed on a few renders, so it gets more seeds than the segmenters (3
 # before 2026-12-05; a row's "per_seed" says how many it had).
 REALNESS_SEEDS = 10
+# The seeds of the classifier in each reduced view (``task.realness.VIEWS`` but "full"): where the gap lies.
+REALNESS_VIEW_SEEDS = 3
 
 
 def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, rendered: Pool) -> dict:
     """The real-versus-rendered accuracy per seed (``REALNESS_SEEDS`` of them): renders of the first half of
-    the cities train, the second half score."""
-    from ..task.realness import RealnessSettings, realness_accuracy
+    the cities train, the second half score. Under "views", the same in each reduced view of
+    ``task.realness.VIEWS`` over ``REALNESS_VIEW_SEEDS`` seeds."""
+    from ..task.realness import VIEWS, RealnessSettings, realness_accuracy
 
     half = len(rendered) // 2
     train = Pool(rendered.name, rendered.images[:half], rendered.masks[:half], rendered.pixel_size_m,
@@ -499,14 +503,20 @@ def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, render
     test = Pool(rendered.name, rendered.images[half:], rendered.masks[half:], rendered.pixel_size_m,
                 rendered.sources[half:])
     settings = RealnessSettings(crop=min(64, *(min(m.shape) for m in real_train.masks + real_test.masks)))
-    accuracy = []
-    for seed in range(REALNESS_SEEDS):
-        progress = h.bars(f"{domain} real-vs-rendered seed {seed}", settings.steps) if h.bars else None
-        accuracy.append(realness_accuracy(real_train, train, real_test, test, replace(settings, seed=seed),
-                                          progress))
-    return {"accuracy": float(np.mean(accuracy)),
-            "accuracy_std": float(np.std(accuracy, ddof=1)) if len(accuracy) > 1 else 0.0,
-            "per_seed": accuracy, "crop": settings.crop}
+
+    def accuracies(view: str, seeds: int) -> dict:
+        accuracy = []
+        for seed in range(seeds):
+            label = f"{domain} real-vs-rendered{'' if view == 'full' else ', ' + view} seed {seed}"
+            progress = h.bars(label, settings.steps) if h.bars else None
+            accuracy.append(realness_accuracy(real_train, train, real_test, test,
+                                              replace(settings, seed=seed, view=view), progress))
+        return {"accuracy": float(np.mean(accuracy)),
+                "accuracy_std": float(np.std(accuracy, ddof=1)) if len(accuracy) > 1 else 0.0,
+                "per_seed": accuracy}
+
+    return {**accuracies("full", REALNESS_SEEDS), "crop": settings.crop,
+            "views": {view: accuracies(view, REALNESS_VIEW_SEEDS) for view in VIEWS if view != "full"}}
 
 
 def colour_stats(pool: Pool) -> dict:
@@ -929,6 +939,24 @@ def realism_markdown(result: dict) -> str:
             lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                          f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                          + " | ".join(cells) + " |")
+    viewed = [(domain, row) for domain, row in rows if "views" in (row.get("realness") or {})]
+    if viewed:
+        names = list(viewed[0][1]["realness"]["views"])
+        lines += ["", "What tells the renders from real imagery: the real-versus-rendered classifier again with its "
+                  "crops, real and rendered alike, reduced (`task.realness.VIEWS`): grey (brightness only: what "
+                  f"colour told it is gone), blur (a Gaussian of {_g(BLUR_PX)} pixels: fine detail, sharpness and "
+                  "noise gone), or both; mean +- standard deviation over its first "
+                  f"{REALNESS_VIEW_SEEDS} seeds. Falling towards 0.5 in a view says the renders differ from the "
+                  "real imagery mostly in what that view takes away.", "",
+                  "| domain | space | sensor | roof jitter | ground | full crops | "
+                  + " | ".join(names) + " |", "|---|---|---|---|---|---|" + "---|" * len(names)]
+        for domain, row in viewed:
+            acc = row["realness"]
+            lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
+                         f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
+                         f"{acc['accuracy']:.2f} +- {acc['accuracy_std']:.2f} | "
+                         + " | ".join(f"{acc['views'][n]['accuracy']:.2f} +- {acc['views'][n]['accuracy_std']:.2f}"
+                                      for n in names) + " |")
     found = [(domain, row) for domain, row in rows if "roof_finder" in row]
     if found:
         lines += ["", "The model's roof finder on real imagery (the pixels whose colours become the inferred roof "

@@ -5,6 +5,12 @@ rendered tiles (the other), then scored on crops of held-out real images and hel
 accuracy of 0.5 means the two are indistinguishable to it; 1.0 means every render gives itself away.
 Crops are balanced between the classes in training and scoring, and get random rotations and flips
 but no colour changes: colour balance is part of what it should notice. Deterministic for a seed.
+
+Where the gap lies, the same classifier says when its crops (real and rendered alike, in training and in
+scoring) are shown in a reduced ``view`` (``VIEWS``): "grey" keeps brightness only (what colour told it is
+gone), "blur" a Gaussian blur of ``BLUR_PX`` pixels (what fine detail, sharpness and noise told it is gone),
+"grey+blur" both. An accuracy that falls towards 0.5 in a view says the renders differ from the real imagery
+mostly in what that view removes.
 """
 
 from __future__ import annotations
@@ -28,6 +34,29 @@ class RealnessSettings:
     width: int = 16
     test_crops: int = 256  # per class
     seed: int = 0
+    view: str = "full"  # one of VIEWS
+
+
+VIEWS = ("full", "grey", "blur", "grey+blur")
+BLUR_PX = 2.0  # the "blur" view's standard deviation, in pixels at the working pixel size
+
+
+def view(images: torch.Tensor, name: str) -> torch.Tensor:
+    """(N, 3, H, W) display-sRGB crops as the view ``name`` of ``VIEWS`` shows them."""
+    if name not in VIEWS:
+        raise MetaSimError(f"unknown classifier view {name!r}; choose one of {', '.join(VIEWS)}")
+    if "grey" in name:
+        images = images.mean(dim=1, keepdim=True).expand(-1, 3, -1, -1)
+    if "blur" in name:
+        radius = int(3 * BLUR_PX)
+        taps = torch.arange(-radius, radius + 1, dtype=images.dtype)
+        kernel = torch.exp(-taps ** 2 / (2 * BLUR_PX ** 2))
+        kernel = (kernel / kernel.sum()).repeat(3, 1)[:, None]  # (3, 1, K): one per channel
+        images = nn.functional.conv2d(nn.functional.pad(images, (radius, radius, 0, 0), mode="replicate"),
+                                      kernel[:, :, None, :], groups=3)
+        images = nn.functional.conv2d(nn.functional.pad(images, (0, 0, radius, radius), mode="replicate"),
+                                      kernel[:, :, :, None], groups=3)
+    return images.contiguous()
 
 
 class _Net(nn.Module):
@@ -46,7 +75,9 @@ class _Net(nn.Module):
 
 def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, rendered_test: Pool,
                       settings: RealnessSettings = RealnessSettings(), progress: Progress | None = None) -> float:
-    """Held-out accuracy of telling real (label 1) from rendered (label 0) crops."""
+    """Held-out accuracy of telling real (label 1) from rendered (label 0) crops, seen in ``settings.view``."""
+    if settings.view not in VIEWS:
+        raise MetaSimError(f"unknown classifier view {settings.view!r}; choose one of {', '.join(VIEWS)}")
     pools = (real_train, rendered_train, real_test, rendered_test)
     if len({p.pixel_size_m for p in pools}) != 1:
         raise MetaSimError("real and rendered images must be at one pixel size")
@@ -59,8 +90,8 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     labels = torch.cat([torch.ones(half), torch.zeros(half)])
     net.train()
     for _ in range(settings.steps):
-        images = torch.cat([real_train.crops(half, settings.crop, crops, colour=None).image,
-                            rendered_train.crops(half, settings.crop, crops, colour=None).image])
+        images = view(torch.cat([real_train.crops(half, settings.crop, crops, colour=None).image,
+                                 rendered_train.crops(half, settings.crop, crops, colour=None).image]), settings.view)
         loss = nn.functional.binary_cross_entropy_with_logits(net(images), labels)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
@@ -70,8 +101,10 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     net.eval()
     scoring = torch.Generator().manual_seed(settings.seed + 1)
     with torch.no_grad():
-        real = net(real_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image) > 0
-        rendered = net(rendered_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image) <= 0
+        real = net(view(real_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image,
+                        settings.view)) > 0
+        rendered = net(view(rendered_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image,
+                            settings.view)) <= 0
     return float(torch.cat([real, rendered]).float().mean())
 
 

@@ -644,20 +644,37 @@ def test_bench_realism_tables_rewrites_the_tables_from_the_results_without_measu
 
 def test_the_classifier_gets_its_own_seeds_more_than_the_segmenters(monkeypatch):
     """The real-versus-rendered accuracy is the mean over ``REALNESS_SEEDS`` classifier seeds (0, 1, ...), not over
-    the segmenters' three: one seed's accuracy moves by 0.1 and more."""
+    the segmenters' three: one seed's accuracy moves by 0.1 and more. Each reduced view (grey, blur, both) gets
+    ``REALNESS_VIEW_SEEDS`` seeds of its own, and the realism table shows them."""
     from types import SimpleNamespace
 
     from meta_sim.experiments import task_eval
     from meta_sim.task.data import Pool
+    from meta_sim.task.realness import VIEWS
 
     seen = []
+    shift = {"full": 0.0, "grey": -0.2, "blur": -0.1, "grey+blur": -0.3}
     monkeypatch.setattr("meta_sim.task.realness.realness_accuracy",
-                        lambda real_train, train, real_test, test, settings, progress: seen.append(settings.seed)
-                        or 0.5 + 0.01 * settings.seed)
+                        lambda real_train, train, real_test, test, settings, progress:
+                        seen.append((settings.view, settings.seed))
+                        or 0.9 + shift[settings.view] - 0.01 * settings.seed)
     image, mask = np.zeros((96, 96, 3), np.float32), np.zeros((96, 96), bool)
     pool = Pool("p", [image] * 4, [mask] * 4, 0.6, ["a"] * 4)
     h = SimpleNamespace(settings=task_eval.TaskEvalSettings(), bars=None)
     out = task_eval._realness(h, "rio", pool, pool, pool)
     assert task_eval.REALNESS_SEEDS >= 10 > len(h.settings.seeds)
-    assert seen == list(range(task_eval.REALNESS_SEEDS)) and len(out["per_seed"]) == task_eval.REALNESS_SEEDS
-    assert out["accuracy"] == pytest.approx(np.mean([0.5 + 0.01 * k for k in seen]))
+    full = [seed for view, seed in seen if view == "full"]
+    assert full == list(range(task_eval.REALNESS_SEEDS)) and len(out["per_seed"]) == task_eval.REALNESS_SEEDS
+    assert out["accuracy"] == pytest.approx(np.mean([0.9 - 0.01 * k for k in full]))
+    assert set(out["views"]) == set(VIEWS) - {"full"}
+    for view, got in out["views"].items():
+        assert [s for v, s in seen if v == view] == list(range(task_eval.REALNESS_VIEW_SEEDS))
+        expected = 0.9 + shift[view] - 0.01 * np.mean(range(task_eval.REALNESS_VIEW_SEEDS))
+        assert got["accuracy"] == pytest.approx(expected)
+    row = {"rendered_only": None, "uniform_designs": {"iou": 0.5, "iou_std": 0.0, "precision": 0.5, "recall": 0.5},
+           "other_real": {"iou": 0.4, "iou_std": 0.0}, "other_domains": ["banepa"], "all_building": 0.3,
+           "sensor": "none", "space": "overhead-towns-v5", "realness": out}
+    table = task_eval.realism_markdown({"runs": {"overhead-towns-v5:uniform": {"rio": row}}, "seconds": 60.0,
+                                        "render_preset": "fast", "settings": {"seeds": [0]}})
+    assert ("| rio | overhead-towns-v5, uniform designs only | none | 0 | plain | 0.86 +- 0.03 | 0.69 +- 0.01 "
+            "| 0.79 +- 0.01 | 0.59 +- 0.01 |") in table

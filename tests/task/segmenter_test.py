@@ -182,3 +182,30 @@ def test_scene_colour_augmentation_carries_to_another_ground_and_camera():
     light = train_segmenter(None, train, TrainSettings(**settings))
     scene = train_segmenter(None, train, TrainSettings(**settings, colour="scene"))
     assert count(scene, test.images, test.masks)[0].iou() > count(light, test.images, test.masks)[0].iou() + 0.1
+
+
+def test_the_classifier_views_take_away_colour_and_fine_detail():
+    """"grey" leaves one brightness per pixel, "blur" smooths fine detail away (a checkerboard's contrast falls
+    below a tenth) and keeps a crop's mean; "full" is the crop itself. A classifier told red from blue crops by
+    colour alone is near chance in the grey view; an unknown view is refused."""
+    from meta_sim.task.realness import RealnessSettings, realness_accuracy, view
+
+    crops = torch.rand(2, 3, 24, 24, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(view(crops, "full"), crops)
+    grey = view(crops, "grey")
+    assert torch.allclose(grey[:, 0], grey[:, 1]) and torch.allclose(grey[:, 0], crops.mean(1))
+    checker = ((torch.arange(24)[:, None] + torch.arange(24)[None]) % 2).float().expand(1, 3, 24, 24)
+    blurred = view(checker, "blur")
+    assert float(blurred.std()) < 0.1 * float(checker.std())
+    assert float(blurred.mean()) == pytest.approx(float(checker.mean()), abs=0.02)
+    assert torch.allclose(view(checker, "grey+blur"), view(view(checker, "grey"), "blur"), atol=1e-6)
+    with pytest.raises(MetaSimError, match="unknown classifier view"):
+        view(crops, "sepia")
+    settings = RealnessSettings(steps=60, batch=8, crop=32, width=8, test_crops=64)
+    red, blue = _pool("red", seed=1, ground=(0.5, 0.2, 0.2)), _pool("blue", seed=2, ground=(0.2, 0.2, 0.5))
+    red_test, blue_test = _pool("red", seed=3, ground=(0.5, 0.2, 0.2)), _pool("blue", seed=4, ground=(0.2, 0.2, 0.5))
+    assert realness_accuracy(red, blue, red_test, blue_test, settings) > 0.95
+    assert realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(**{**settings.__dict__,
+                                                                                 "view": "grey"})) < 0.75
+    with pytest.raises(MetaSimError, match="unknown classifier view"):
+        realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(view="sepia"))
