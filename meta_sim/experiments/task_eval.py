@@ -522,11 +522,12 @@ def _realness(h: Harness, domain: str, real_train: Pool, real_test: Pool, render
 def colour_stats(pool: Pool) -> dict:
     """Mean display brightness (0-1) and saturation of building and of other pixels over a pool: where
     renders and real imagery differ in plain colour, before any shape or texture. And per image (the median
-    over the pool): the building share and how dark its darkest pixels are, the 5th percentile of linear
-    luminance over its median (shadows and dark canopy bring it down)."""
+    over the pool): the building share, how dark its darkest pixels are, the 5th percentile of linear
+    luminance over its median (shadows and dark canopy bring it down), and its fine detail (``fine_detail``)."""
     tails = [t for t in (_dark_tail(i) for i in pool.images) if np.isfinite(t)]  # images with enough lit pixels
     out = {"image": {"building_share": float(np.median([m.mean() for m in pool.masks])),
-                     "dark_tail": float(np.median(tails)) if tails else None}}
+                     "dark_tail": float(np.median(tails)) if tails else None,
+                     "fine_detail": float(np.median([fine_detail(i) for i in pool.images]))}}
     for part, pick in (("building", True), ("ground", False)):
         pixels = np.concatenate([i[m == pick] for i, m in zip(pool.images, pool.masks)])
         if not len(pixels):
@@ -537,9 +538,19 @@ def colour_stats(pool: Pool) -> dict:
     return out
 
 
-def _share(value) -> str:
+def _share(value, digits: int = 2) -> str:
     """A colour statistic in a table cell ("-" where the pool had none)."""
-    return "-" if value is None else f"{value:.2f}"
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def fine_detail(display: np.ndarray) -> float:
+    """How much detail an sRGB image holds at its finest scale: the standard deviation of its display brightness
+    (the channels' mean) minus that brightness blurred by a Gaussian of one pixel. Sharpness, small texture and
+    noise raise it; the blur of optics and resampling lowers it."""
+    from ..sim.sensor import gaussian_blur
+
+    brightness = np.clip(display, 0.0, 1.0).mean(axis=2, keepdims=True).astype(np.float32)
+    return float(np.std(brightness - gaussian_blur(brightness, 1.0)))
 
 
 def _dark_tail(display: np.ndarray) -> float:
@@ -925,17 +936,21 @@ def realism_markdown(result: dict) -> str:
     if coloured:
         lines += ["", "Plain colour, real (`adapt` scenes) against rendered: mean display brightness (0-1) and "
                   "saturation of building pixels and of the other pixels; per image (median over the images), the "
-                  "building share and the dark tail (5th percentile of linear luminance over the median: shadows "
-                  "and dark canopy lower it; '-' for runs from before it was measured).", "",
+                  "building share, the dark tail (5th percentile of linear luminance over the median: shadows "
+                  "and dark canopy lower it) and the fine detail (standard deviation of the brightness minus its "
+                  "Gaussian blur of one pixel: sharpness, small texture and noise raise it); '-' for runs from "
+                  "before a figure was measured.", "",
                   "| domain | space | sensor | roof jitter | ground | buildings: brightness real / rendered "
                   "| saturation | other pixels: brightness real / rendered | saturation | building share "
-                  "| dark tail |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "| dark tail | fine detail |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for domain, row in coloured:
             real, rendered = row["colour"]["real"], row["colour"]["rendered"]
-            cells = [f"{_share(real[part][key])} / {_share(rendered[part][key])}" if part in real and part in rendered
+            cells = [f"{_share(real[part].get(key), digits)} / {_share(rendered[part].get(key), digits)}"
+                     if part in real and part in rendered and (key in real[part] or key in rendered[part])
                      else "-" for part in ("building", "ground", "image")
-                     for key in {"image": ("building_share", "dark_tail")}.get(part, ("brightness", "saturation"))]
+                     for key, digits in {"image": (("building_share", 2), ("dark_tail", 2), ("fine_detail", 3))}.get(
+                         part, (("brightness", 2), ("saturation", 2)))]
             lines.append(f"| {domain} | {_space_cell(row)} | {row['sensor']} | "
                          f"{_g(row.get('roof_jitter', 0))} | {row.get('ground', 'plain')} | "
                          + " | ".join(cells) + " |")

@@ -304,11 +304,32 @@ def test_colour_stats_give_the_building_share_and_how_dark_the_shadows_are_and_o
     header = next(line for line in lines if line.startswith("| domain") and "dark tail" in line)
     banepa = [line for line in lines if line.startswith("| banepa")][-1]
     kampala = [line for line in lines if line.startswith("| kampala")][-1]
-    assert banepa.endswith("| 0.25 / 0.50 | 0.10 / 0.45 |") and kampala.endswith("| - | - |")
+    detail = f"{flat['image']['fine_detail']:.3f}"
+    assert banepa.endswith(f"| 0.25 / 0.50 | 0.10 / 0.45 | {detail} / - |") and kampala.endswith("| - | - | - |")
     row["colour"]["real"]["image"] = {"building_share": 0.25, "dark_tail": None}
     assert [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1].endswith(
-        "| 0.25 / 0.50 | - / 0.45 |")
+        "| 0.25 / 0.50 | - / 0.45 | - |")
     assert len(banepa.split(" | ")) == len(header.split(" | ")) == len(kampala.split(" | "))
+
+
+def test_fine_detail_grows_with_sharpness_and_noise_and_is_the_median_over_a_pool():
+    """A flat image has none; a one-pixel checkerboard has the most, and blurring it takes most of that away;
+    noise adds detail; a pool reports the median over its images."""
+    from meta_sim.experiments.task_eval import colour_stats, fine_detail
+    from meta_sim.sim.sensor import gaussian_blur
+    from meta_sim.task.data import Pool
+
+    flat = np.full((32, 32, 3), 0.4, np.float32)
+    checker = np.repeat((((np.arange(32)[:, None] + np.arange(32)[None]) % 2) * 0.5 + 0.25)[:, :, None], 3, axis=2)
+    checker = checker.astype(np.float32)
+    assert fine_detail(flat) == pytest.approx(0.0, abs=1e-6)
+    assert fine_detail(checker) > 0.2
+    assert fine_detail(gaussian_blur(checker, 1.0)) < 0.2 * fine_detail(checker)
+    noisy = flat + 0.02 * np.random.default_rng(0).standard_normal(flat.shape).astype(np.float32)
+    assert fine_detail(noisy) > 0.005
+    mask = np.zeros((32, 32), bool)
+    pool = Pool("p", [flat, noisy, checker], [mask] * 3, 0.3, ["a", "b", "c"])
+    assert colour_stats(pool)["image"]["fine_detail"] == pytest.approx(fine_detail(noisy))
 
 
 def test_the_realism_picture_shows_real_scenes_and_renders_on_the_same_ground():
