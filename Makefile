@@ -10,7 +10,7 @@ DEMO_TARGETS := 12
 DEMO_STARTS := 64
 DEMO_ITERATIONS := 100
 
-.PHONY: setup demo test test-all lint addon bench-render bench-exposure bench-nams bench-adjoint bench-ablations bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective clean
+.PHONY: setup demo test test-all lint addon bench-render bench-exposure bench-nams bench-adjoint bench-ablations bench-tradeoff bench-farm bench-reference bench-infer bench-task bench-realism bench-appearance bench-stability bench-roof-finder bench-objective bench-sensor clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -124,6 +124,11 @@ bench-ablations: setup
 # what the cache lacks): roof pixels it counts against the building masks and the training cities' range.
 bench-roof-finder: setup
 	META_SIM_THREADS=2 $(BIN)/meta-sim bench roof-finder --finders segmenter,segmenter-jitter --out benchmarks/roof_finder.json
+
+# Each named sensor's sharpness against the fine detail of the real domains' adapt scenes it stands for
+# (renders 48 tiles once, then seconds).
+bench-sensor: setup
+	$(BIN)/meta-sim bench sensor --out benchmarks/sensor.json
 
 # What each extreme case (constant, black, white, HDR and NaN targets; one-tile groups; M=1, S=M, k=0, r=0 and 1;
 # a one-choice space; zero-variance features; bfloat16) ends in, on tiny models made in the run (a few minutes).

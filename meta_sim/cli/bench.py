@@ -380,6 +380,21 @@ def bench_roof_finder_command(out, docs, spaces, finders, realdata, cache):
     _publish(result, out, format_roof_finder_table(result), "roof-finder", docs)
 
 
+@bench.command("sensor")
+@click.option("--out", type=click.Path(path_type=Path), default=Path("benchmarks/sensor.json"), show_default=True)
+@_docs_option
+@click.option("--realdata", type=click.Path(path_type=Path), default=None,
+              help="the shared real domains (default: ../shared/realdata beside the repository)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
+def bench_sensor_command(out, docs, realdata, cache):
+    """Fit each named sensor's sharpness (blur, unsharp mask) to the fine detail of the real domains' adapt
+    scenes it stands for, on renders of the richest built-in scene with no sensor."""
+    from ..experiments.sensor_fit import bench_sensor, format_sensor_table
+
+    result = _with_bars(bench_sensor, cache_dir=cache, realdata=realdata)
+    _publish(result, out, format_sensor_table(result), "sensor", docs)
+
+
 @bench.command("realism")
 @_task_bench_options("realism", "folder for realism*.png (real scenes beside renders of their inferred designs)")
 @click.option("--runs", default=None,

@@ -70,7 +70,8 @@ def test_blur_and_jpeg_keep_the_mean_and_change_the_detail():
 
 
 @pytest.mark.parametrize("bad", [dict(haze=2.0), dict(blur_px=-1), dict(jpeg_quality=101), dict(jpeg_quality=True),
-                                 dict(gains=(1, 1)), dict(read_noise=float("nan")), dict(knee=0.99)])
+                                 dict(gains=(1, 1)), dict(read_noise=float("nan")), dict(knee=0.99), dict(sharpen=-0.5),
+                                 dict(sharpen=True)])
 def test_bad_sensor_settings_are_refused(bad):
     with pytest.raises(MetaSimError, match="sensor"):
         Sensor(name="custom", **bad).check()
@@ -79,5 +80,25 @@ def test_bad_sensor_settings_are_refused(bad):
 def test_named_sensors_are_valid_and_unknown_names_listed():
     for sensor in SENSORS.values():
         sensor.check()
-    with pytest.raises(MetaSimError, match="none, drone, satellite"):
+    with pytest.raises(MetaSimError, match="none, drone, drone-v2, satellite"):
         get_sensor("xray")
+
+
+def test_sharpening_raises_fine_detail_keeps_the_mean_and_stays_out_of_headers_when_unset():
+    """The unsharp mask multiplies the finest detail (a one-pixel checkerboard's contrast grows), leaves a flat
+    image and the mean alone, is applied after the blur, and is recorded in the header only when set (so the
+    headers of the named sensors without it, and the tiles cached with them, are unchanged)."""
+    checker = ((np.arange(32)[:, None] + np.arange(32)[None]) % 2).astype(np.float32) * 0.1 + 0.2
+    rgb = np.repeat(checker[:, :, None], 3, axis=2)
+    plain = Sensor(name="custom", knee=0.9, ceiling=1.0)
+    sharp = Sensor(name="custom", knee=0.9, ceiling=1.0, sharpen=1.0)
+    contrast = [float(np.std(s.apply(rgb, [0, 0]))) for s in (plain, sharp)]
+    assert contrast[1] > 1.5 * contrast[0]
+    assert float(np.mean(sharp.apply(rgb, [0, 0]))) == pytest.approx(float(np.mean(plain.apply(rgb, [0, 0]))), rel=0.03)
+    flat = np.full((16, 16, 3), 0.3, np.float32)
+    assert np.array_equal(sharp.apply(flat, [0, 0]), plain.apply(flat, [0, 0]))
+    blurred_first = Sensor(name="custom", knee=0.9, ceiling=1.0, blur_px=2.0, sharpen=1.0).apply(rgb, [0, 0])
+    assert float(np.std(blurred_first)) < 0.5 * contrast[0]  # the blur took the checkerboard first
+    assert "sharpen" not in plain.to_dict() and sharp.to_dict()["sharpen"] == 1.0
+    for sensor in SENSORS.values():
+        assert ("sharpen" in sensor.to_dict()) == bool(sensor.sharpen)
