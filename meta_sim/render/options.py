@@ -42,7 +42,8 @@ RENDER_OPTIONS = (
     Option("--tiles", int, 9, "tiles per design (a near-square grid of adjacent tiles)"),
     Option("--preset", str, "fast", "render quality preset: fast (Workbench), balanced or quality (Cycles)"),
     Option("--sensor", str, "none", "camera after the render: none, drone, drone-v2 (sharper: fitted to real "
-           "drone imagery by make bench-sensor) or satellite (colour balance, haze, blur, sharpening, a tone curve that does not clip, noise, JPEG; see meta_sim/sim/sensor.py)"),
+           "drone imagery by make bench-sensor) or satellite (colour balance, haze, blur, sharpening, a tone "
+           "curve that does not clip, noise, JPEG; see meta_sim/sim/sensor.py)"),
     Option("--ground", str, "plain", "ground cover: plain (one lawn), suburban, mixed or arid (patches of lawn, "
            "dry grass, soil, sand, gravel, pavement; see meta_sim/sim/ground.py)"),
     Option("--style", str, "suburban", "city style: suburban (a street grid), dense (a packed informal town), "
