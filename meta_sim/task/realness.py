@@ -41,10 +41,14 @@ VIEWS = ("full", "grey", "blur", "grey+blur")
 BLUR_PX = 2.0  # the "blur" view's standard deviation, in pixels at the working pixel size
 
 
-def view(images: torch.Tensor, name: str) -> torch.Tensor:
-    """(N, 3, H, W) display-sRGB crops as the view ``name`` of ``VIEWS`` shows them."""
+def _check_view(name: str) -> None:
     if name not in VIEWS:
         raise MetaSimError(f"unknown classifier view {name!r}; choose one of {', '.join(VIEWS)}")
+
+
+def view(images: torch.Tensor, name: str) -> torch.Tensor:
+    """(N, 3, H, W) display-sRGB crops as the view ``name`` of ``VIEWS`` shows them."""
+    _check_view(name)
     if "grey" in name:
         images = images.mean(dim=1, keepdim=True).expand(-1, 3, -1, -1)
     if "blur" in name:
@@ -76,8 +80,7 @@ class _Net(nn.Module):
 def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, rendered_test: Pool,
                       settings: RealnessSettings = RealnessSettings(), progress: Progress | None = None) -> float:
     """Held-out accuracy of telling real (label 1) from rendered (label 0) crops, seen in ``settings.view``."""
-    if settings.view not in VIEWS:
-        raise MetaSimError(f"unknown classifier view {settings.view!r}; choose one of {', '.join(VIEWS)}")
+    _check_view(settings.view)  # before any training
     pools = (real_train, rendered_train, real_test, rendered_test)
     if len({p.pixel_size_m for p in pools}) != 1:
         raise MetaSimError("real and rendered images must be at one pixel size")
