@@ -81,9 +81,10 @@ class ModelSettings:
                                "finder has no steps")
         return self
 
-    def key(self, dataset: DatasetConfig, extractor_id: str) -> str:
+    def key(self, dataset: DatasetConfig, extractor_id: str, generation: int = 0) -> str:
         """Names the cached models: every input, with the training and model defaults resolved, so
-        that a change of a default (not only of an override) trains afresh."""
+        that a change of a default (not only of an override) trains afresh, and the training set's tile
+        ``generation`` (``tiles_generation``) when its tiles were ever rendered again."""
         from ..nams import NAMSConfig, TrainConfig
 
         hidden = architecture_options(self.architecture, ())["hidden"]  # an unknown name: an error here
@@ -96,6 +97,8 @@ class ModelSettings:
         train = TrainConfig.from_dict({"seed": self.seed, **self.train}).to_dict()
         inputs = {"dataset": dataset.identity(), "extractor": extractor_id, "views": self.views,
                   "nams": nams, "train": train, "seed": self.seed, "code": MODEL_CODE_VERSION}
+        if generation:  # tiles rendered again under the same key: models of the older tiles are stale
+            inputs["tiles_generation"] = int(generation)
         if self.architecture != "paper":  # models cached before the choice existed are the paper's
             inputs["architecture"] = self.architecture
         if self.roof_colour:  # models without it keep the keys they had before it existed
@@ -132,6 +135,39 @@ def dataset_dir(config: DatasetConfig, root: Path | None = None) -> Path:
     return Path(root or cache_root()) / "datasets" / config.key()
 
 
+GENERATION_FILE = "tiles-generation"
+
+
+def tiles_generation(folder: Path) -> int:
+    """How many times a training set's tiles were rendered again after something had been derived from them
+    (0 for a set rendered once): the models' key takes it (``ModelSettings.key``)."""
+    try:
+        return int((Path(folder) / GENERATION_FILE).read_text().strip())
+    except (FileNotFoundError, ValueError):
+        return 0
+
+
+def drop_derived(folder: Path) -> int:
+    """After tiles of the training set in ``folder`` were (re)rendered: delete what was derived from the tiles
+    before (the features, per design and per tile, and the roof finders: every ``*.pt`` beside ``tiles/``) and
+    count one more tile generation, so neither they nor models trained on them are taken for the new tiles'.
+    A set whose tiles are rendered while nothing was derived yet (a first run, or one stopped while rendering)
+    keeps its generation. A named sensor or scene whose look changed renders its tiles again under the same
+    key (their headers no longer match); so does a space file reused under an old name. Returns the generation."""
+    from ..core.fileio import write_text_atomic
+
+    folder = Path(folder)
+    derived = sorted(folder.glob("*.pt"))
+    generation = tiles_generation(folder)
+    if not derived:
+        return generation
+    for path in derived:
+        path.unlink(missing_ok=True)
+    generation += 1
+    write_text_atomic(folder / GENERATION_FILE, f"{generation}\n")
+    return generation
+
+
 def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path | None = None,
                      bars: Bars | None = None) -> tuple[FeatureSet, dict]:
     """Render what is missing of the training set and compute what is missing of its features.
@@ -156,6 +192,8 @@ def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettin
     started = time.perf_counter()
     _, summary = render_training_set(folder, config,
                                      bars("render training set", config.designs * config.tiles) if bars else None)
+    if summary.written:
+        drop_derived(folder)
     seconds["render"] = time.perf_counter() - started
     extractor = make_extractor(settings.extractor, Path(settings.weights) if settings.weights else None)
     started = time.perf_counter()
@@ -237,7 +275,8 @@ def ensure_models(config: DatasetConfig, settings: ModelSettings, root: Path | N
     from ..nams import load_checkpoint
 
     features, seconds, _ = prepare_features(config, settings, root, bars)
-    folder = Path(root or cache_root()) / "models" / settings.key(config, features.extractor_id)
+    generation = tiles_generation(dataset_dir(config, root))
+    folder = Path(root or cache_root()) / "models" / settings.key(config, features.extractor_id, generation)
     paths = {kind: folder / f"{kind}.pt" for kind in ("nams", "dr")}
     with locked(folder):
         missing = []
