@@ -49,3 +49,20 @@ def test_drone_v2_has_the_published_fit():
     assert (v2.blur_px, v2.sharpen) == (published["blur_px"], published["sharpen"])
     assert (v2.read_noise, v2.shot_noise, v2.jpeg_quality, v2.gains) == (v1.read_noise, v1.shot_noise,
                                                                          v1.jpeg_quality, v1.gains)
+
+
+def test_bench_sensor_command_writes_the_fit_and_its_table(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    from meta_sim.cli import main
+
+    renders = _renders()
+    target = sensor_fit.rendered_detail(renders, get_sensor("drone"))
+    result = {"sensors": sensor_fit.fit_sensors(renders, {"banepa": target, "kampala": target, "rio": target}),
+              "renders": 3, "designs": 3, "tiles": 1, "space": "s", "seed": 1, "seconds": 2.0}
+    monkeypatch.setattr(sensor_fit, "bench_sensor", lambda cache_dir=None, realdata=None, bars=None: result)
+    out = tmp_path / "sensor.json"
+    ran = CliRunner().invoke(main, ["bench", "sensor", "--no-docs", "--out", str(out)])
+    assert ran.exit_code == 0, ran.output
+    assert json.loads(out.read_text())["sensors"]["drone"]["fitted"] == result["sensors"]["drone"]["fitted"]
+    assert "| drone | banepa " in ran.output and "| satellite | rio " in ran.output
