@@ -6,7 +6,7 @@ classifier in its "blur" view showed that fine detail is part of what gives rend
 it: cities of the richest built-in scene (``FIT_SPACE`` without its sensor parameter, designs drawn uniformly)
 are rendered once with no sensor; each candidate sharpness (``FIT_BLUR`` x ``FIT_SHARPEN``, the sensor's
 other settings kept) is applied to those renders, and its fine detail
-(``task_eval.fine_detail``, median over the tiles) is set against the median over the ``adapt`` scenes of the
+(``sim.sensor.fine_detail``, median over the tiles) is set against the median over the ``adapt`` scenes of the
 real domains that sensor stands for (``realdomains.SENSOR_OF``; validation scenes, never the test scenes).
 The candidate nearest in the mean absolute log ratio is the fitted sharpness. Numpy after the renders: the
 grid takes seconds.
@@ -22,6 +22,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from ..core.progress import Bars
+from ..sim.sensor import fine_detail
 from . import realdomains
 
 FIT_SPACE = "overhead-towns-v5"
@@ -64,16 +65,12 @@ def _display(linear: np.ndarray) -> np.ndarray:
 
 def rendered_detail(renders: list[np.ndarray], sensor) -> float:
     """The median fine detail of ``renders`` (linear) seen through ``sensor``."""
-    from .task_eval import fine_detail
-
     return float(np.median([fine_detail(_display(sensor.apply(image, [FIT_SEED, k])))
                             for k, image in enumerate(renders)]))
 
 
 def real_detail(domain: str, realdata: Path, pixel_size_m: float = 0.3) -> float:
     """The median fine detail of a real domain's ``adapt`` scenes at ``pixel_size_m``."""
-    from .task_eval import fine_detail
-
     adapt, _ = realdomains.split(realdomains.scenes(domain, realdata))
     return float(np.median([fine_detail(realdomains.at_pixel_size(scene, pixel_size_m)[0]) for scene in adapt]))
 

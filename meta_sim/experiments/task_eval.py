@@ -41,6 +41,7 @@ from ..core.fileio import write_text_atomic
 from ..core.progress import Bars
 from ..render.jobs import Job
 from ..sim.design import builtin_spaces
+from ..sim.sensor import fine_detail
 from ..task.data import Pool
 from ..task.realness import BLUR_PX
 from ..task.score import Counts
@@ -541,16 +542,6 @@ def colour_stats(pool: Pool) -> dict:
 def _share(value, digits: int = 2) -> str:
     """A colour statistic in a table cell ("-" where the pool had none)."""
     return "-" if value is None else f"{value:.{digits}f}"
-
-
-def fine_detail(display: np.ndarray) -> float:
-    """How much detail an sRGB image holds at its finest scale: the standard deviation of its display brightness
-    (the channels' mean) minus that brightness blurred by a Gaussian of one pixel. Sharpness, small texture and
-    noise raise it; the blur of optics and resampling lowers it."""
-    from ..sim.sensor import gaussian_blur
-
-    brightness = np.clip(display, 0.0, 1.0).mean(axis=2, keepdims=True).astype(np.float32)
-    return float(np.std(brightness - gaussian_blur(brightness, 1.0)))
 
 
 def _dark_tail(display: np.ndarray) -> float:

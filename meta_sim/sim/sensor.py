@@ -102,6 +102,14 @@ class Sensor:
 SHARPEN_PX = 1.0  # the unsharp mask's Gaussian, in pixels
 
 
+def fine_detail(display: np.ndarray) -> float:
+    """How much detail an sRGB image holds at its finest scale: the standard deviation of its display brightness
+    (the channels' mean) minus that brightness blurred by a Gaussian of one pixel. Sharpness, small texture and
+    noise raise it; the blur of optics and resampling lowers it (``make bench-sensor`` fits the sensors by it)."""
+    brightness = np.clip(display, 0.0, 1.0).mean(axis=2, keepdims=True).astype(np.float32)
+    return float(np.std(brightness - gaussian_blur(brightness, 1.0)))
+
+
 def tone_curve(light: np.ndarray, knee: float, ceiling: float = 1.0) -> np.ndarray:
     """Per channel: the identity up to ``knee``, then an exponential shoulder towards ``ceiling`` with
     the same slope at the knee (smooth, rising, below the ceiling for any finite light)."""
