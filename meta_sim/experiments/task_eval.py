@@ -112,6 +112,7 @@ class Harness:
     source: Pool
     bars: Bars | None = None
     trained: dict = field(default_factory=dict)  # model id -> Segmenter, within one run
+    critic_pool: tuple | None = None  # the NAMS training set's tiles and their designs, for ``critic_designs``
 
     @property
     def gsd(self) -> float:
@@ -406,14 +407,17 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
             uniform[seen_by] = render_set(h, "uniform", synthetic_jobs(h, None, s.r_real, s.target_seed), seen_by,
                                           roof_jitter, ground)
         found = {}
-        designs = _infer_real(h, adapt, s.target_seed, domain, found)[method] if infer else None
+        adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
+        if infer and method == CRITIC_METHOD:
+            designs = critic_designs(h, adapt_pool, CRITIC_DESIGNS, domain)
+        else:
+            designs = _infer_real(h, adapt, s.target_seed, domain, found)[method] if infer else None
         population = near_designs(found["nams"], near) if infer and near else designs
         rendered = (render_set(h, f"{domain} {method}", synthetic_jobs(h, population, s.r_real, s.target_seed), seen_by,
                                roof_jitter, ground) if infer else uniform[seen_by])
         others = [d for d in realdomains.DOMAINS if d != domain]
         other = merge([_real_pool(d, realdomains.scenes(d, h.realdata), s.train) for d in others])
         test_pool = _real_pool(f"{domain} test", test, s.train)
-        adapt_pool = _real_pool(f"{domain} adapt", adapt, s.train)
         flat_pool = uniform[seen_by]
         if matched:
             rendered, flat_pool = _colour_matched(rendered, adapt_pool), _colour_matched(flat_pool, adapt_pool)
@@ -465,6 +469,54 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += f"-r{s.r_real:g}" if diversified else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
+
+
+# ``run_sim_only``'s method "critic": each domain's population is the CRITIC_DESIGNS designs of the NAMS model's
+# training set whose renders a real-versus-rendered critic, trained on the domain's adapt scenes (no labels),
+# finds the most real (``critic_designs``).
+CRITIC_METHOD = "critic"
+CRITIC_DESIGNS = 16
+CRITIC_STEPS = 600
+
+
+def critic_designs(h: Harness, real: Pool, n: int, label: str = "target") -> list[dict]:
+    """The ``n`` designs of the harness's NAMS training set whose tiles look the most like ``real`` (unlabelled
+    use of its images only) to a real-versus-rendered critic (``task.realness.train_critic``): the designs are
+    split in two folds, a critic trained on the real images against one fold's tiles scores the other fold's
+    (``realness_scores``: mean logit over the tile's crops), and each design takes its tiles' mean score.
+    Deterministic; the tiles are read once per harness."""
+    from ..pipeline.trainsets import TileDataset
+    from ..pipeline.workflow import dataset_dir
+    from ..task.realness import RealnessSettings, realness_scores, train_critic
+
+    if n < 1:
+        raise MetaSimError(f"critic designs: n must be at least 1, not {n}")
+    if h.critic_pool is None:
+        data = TileDataset(dataset_dir(h.dataset, h.root) / "tiles", "srgb", h.gsd)
+        items, progress = [], h.bars("read the training tiles", len(data)) if h.bars else None
+        for k in range(len(data)):
+            item = data[k]
+            items.append((np.ascontiguousarray(item["image"].numpy().transpose(1, 2, 0)), item["meta"]["design"]))
+            if progress:
+                progress(1)
+        h.critic_pool = (Pool("training tiles", [i for i, _ in items], [np.zeros(i.shape[:2], bool) for i, _ in items],
+                              h.gsd, [d for _, d in items]), [d for _, d in items])
+    tiles, keys = h.critic_pool
+    order = sorted(set(keys))
+    index = np.array([order.index(k) for k in keys])
+    scores = np.zeros(len(keys))
+    settings = RealnessSettings(steps=CRITIC_STEPS, crop=min(64, *(min(m.shape) for m in real.masks)))
+    for fold in (0, 1):
+        train = [k for k in range(len(keys)) if index[k] % 2 != fold]
+        scored = [k for k in range(len(keys)) if index[k] % 2 == fold]
+        part = Pool("training tiles", [tiles.images[k] for k in train], [tiles.masks[k] for k in train],
+                    tiles.pixel_size_m, [tiles.sources[k] for k in train])
+        progress = h.bars(f"{label} critic, fold {fold}", settings.steps) if h.bars else None
+        net = train_critic(real, part, replace(settings, seed=fold), progress)
+        scores[scored] = realness_scores(net, [tiles.images[k] for k in scored], settings.crop)
+    per_design = np.bincount(index, weights=scores) / np.bincount(index)
+    best = np.argsort(-per_design, kind="stable")[:n]
+    return [json.loads(order[k]) for k in best]
 
 
 def _colour_matched(rendered: Pool, real: Pool) -> Pool:
@@ -687,7 +739,11 @@ DR_DESIGNS = ":dr"
 # colour statistics of its adapt scenes (``run_sim_only``'s ``matched``) before the segmenters and the
 # classifier see them.
 COLOUR_MATCHED = ":matched"
-RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED)  # at most one, after any AUGMENTED
+# A space's run with this suffix (e.g. "overhead-towns-v5+scene:critic") draws each domain's training cities from
+# the CRITIC_DESIGNS training designs a real-versus-rendered critic finds the most real (``critic_designs``).
+CRITIC_POPULATION = ":critic"
+RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED, CRITIC_POPULATION)  # at most one,
+# after any AUGMENTED
 # A space's run ending in ":r" and a share (e.g. "overhead-towns-v4+scene:r0.5") renders each domain's training set
 # with that diversify-with-rejection rate (the share of cities drawn uniformly instead of from the inferred
 # designs; ``TaskEvalSettings.r_real``, the paper's 0.25 otherwise): how far to trust an inferred design.
@@ -724,7 +780,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
                 for suffix in RUN_SUFFIXES}
     suffixed |= {run for run in only or () if diversify_share(run) is not None
-                 and run.rpartition(DIVERSIFY)[0] in {*builtin_spaces(), *augmentable}}
+                 and run.rpartition(DIVERSIFY)[0] in {*builtin_spaces(), *augmentable, *suffixed}}
     spaces = (*spaces, *sorted(set(only or ()) & (set(builtin_spaces()) | augmentable | suffixed) - set(spaces)))
     names = realism_runs(variants, spaces)
     unknown = sorted(set(only or ()) - set(names))
@@ -745,10 +801,12 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for run in spaces:
         infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
-        method, matched = "dr" if run.endswith(DR_DESIGNS) else "nams", run.endswith(COLOUR_MATCHED)
         named, share = run, diversify_share(run)
         if share is not None:
             named = run.rpartition(DIVERSIFY)[0]
+        method = ("dr" if named.endswith(DR_DESIGNS) else CRITIC_METHOD if named.endswith(CRITIC_POPULATION)
+                  else "nams")
+        matched = named.endswith(COLOUR_MATCHED)
         for suffix in RUN_SUFFIXES:
             named = named.removesuffix(suffix)
         augment = next((suffix for suffix in AUGMENTED if named.endswith(suffix)), None)
@@ -775,6 +833,8 @@ def _space_cell(row: dict) -> str:
             + (", uniform designs only" if row.get("rendered_only", {}) is None else "")
             + (f", population of each group's {row['near']} best-ranked designs" if row.get("near") else "")
             + (", designs inferred by DR" if row.get("method") == "dr" else "")
+            + (f", the {len(row['designs'])} training designs a critic of the adapt scenes finds the most real"
+               if row.get("method") == CRITIC_METHOD else "")
             + (", renders colour-matched to the adapt scenes" if row.get("colour_matched") else "")
             + (f", {row['r']:.0%} of the cities uniform designs" if row.get("r") is not None else ""))
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -77,14 +78,14 @@ class _Net(nn.Module):
         return self.head(self.features(x).mean(dim=(-2, -1)))[:, 0]
 
 
-def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, rendered_test: Pool,
-                      settings: RealnessSettings = RealnessSettings(), progress: Progress | None = None) -> float:
-    """Held-out accuracy of telling real (label 1) from rendered (label 0) crops, seen in ``settings.view``."""
+def train_critic(real: Pool, rendered: Pool, settings: RealnessSettings = RealnessSettings(),
+                 progress: Progress | None = None) -> nn.Module:
+    """The classifier trained to tell ``real`` (label 1) from ``rendered`` (label 0) crops seen in
+    ``settings.view``, in inference mode: a crop's logit says how real it looks to it."""
     _check_view(settings.view)  # before any training
-    pools = (real_train, rendered_train, real_test, rendered_test)
-    if len({p.pixel_size_m for p in pools}) != 1:
+    if real.pixel_size_m != rendered.pixel_size_m:
         raise MetaSimError("real and rendered images must be at one pixel size")
-    real_train, rendered_train, real_test, rendered_test = (_whole_crops_only(p, settings.crop) for p in pools)
+    real, rendered = (_whole_crops_only(p, settings.crop) for p in (real, rendered))
     torch.manual_seed(settings.seed)
     net = _Net(settings.width)
     crops = torch.Generator().manual_seed(settings.seed)
@@ -93,15 +94,26 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
     labels = torch.cat([torch.ones(half), torch.zeros(half)])
     net.train()
     for _ in range(settings.steps):
-        images = view(torch.cat([real_train.crops(half, settings.crop, crops, colour=None).image,
-                                 rendered_train.crops(half, settings.crop, crops, colour=None).image]), settings.view)
+        images = view(torch.cat([real.crops(half, settings.crop, crops, colour=None).image,
+                                 rendered.crops(half, settings.crop, crops, colour=None).image]), settings.view)
         loss = nn.functional.binary_cross_entropy_with_logits(net(images), labels)
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
         optimiser.step()
         if progress:
             progress(1)
-    net.eval()
+    return net.eval()
+
+
+def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, rendered_test: Pool,
+                      settings: RealnessSettings = RealnessSettings(), progress: Progress | None = None) -> float:
+    """Held-out accuracy of telling real (label 1) from rendered (label 0) crops, seen in ``settings.view``."""
+    _check_view(settings.view)  # before any training
+    pools = (real_train, rendered_train, real_test, rendered_test)
+    if len({p.pixel_size_m for p in pools}) != 1:
+        raise MetaSimError("real and rendered images must be at one pixel size")
+    real_test, rendered_test = (_whole_crops_only(p, settings.crop) for p in (real_test, rendered_test))
+    net = train_critic(real_train, rendered_train, settings, progress)
     scoring = torch.Generator().manual_seed(settings.seed + 1)
     with torch.no_grad():
         real = net(view(real_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image,
@@ -109,6 +121,22 @@ def realness_accuracy(real_train: Pool, rendered_train: Pool, real_test: Pool, r
         rendered = net(view(rendered_test.crops(settings.test_crops, settings.crop, scoring, augment=False).image,
                             settings.view)) <= 0
     return float(torch.cat([real, rendered]).float().mean())
+
+
+def realness_scores(net: nn.Module, images, crop: int, view_name: str = "full") -> list[float]:
+    """How real each image (float32 (H, W, 3) display sRGB) looks to a ``train_critic`` net: the mean logit over
+    the whole ``crop``-pixel crops tiling it (at least one, from its top-left corner)."""
+    scores = []
+    with torch.no_grad():
+        for image in images:
+            h, w = image.shape[:2]
+            if min(h, w) < crop:
+                raise MetaSimError(f"an image of {w} x {h} pixels holds no {crop}-pixel crop")
+            tiles = [image[y:y + crop, x:x + crop] for y in range(0, h - crop + 1, crop)
+                     for x in range(0, w - crop + 1, crop)]
+            batch = torch.from_numpy(np.stack(tiles).transpose(0, 3, 1, 2).copy())
+            scores.append(float(net(view(batch, view_name)).mean()))
+    return scores
 
 
 def _whole_crops_only(pool: Pool, size: int) -> Pool:

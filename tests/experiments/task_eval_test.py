@@ -699,3 +699,39 @@ def test_the_classifier_gets_its_own_seeds_more_than_the_segmenters(monkeypatch)
                                         "render_preset": "fast", "settings": {"seeds": [0]}})
     assert ("| rio | overhead-towns-v5, uniform designs only | none | 0 | plain | 0.86 +- 0.03 | 0.69 +- 0.01 "
             "| 0.79 +- 0.01 | 0.59 +- 0.01 |") in table
+
+
+def test_critic_designs_are_the_training_designs_whose_tiles_look_the_most_like_the_real_scenes(monkeypatch):
+    """``critic_designs`` ranks the training set's designs by how real their tiles look to a critic of the real
+    scenes scored across two folds of designs: designs on the real scenes' green ground come first, designs on
+    blue ground last; deterministic, and n must be at least 1."""
+    from meta_sim.experiments import task_eval
+    from meta_sim.task.data import Pool
+
+    def scene(ground, seed):
+        rng = np.random.default_rng(seed)
+        image = np.clip(np.array(ground) + 0.05 * rng.standard_normal((64, 64, 3)), 0, 1).astype(np.float32)
+        image[20:40, 10:30] = (0.8, 0.3, 0.2)
+        return image
+
+    real = Pool("real", [scene((0.3, 0.5, 0.25), k) for k in range(6)], [np.zeros((64, 64), bool)] * 6, 0.6,
+                ["r"] * 6)
+    grounds = {"green": (0.3, 0.5, 0.25), "olive": (0.35, 0.45, 0.3), "blue": (0.2, 0.3, 0.7),
+               "grey": (0.5, 0.5, 0.5)}
+    designs = [json.dumps({"ground": name, "k": k}, sort_keys=True) for name in grounds for k in range(4)]
+    images = [scene(grounds[json.loads(d)["ground"]], 100 + 2 * i + t) for i, d in enumerate(designs) for t in (0, 1)]
+    keys = [d for d in designs for _ in (0, 1)]
+
+    def harness():
+        h = task_eval.Harness(object(), None, None, TaskEvalSettings(), Path("."), REALDATA, None)
+        h.critic_pool = (Pool("t", images, [np.zeros((64, 64), bool)] * len(images), 0.6, keys), keys)
+        return h
+
+    monkeypatch.setattr(task_eval, "CRITIC_STEPS", 80)
+    best, again = (task_eval.critic_designs(harness(), real, 4) for _ in range(2))
+    ranked = task_eval.critic_designs(harness(), real, 16)  # four designs per ground, two tiles each
+    assert best == again and len(best) == 4 and len(ranked) == 16
+    assert {d["ground"] for d in best} <= {"green", "olive"}
+    assert {d["ground"] for d in ranked[-4:]} <= {"blue", "grey"}
+    with pytest.raises(MetaSimError, match="at least 1"):
+        task_eval.critic_designs(harness(), real, 0)

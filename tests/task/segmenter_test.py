@@ -128,6 +128,24 @@ def test_real_versus_rendered_accuracy_is_high_for_unlike_images_and_chance_for_
     assert first == realness_accuracy(red, blue, red_test, blue_test, RealnessSettings(steps=5, crop=32, width=8))
 
 
+def test_a_critic_scores_images_like_the_real_ones_higher_and_is_deterministic():
+    """A critic trained on scenes of green ground ("real") against blue ground scores held-out green scenes and
+    scenes of a ground near it above blue ones (``realness_scores``: mean logit over an image's crops); the same
+    seed gives the same scores, and an image smaller than a crop is refused."""
+    from meta_sim.task.realness import RealnessSettings, realness_scores, train_critic
+
+    settings = RealnessSettings(steps=60, batch=8, crop=32, width=8)
+    red, blue = _pool("red", seed=1), _pool("blue", seed=2, ground=(0.2, 0.3, 0.7))
+    net = train_critic(red, blue, settings)
+    held = [*_pool("red", n=2, seed=3).images, *_pool("near", n=2, seed=4, ground=(0.3, 0.45, 0.35)).images,
+            *_pool("blue", n=2, seed=5, ground=(0.2, 0.3, 0.7)).images]
+    scores = realness_scores(net, held, settings.crop)
+    assert min(scores[:4]) > max(scores[4:])
+    assert scores == realness_scores(train_critic(red, blue, settings), held, settings.crop)
+    with pytest.raises(MetaSimError, match="holds no 32-pixel crop"):
+        realness_scores(net, [np.zeros((16, 40, 3), np.float32)], settings.crop)
+
+
 def test_scene_colour_augmentation_recolours_the_ground_apart_and_is_seeded():
     """"scene" changes the crops beyond "light" and, in most crops, the ground's colour apart from the buildings'
     (the difference of their mean colours), which "light" keeps within its gain; its halves: "ground" recolours
