@@ -298,7 +298,7 @@ class CityScene:
                  greenness: float | None = None, sun_elevation_deg: float | None = None,
                  ground_albedo: float | None = None, shadow_depth: float | None = None,
                  view_height_m: float | None = None, ground_grain: float | None = None,
-                 road_dust: float | None = None):
+                 road_dust: float | None = None, soil_redness: float | None = None):
         self.layout = layout
         self.ground_mix = ground  # ``sim.ground`` cover shares; None: the plain lawn
         self.greenness = greenness  # ``sim.appearance``: vegetation colour; None: today's lawn and trees
@@ -306,6 +306,7 @@ class CityScene:
         self.ground_albedo = ground_albedo  # ``sim.appearance.ground_colours``; None: today's ground
         self.ground_grain = ground_grain  # ``sim.ground.grain_field``'s strength; None: today's smooth ground
         self.road_dust = road_dust  # ``sim.surfaces.dusty``; None: today's roads and tracks
+        self.soil_redness = soil_redness  # ``sim.appearance.ground_colours``; None: today's soil
         self.shadow_depth = shadow_depth  # share of the light a shadow takes; None: ``quality.SHADOW_DEPTH``
         if view_height_m is not None and not 1.0 < float(view_height_m) < math.inf:
             raise MetaSimError(f"a view height must be a number of metres above 1, not {view_height_m!r}")
@@ -373,7 +374,7 @@ class CityScene:
         }
         # The bare ground (lawn or cover mix, and the dirt tracks) in the design's colours and albedo:
         # a property of the scene, so shadows, trees and cars fall on it as on any ground.
-        bare = ground_colours(self.greenness, self.ground_albedo)
+        bare = ground_colours(self.greenness, self.ground_albedo, self.soil_redness)
         covers = self.ground_mix or ({"lawn": 1.0} if self.ground_grain else None)  # grain on the plain lawn too
         if covers:
             ground = _image_material("ground", self._ground_image(region, seed + 1, bare, covers), key)

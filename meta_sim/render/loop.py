@@ -137,7 +137,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                               greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
                               ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
                               view_height_m=look.view_height_m, ground_grain=look.ground_grain,
-                              road_dust=look.road_dust)
+                              road_dust=look.road_dust, soil_redness=look.soil_redness)
         except MetaSimError as exc:  # a look this city cannot take (a view below its towers): say whose
             raise MetaSimError(f"job {work[0][0].name} (city seed {city_seed}): {exc}") from None
         summary.seconds["build"] += time.perf_counter() - clock

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from .ground import COVERS, DIRT, MIXES
-from .jitter import roof_jitter, roof_paint
+from .jitter import LUMA, roof_jitter, roof_paint
 from .sensor import SENSORS, Sensor, get_sensor
 
 # categorical field -> the choices it allows; continuous field -> (lowest, highest) value
@@ -29,13 +29,17 @@ CATEGORICAL_FIELDS = {"ground": tuple(MIXES), "sensor": tuple(SENSORS)}
 CONTINUOUS_FIELDS = {"roof_jitter": (0.0, 1.0), "greenness": (0.0, 1.0), "sun_elevation_deg": (15.0, 85.0),
                      "brightness": (0.25, 4.0), "ground_albedo": (0.2, 2.0), "roof_paint": (0.0, 1.0),
                      "shadow_depth": (0.0, 0.95), "view_height_m": (30.0, 10_000.0), "ground_grain": (0.0, 1.0),
-                     "road_dust": (0.0, 1.0)}
+                     "road_dust": (0.0, 1.0), "soil_redness": (0.0, 1.0), "saturation": (0.5, 2.0)}
 FIELDS = (*CATEGORICAL_FIELDS, *CONTINUOUS_FIELDS)
 
 # Vegetation colours (linear RGB) at greenness 1 (lush, after rain) and 0 (dry season, dormant grass).
 LUSH = {"lawn": (0.11, 0.20, 0.06), "tree": (0.04, 0.12, 0.03)}
 DRY = {"lawn": (0.34, 0.29, 0.17), "tree": (0.12, 0.13, 0.06)}
 TREE_COLOUR = (0.05, 0.13, 0.035)  # small trees' leaves when greenness is not set
+# The bare ground's colours (linear RGB) at soil redness 1: the iron-rich red-orange earth (laterite) of the
+# tropics, as in Kampala's yards and unpaved lanes (its adapt scenes' bare ground: red over green 1.5 to 1.7,
+# against 1.4 for `ground.COVERS`' soil).
+LATERITE = {"soil": (0.45, 0.24, 0.13), "sand": (0.55, 0.36, 0.22), "dirt": (0.40, 0.22, 0.12)}
 
 
 @dataclass(frozen=True)
@@ -54,7 +58,10 @@ class Appearance:
     and roofs lean out from the centre, the more the taller and the farther), None for today's orthographic
     nadir view; ``ground_grain`` the strength of the bare ground's fine texture (``sim.ground.grain_field``),
     None for today's smooth covers; ``road_dust`` how far the roads' and tracks' colour moves towards dust
-    (``sim.surfaces.dusty``), None for today's.
+    (``sim.surfaces.dusty``), None for today's; ``soil_redness`` how far the bare soil, sand and dirt tracks
+    move towards red laterite (`LATERITE`, ``ground_colours``), None for today's; ``saturation`` the colour
+    saturation of the finished render around its luminance (a camera's or its processing's vividness: 1 as
+    rendered, 0 grey), None for 1.
     """
 
     sensor: Sensor = Sensor()
@@ -69,6 +76,8 @@ class Appearance:
     view_height_m: float | None = None
     ground_grain: float | None = None
     road_dust: float | None = None
+    soil_redness: float | None = None
+    saturation: float | None = None
 
     def with_design(self, space, design: Mapping) -> "Appearance":
         """This appearance with the values ``design`` gives to the space's appearance parameters."""
@@ -84,7 +93,7 @@ class Appearance:
     def scene_key(self) -> tuple:
         """What the Blender scene of a city depends on (the rest is applied to finished renders)."""
         return (self.ground, self.greenness, self.sun_elevation_deg, self.ground_albedo, self.shadow_depth,
-                self.view_height_m, self.ground_grain, self.road_dust)
+                self.view_height_m, self.ground_grain, self.road_dust, self.soil_redness)
 
     def header(self) -> dict:
         """The fields that differ from a plain render, for a tile's header (empty for a plain one)."""
@@ -113,18 +122,24 @@ class Appearance:
             out["ground_grain"] = self.ground_grain
         if self.road_dust is not None:
             out["road_dust"] = self.road_dust
+        if self.soil_redness is not None:
+            out["soil_redness"] = self.soil_redness
+        if self.saturation is not None:
+            out["saturation"] = self.saturation
         return out
 
     def apply(self, rgb: np.ndarray, instance: np.ndarray, roof_class: np.ndarray, city_seed: int,
               seed, preset=None) -> np.ndarray:
         """A finished linear render as this appearance shows it: a share of the roofs painted, roofs varied
-        per building, the light scaled by the brightness, then seen through the sensor (its noise seeded by
-        ``seed``), whose own tone curve replaces that of the render ``preset`` (a ``RenderPreset``; None: no
-        curve)."""
+        per building, the light scaled by the brightness and its colours by the saturation, then seen through
+        the sensor (its noise seeded by ``seed``), whose own tone curve replaces that of the render ``preset`` (a
+        ``RenderPreset``; None: no curve)."""
         image = roof_paint(rgb, instance, roof_class, city_seed, self.roof_paint)
         image = roof_jitter(image, instance, roof_class, city_seed, self.roof_jitter)
         if self.brightness != 1.0:
             image = image * np.float32(self.brightness)
+        if self.saturation is not None and self.saturation != 1.0:
+            image = saturate(image, self.saturation)
         if self.sensor.active or preset is None:
             return self.sensor.apply(image, seed)
         return preset.tone_map(image)
@@ -167,12 +182,26 @@ def foliage_tint(greenness: float | None) -> tuple | None:
     return tuple(t / d for t, d in zip(vegetation_colour("tree", greenness, TREE_COLOUR), TREE_COLOUR))
 
 
-def ground_colours(greenness: float | None, albedo: float | None) -> dict:
+def saturate(rgb: np.ndarray, saturation: float) -> np.ndarray:
+    """A linear RGB image (..., 3) with its colours' distance from their luminance (Rec. 709) times
+    ``saturation``, clipped at 0; the luminance of every pixel that stays non-negative is kept."""
+    rgb = np.asarray(rgb, np.float32)
+    luma = rgb @ LUMA
+    return np.clip(luma[..., None] + np.float32(saturation) * (rgb - luma[..., None]), 0.0, None).astype(np.float32)
+
+
+
+def ground_colours(greenness: float | None, albedo: float | None, soil_redness: float | None = None) -> dict:
     """The linear colour of each surface of the bare ground: every cover of ``ground.COVERS`` (the lawn at
     ``greenness``, see ``vegetation_colour``) and "dirt", the unpaved tracks' earth, as ground-like as the
-    covers. ``albedo`` multiplies them all (clipped at 1, as a reflectance is); None leaves them as they
-    are. Roofs, walls, asphalt, pavings, yards, pools, cars and vegetation are not ground."""
+    covers; with ``soil_redness`` (0 to 1) the soil, sand and dirt that far towards `LATERITE`. ``albedo``
+    multiplies them all (clipped at 1, as a reflectance is); None leaves them as they are. Roofs, walls,
+    asphalt, pavings, yards, pools, cars and vegetation are not ground."""
     colours = {**COVERS, "lawn": vegetation_colour("lawn", greenness, COVERS["lawn"]), "dirt": DIRT}
+    if soil_redness is not None:
+        t = float(np.clip(soil_redness, 0.0, 1.0))
+        colours.update({name: tuple(c + t * (red - c) for c, red in zip(colours[name], LATERITE[name]))
+                        for name in LATERITE})
     if albedo is None:
         return {name: tuple(colour) for name, colour in colours.items()}
     return {name: tuple(float(min(1.0, c * float(albedo))) for c in colour) for name, colour in colours.items()}

@@ -1325,6 +1325,37 @@ def test_a_declared_road_dust_lightens_the_roads_and_leaves_roofs_and_labels(spa
     assert (np.abs(dusty.rgb[roofs] - clean.rgb[roofs]).max(axis=-1) < 2e-3).mean() > 0.97
 
 
+RED = {"name": "red", "type": "continuous", "appearance": "soil_redness", "low": 0.0, "high": 1.0}
+
+
+def test_a_declared_soil_redness_reddens_the_bare_ground_and_leaves_roofs_and_labels(space, bank, tmp_path):
+    """A design's soil redness takes the arid ground's soil and sand towards laterite in the scene: the bare
+    ground's red over green rises; roofs and labels stay as they were, and the header records it."""
+    red_space = DesignSpace.from_dict({**space.to_dict(), "name": "red",
+                                       "parameters": [*space.to_dict()["parameters"], RED]})
+    design = space.validate(_design(space, 5, 9))
+    settings = RenderSettings(space=red_space, banks=[bank], preset=get_preset("fast"), out_dir=tmp_path / "r",
+                              n_tiles=1, ground="arid", tile_px=192, pixel_size_m=0.6)
+    jobs = [single_job(red_space, {**design, "red": r}, SEED) for r in (0.0, 1.0)]
+    assert render_jobs(jobs, settings).cities == 2  # the soil's colour is built into the scene
+    plain, red = (tiles.read_tile(tmp_path / "r" / f"{job.name}_t00.exr") for job in jobs)
+    assert red.meta["soil_redness"] == 1.0 and plain.meta["soil_redness"] == 0.0
+    for name in ("instance", "roof_class", "building"):
+        assert np.array_equal(getattr(red, name), getattr(plain, name))
+    layout, (rect,) = layout_for_tiles(SEED, 1, 192 * 0.6, LayoutParams())
+    roads = _rasterise_polygons([r.polygon for r in layout.roads], rect, 192, 0.6)
+    crowns = _rasterise_polygons([polygons_disc(t) for t in layout.trees], rect, 192, 0.6)
+    bare = _erode((plain.building == 0) & ~roads & ~crowns, 2)
+    roofs = _erode(plain.building > 0, 4)
+    assert bare.sum() > 2000 and roofs.sum() > 300
+
+    def redness(tile):
+        return np.median(tile.rgb[bare][:, 0] / np.maximum(tile.rgb[bare][:, 1], 1e-4))
+
+    assert redness(red) > 1.15 * redness(plain)
+    assert (np.abs(red.rgb[roofs] - plain.rgb[roofs]).max(axis=-1) < 2e-3).mean() > 0.97
+
+
 def test_a_view_below_the_tallest_roof_in_view_is_refused_before_anything_is_built(space, bank, tmp_path):
     """A drone flies over the roofs it photographs: a view height within VIEW_CLEARANCE_M of the tallest ridge
     in the tiles is a clear error naming the height to give, before the scene is built; the render says whose."""

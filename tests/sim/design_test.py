@@ -1,3 +1,4 @@
+import dataclasses
 import json
 
 import numpy as np
@@ -150,7 +151,7 @@ def test_ground_albedo_is_a_continuous_look_of_the_scene_recorded_in_the_header(
     # a scene of its own: the ground's colours are built into it, unlike brightness or the sensor
     assert look.scene_key() != without.scene_key()
     assert look.scene_key() != Appearance().with_design(space, {**design, "albedo": 0.6}).scene_key()
-    assert Appearance().scene_key() == ("plain", *[None] * 7) and Appearance().header() == {}
+    assert Appearance().scene_key() == ("plain", *[None] * 8) and Appearance().header() == {}
     assert space.decode(space.encode(design)) == pytest.approx(design)
     for bad, message in (("2", "out of range"), ("0.3", "out of range"), ("dark", "not a number")):
         with pytest.raises(MetaSimError, match=message):
@@ -186,6 +187,63 @@ def test_ground_albedo_scales_the_bare_ground_colours_and_none_leaves_them_as_th
     assert ground_colours(None, 1.0) == ground_colours(None, None)
     assert max(max(c) for c in ground_colours(None, 2.0).values()) == 1.0  # a reflectance stays at most 1
     assert ground_colours(None, 2.0)["lawn"] == pytest.approx((0.40, 0.52, 0.24))
+
+
+def test_soil_redness_takes_the_bare_soil_sand_and_dirt_to_laterite_in_the_scene():
+    """A design's soil redness moves the soil, sand and dirt tracks towards `LATERITE` (0: as before, the lawn,
+    dry grass, gravel and pavement untouched, the albedo applied after); it is built into the scene (its key)
+    and recorded in the header."""
+    from meta_sim.sim.appearance import LATERITE, Appearance, ground_colours
+
+    plain = ground_colours(0.4, None)
+    assert ground_colours(0.4, None, 0.0) == plain
+    red = ground_colours(0.4, None, 1.0)
+    for name, colour in LATERITE.items():
+        assert red[name] == pytest.approx(colour)
+    assert all(red[name] == plain[name] for name in plain if name not in LATERITE)
+    half = ground_colours(0.4, None, 0.5)
+    for name in LATERITE:
+        assert half[name] == pytest.approx(tuple((a + b) / 2 for a, b in zip(plain[name], LATERITE[name])))
+        assert half[name][0] / half[name][1] > plain[name][0] / plain[name][1]  # redder
+    assert ground_colours(0.4, 0.5, 1.0)["soil"] == pytest.approx(tuple(0.5 * c for c in LATERITE["soil"]))
+    space = _appearance_space({"name": "red", "type": "continuous", "appearance": "soil_redness", "low": 0.0,
+                               "high": 1.0})
+    design = space.parse("flat_roof=a,ground=arid,sensor=drone,greenness=0.5,sun=40,style=dense,red=0.7")
+    look = Appearance().with_design(space, design)
+    assert look.soil_redness == 0.7 and look.header()["soil_redness"] == 0.7
+    assert look.scene_key() != Appearance().with_design(space, {**design, "red": 0.2}).scene_key()
+
+
+def test_saturation_scales_the_colours_of_the_finished_render_around_their_luminance():
+    """``saturate``: 1 leaves an image, 0 makes it grey at its luminance, 1.5 moves every colour half as far
+    again from its luminance (kept where nothing clips); a design's saturation applies to the finished render
+    (not the scene: its key stays), the header records it, and the space refuses a range beyond 0.5 to 2."""
+    from meta_sim.sim.appearance import Appearance, saturate
+    from meta_sim.sim.jitter import LUMA
+
+    rng = np.random.default_rng(3)
+    image = (0.2 + 0.5 * rng.random((8, 8, 3))).astype(np.float32)
+    assert np.allclose(saturate(image, 1.0), image)
+    grey = saturate(image, 0.0)
+    assert np.allclose(grey, (image @ LUMA)[..., None].repeat(3, axis=-1), atol=1e-6)
+    vivid = saturate(image, 1.5)
+    assert np.allclose(vivid - grey, 1.5 * (image - grey), atol=1e-5)
+    unclipped = (vivid > 0).all(axis=-1)
+    assert np.allclose((vivid @ LUMA)[unclipped], (image @ LUMA)[unclipped], atol=1e-5)
+    assert saturate(np.array([[0.0, 0.5, 0.0]], np.float32), 2.0).min() == 0.0  # clipped at 0, never negative
+    space = _appearance_space({"name": "sat", "type": "continuous", "appearance": "saturation", "low": 0.7,
+                               "high": 1.5})
+    design = space.parse("flat_roof=a,ground=arid,sensor=drone,greenness=0.5,sun=40,style=dense,sat=1.3")
+    look = Appearance().with_design(space, design)
+    assert look.saturation == 1.3 and look.header()["saturation"] == 1.3
+    assert look.scene_key() == Appearance().with_design(space, {**design, "sat": 0.8}).scene_key()
+    flat = np.zeros((8, 8), np.int32)
+    plain = dataclasses.replace(look, saturation=None)  # the same sensor, roofs and brightness
+    assert np.allclose(look.apply(image, flat, flat, 1, 0), plain.apply(saturate(image, 1.3), flat, flat, 1, 0))
+    assert not np.allclose(look.apply(image, flat, flat, 1, 0), plain.apply(image, flat, flat, 1, 0))
+    with pytest.raises(MetaSimError, match=r"saturation must stay within \[0.5, 2\]"):
+        _appearance_space({"name": "sat", "type": "continuous", "appearance": "saturation", "low": 0.2,
+                           "high": 1.5})
 
 
 def test_overhead_v2_is_overhead_v1_plus_the_ground_albedo():
