@@ -37,8 +37,7 @@ LUSH = {"lawn": (0.11, 0.20, 0.06), "tree": (0.04, 0.12, 0.03)}
 DRY = {"lawn": (0.34, 0.29, 0.17), "tree": (0.12, 0.13, 0.06)}
 TREE_COLOUR = (0.05, 0.13, 0.035)  # small trees' leaves when greenness is not set
 # The bare ground's colours (linear RGB) at soil redness 1: the iron-rich red-orange earth (laterite) of the
-# tropics, as in Kampala's yards and unpaved lanes (its adapt scenes' bare ground: red over green 1.5 to 1.7,
-# against 1.4 for `ground.COVERS`' soil).
+# tropics, as in Kampala's yards and unpaved lanes, redder than `ground.COVERS`' soil.
 LATERITE = {"soil": (0.45, 0.24, 0.13), "sand": (0.55, 0.36, 0.22), "dirt": (0.40, 0.22, 0.12)}
 
 
