@@ -405,9 +405,11 @@ def bench_sensor_command(out, docs, realdata, cache):
                    "designs), or with :near (overhead-towns-v3+scene:near: each domain's renders drawn from its "
                    "groups' best-ranked designs of the search, not one design per group), or with :dr (each group's "
                    "design from the DR baseline trained beside NAMS), or with :matched (each domain's renders "
-                   "brought to the colour statistics of its adapt scenes), or with :rSHARE (overhead-towns-v4+scene:"
-                   "r0.5: that share of each domain's cities drawn uniformly instead of from its inferred designs; "
-                   "0.25 otherwise); their rows replace those "
+                   "brought to the colour statistics of its adapt scenes), or with :critic (each domain's renders "
+                   "drawn from the training designs a real-versus-rendered critic of its adapt scenes finds the most "
+                   "real), and any of these with :rSHARE (overhead-towns-v4+scene:r0.5: that share of each domain's "
+                   "cities drawn uniformly instead of from its inferred designs; 0.25 otherwise); their rows replace "
+                   "those "
                    "in --out and the other rows stay (default: every run)")
 @click.option("--tables", is_flag=True,
               help="measure nothing: write the tables again from the results in --out (after a change to them)")

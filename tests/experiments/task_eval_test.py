@@ -735,3 +735,30 @@ def test_critic_designs_are_the_training_designs_whose_tiles_look_the_most_like_
     assert {d["ground"] for d in ranked[-4:]} <= {"blue", "grey"}
     with pytest.raises(MetaSimError, match="at least 1"):
         task_eval.critic_designs(harness(), real, 0)
+
+
+def test_a_critic_realism_run_draws_each_domains_cities_from_the_critics_designs_at_its_share(tmp_path, monkeypatch):
+    """"overhead-towns-v3+scene:critic:r0.5": the domain's training cities take the critic's designs (NAMS's
+    search is not run), half of them uniform; the row, the table and the picture's name say so."""
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    picked = DesignSpace.load("overhead-towns-v3").sample(np.random.default_rng(4), 3)
+    _stub_inferring_harness(monkeypatch, tmp_path, [])
+    monkeypatch.setattr(task_eval, "_infer_real", lambda *a, **k: pytest.fail("NAMS's search ran"))
+    asked = []
+    monkeypatch.setattr(task_eval, "critic_designs", lambda h, real, n, label="": asked.append((n, label)) or picked)
+    drawn = {}
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: drawn.update({name: [job.design for job in jobs]}))
+    run = "overhead-towns-v3+scene:critic:r0.5"
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={run})
+    assert asked[0] == (task_eval.CRITIC_DESIGNS, "rio") and len(asked) == 3
+    share = np.mean([d in picked for d in drawn["rio critic"]])
+    assert 0.3 < share < 0.75  # the rest uniform
+    row = result["runs"][run]["rio"]
+    assert row["designs"] == picked and row["method"] == "critic" and row["r"] == 0.5
+    line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| rio"))
+    assert "the 3 training designs a critic of the adapt scenes finds the most real" in line
+    assert (tmp_path / "realism-overhead-towns-v3-scene-critic-r0.5.png").is_file()
