@@ -383,7 +383,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     scenes only report.
     A harness without NAMS (``make_harness(infer=False)``) measures the renders alone: no design is
     inferred, the row's "rendered_only" is None, and the classifier, the colours and the picture take the
-    renders of uniform designs.
+    renders of uniform designs; with ``method`` "critic" it needs only the training set's tiles (rendered when
+    missing), not a NAMS model.
     ``near`` > 0 draws each domain's renders from its groups' ``near`` best-ranked designs of NAMS's search
     (``nams.near_designs``) instead of one design per group; the row keeps the groups' designs.
     ``method`` "dr" takes each group's design from the DR baseline trained beside NAMS (the same training
@@ -396,7 +397,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     from ..task.score import all_building
 
     s = h.settings
-    infer = h.methods is not None
+    infer = h.methods is not None or method == CRITIC_METHOD  # the critic needs the training set, not NAMS
     diversified = infer and s.r_real != TaskEvalSettings.r_real  # not the paper's share of uniform cities
     space = h.space
     rows, picture, uniform = {}, [], {}
@@ -439,7 +440,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
                                        "all_building": all_building(adapt_pool.masks).iou()}}
-        if infer and hasattr(h.methods.extractor, "finder"):  # what the roof colours of the inferred designs rest on
+        if h.methods is not None and hasattr(h.methods.extractor, "finder"):  # what the inferred roofs rest on
             from .finder_bench import finder_on_scenes
 
             rows[domain]["roof_finder"] = {name: finder_on_scenes(h.methods.extractor, scenes, h.dataset.pixel_size_m)
@@ -486,13 +487,15 @@ def critic_designs(h: Harness, real: Pool, n: int, label: str = "target") -> lis
     (``realness_scores``: mean logit over the tile's crops), and each design takes its tiles' mean score.
     Deterministic; the tiles are read once per harness."""
     from ..pipeline.trainsets import TileDataset
-    from ..pipeline.workflow import dataset_dir
+    from ..pipeline.workflow import dataset_dir, render_tiles
     from ..task.realness import RealnessSettings, realness_scores, train_critic
 
     if n < 1:
         raise MetaSimError(f"critic designs: n must be at least 1, not {n}")
-    if h.critic_pool is None:
-        data = TileDataset(dataset_dir(h.dataset, h.root) / "tiles", "srgb", h.gsd)
+    if h.critic_pool is None:  # the training set's tiles: rendered here when no NAMS model was trained on them
+        folder = dataset_dir(h.dataset, h.root)
+        render_tiles(folder, h.dataset, h.bars)
+        data = TileDataset(folder / "tiles", "srgb", h.gsd)
         items, progress = [], h.bars("read the training tiles", len(data)) if h.bars else None
         for k in range(len(data)):
             item = data[k]
@@ -815,8 +818,9 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         run_settings = (replace(settings, train=replace(settings.train, colour=augment.removeprefix("+")))
                         if augment else settings)
         run_settings = run_settings if share is None else replace(run_settings, r_real=share)
-        other = make_harness(wider, models_settings, run_settings, root, realdata, bars, infer)
-        if infer:
+        other = make_harness(wider, models_settings, run_settings, root, realdata, bars,
+                             infer and method != CRITIC_METHOD)
+        if other.methods is not None:
             models[space] = other.methods.nams.model_id
         result["runs"][run] = run_sim_only(other, out, True, near=near, method=method,
                                            matched=matched)["domains"]

@@ -184,16 +184,23 @@ def prepare_features(config: DatasetConfig, settings: ModelSettings, root: Path 
         return _prepare_features(folder, config, settings, bars)
 
 
+def render_tiles(folder: Path, config: DatasetConfig, bars: Bars | None = None) -> int:
+    """Render (or finish) the training set's tiles in ``folder``/tiles; when any tile was written, the files
+    derived from older tiles are dropped (``drop_derived``). Returns how many tiles this call wrote."""
+    _, summary = render_training_set(folder, config,
+                                     bars("render training set", config.designs * config.tiles) if bars else None)
+    if summary.written:
+        drop_derived(folder)
+    return summary.written
+
+
 def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettings,
                       bars: Bars | None) -> tuple[FeatureSet, dict]:
     from .features import make_extractor
 
     seconds = {}
     started = time.perf_counter()
-    _, summary = render_training_set(folder, config,
-                                     bars("render training set", config.designs * config.tiles) if bars else None)
-    if summary.written:
-        drop_derived(folder)
+    written = render_tiles(folder, config, bars)
     seconds["render"] = time.perf_counter() - started
     extractor = make_extractor(settings.extractor, Path(settings.weights) if settings.weights else None)
     started = time.perf_counter()
@@ -215,7 +222,7 @@ def _prepare_features(folder: Path, config: DatasetConfig, settings: ModelSettin
     features = build_features(folder, config, extractor, settings.views,
                               bars("features", config.designs) if bars else None)
     seconds["features"] = time.perf_counter() - started
-    return Prepared(features, seconds, summary.written)
+    return Prepared(features, seconds, written)
 
 
 def train_models(features: FeatureSet, out_dir: Path, settings: ModelSettings, dataset: DatasetConfig,

@@ -738,14 +738,21 @@ def test_critic_designs_are_the_training_designs_whose_tiles_look_the_most_like_
 
 
 def test_a_critic_realism_run_draws_each_domains_cities_from_the_critics_designs_at_its_share(tmp_path, monkeypatch):
-    """"overhead-towns-v3+scene:critic:r0.5": the domain's training cities take the critic's designs (NAMS's
-    search is not run), half of them uniform; the row, the table and the picture's name say so."""
+    """"overhead-towns-v3+scene:critic:r0.5": the domain's training cities take the critic's designs, half of
+    them uniform, with a harness that trains no NAMS model (the critic needs the training set only); the row,
+    the table and the picture's name say so."""
     from meta_sim.experiments import task_eval
     from meta_sim.pipeline.dataset import DatasetConfig
     from meta_sim.pipeline.workflow import ModelSettings
 
     picked = DesignSpace.load("overhead-towns-v3").sample(np.random.default_rng(4), 3)
-    _stub_inferring_harness(monkeypatch, tmp_path, [])
+    harnesses = []
+
+    def make_harness(dataset, models, settings, root, realdata, bars, infer=True):
+        harnesses.append(infer)
+        return task_eval.Harness(None, dataset, models, settings, tmp_path, REALDATA, None)
+
+    monkeypatch.setattr(task_eval, "make_harness", make_harness)
     monkeypatch.setattr(task_eval, "_infer_real", lambda *a, **k: pytest.fail("NAMS's search ran"))
     asked = []
     monkeypatch.setattr(task_eval, "critic_designs", lambda h, real, n, label="": asked.append((n, label)) or picked)
@@ -754,6 +761,7 @@ def test_a_critic_realism_run_draws_each_domains_cities_from_the_critics_designs
     run = "overhead-towns-v3+scene:critic:r0.5"
     result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
                                    only={run})
+    assert harnesses == [False]  # no NAMS model trained or loaded
     assert asked[0] == (task_eval.CRITIC_DESIGNS, "rio") and len(asked) == 3
     share = np.mean([d in picked for d in drawn["rio critic"]])
     assert 0.3 < share < 0.75  # the rest uniform
