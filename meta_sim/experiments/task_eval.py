@@ -506,7 +506,8 @@ def critic_designs(h: Harness, real: Pool, n: int, label: str = "target") -> lis
                               h.gsd, [d for _, d in items]), [d for _, d in items])
     tiles, keys = h.critic_pool
     order = sorted(set(keys))
-    index = np.array([order.index(k) for k in keys])
+    position = {key: k for k, key in enumerate(order)}
+    index = np.array([position[key] for key in keys])
     scores = np.zeros(len(keys))
     settings = RealnessSettings(steps=CRITIC_STEPS, crop=min(64, *(min(m.shape) for m in real.masks)))
     for fold in (0, 1):
