@@ -263,7 +263,8 @@ def test_realism_table_shows_the_uniform_designs_column_and_a_dash_for_rows_meas
     found = {"roof_pixels": {"flat": 0.9, "sloped": 0.0}, "building_share": 0.3, "iou": 0.25, "precision": 0.3,
              "recall": 0.95}
     result["runs"]["a"]["banepa"]["roof_finder"] = {"validation": found, "test": {**found, "iou": 0.2}}
-    finder = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    lines = realism_markdown(result).splitlines()
+    finder = [line for line in lines if line.startswith("| banepa | rooftops-v1 | 90")][-1]
     assert finder == ("| banepa | rooftops-v1 | 90.0 / 90.0 | 0.0 / 0.0 | 30.0 / 30.0 | 25.0 / 20.0 | 30.0 / 30.0 "
                       "| 95.0 / 95.0 |")
 
@@ -611,13 +612,13 @@ def test_the_share_of_uniform_designs_is_chosen_per_domain_on_validation_and_rea
     assert c["over_all_building"] == pytest.approx(0.16) and c["under_other_real"] == pytest.approx(0.04)
     assert c["met"] == {"over_all_building": True, "near_other_real": True, "beats_other_real": False,
                         "realness": True}
-    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa | towns |")][-1]
     assert line == ("| banepa | towns | scene 0.25, 0.5, 1 | scene 0.5 | 33.0 | 36.0 +- 1.0 | +16.0 | +4.0 "
                     "| 0.70 | yes / yes / yes | - |")
     # the segmenter of the domain's own adapt scenes, from any run that measured it
     result["runs"]["towns+scene"]["banepa"]["own_real"] = {"iou": 0.7, "iou_std": 0.02}
     assert chosen_shares(result)[0]["own_real"]["iou"] == 0.7
-    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa | towns |")][-1]
     assert line.endswith("| 0.70 | yes / yes / yes | 70.0 +- 2.0 |")
     # Uniform designs in the same cities win on validation: share 1, and no classifier figure for them.
     result["runs"]["towns+scene:r0.5"]["banepa"]["validation"]["uniform_designs"]["iou"] = 0.35
@@ -638,7 +639,7 @@ def test_the_share_of_uniform_designs_is_chosen_per_domain_on_validation_and_rea
     [c] = chosen_shares(result)
     assert (c["colour_augment"], c["r"], c["run"]) == ("light", 0.75, "towns:r0.75")
     assert ("light", 1.0) in c["tried"] and ("scene", 0.25) in c["tried"]
-    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa")][-1]
+    line = [line for line in realism_markdown(result).splitlines() if line.startswith("| banepa | towns |")][-1]
     assert line.startswith("| banepa | towns | scene 0.25, 0.5, 1; light 0.75, 1 | light 0.75 | 40.0 | 38.0 +- 1.0 |")
 
 
@@ -771,3 +772,46 @@ def test_a_critic_realism_run_draws_each_domains_cities_from_the_critics_designs
     line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| rio"))
     assert "the 3 training designs a critic of the adapt scenes finds the most real" in line
     assert (tmp_path / "realism-overhead-towns-v3-scene-critic-r0.5.png").is_file()
+
+
+def test_one_training_set_is_chosen_per_domain_among_every_run_on_validation_and_read_against_the_targets():
+    from meta_sim.experiments.task_eval import chosen_overall, chosen_shares, realism_markdown
+
+    def row(space, test, val, uniform_test=0.30, uniform_val=0.30, **extra):
+        iou = {"iou_std": 0.01, "precision": 0.5, "recall": 0.5}
+        return {"rendered_only": {**iou, "iou": test}, "uniform_designs": {**iou, "iou": uniform_test},
+                "other_real": {"iou": 0.40, "iou_std": 0.02}, "other_domains": ["rio"], "all_building": 0.20,
+                "sensor": "inferred", "space": space, "colour_augment": "scene",
+                "realness": {"accuracy": 0.85, "accuracy_std": 0.1},
+                "validation": {"rendered_only": {**iou, "iou": val}, "uniform_designs": {**iou, "iou": uniform_val},
+                               "other_real": {**iou, "iou": 0.4}, "all_building": 0.2}, **extra}
+    result = {"runs": {"a+scene:r0.5": {"kampala": row("a", 0.50, 0.31, r=0.5)},
+                       "b:critic:r0.5": {"kampala": row("b", 0.45, 0.36, r=0.5, method="critic", colour_augment="light",
+                                                        designs=[{}],
+                                                        realness={"accuracy": 0.75, "accuracy_std": 0.1})},
+                       "b+scene:uniform": {"kampala": row("b", 0.0, 0.0, rendered_only=None, uniform_test=0.6,
+                                                          uniform_val=0.35)},
+                       "old": {"kampala": row("a", 0.9, 0.9)}},
+              "settings": {"seeds": [0, 1], "r_real": 0.25}, "render_preset": "fast", "seconds": 60}
+    del result["runs"]["old"]["kampala"]["validation"]  # measured before validation: no part
+    # The critic's run wins on validation (0.36) over another space's NAMS run, its uniform designs and a run
+    # of uniform designs alone (0.35; its better test IoU takes no part); the per-space table leaves it out.
+    [c] = chosen_overall(result)
+    assert (c["run"], c["method"], c["r"], c["colour_augment"]) == ("b:critic:r0.5", "critic", 0.5, "light")
+    assert len(c["tried"]) == 5 and ("b+scene:uniform", "uniform", 1.0) in c["tried"]
+    assert c["over_all_building"] == pytest.approx(0.25) and c["under_other_real"] == pytest.approx(-0.05)
+    assert c["realness"] == 0.75 and all(c["met"].values())
+    assert [s["run"] for s in chosen_shares(result)] == ["a+scene:r0.5"]
+    line = realism_markdown(result).splitlines()[-3]
+    assert line == ("| kampala | 5 | `b:critic:r0.5`: the critic's designs, 50% uniform, light | 36.0 | 45.0 +- 1.0 "
+                    "| +25.0 | -5.0 | 0.75 | yes / yes / yes | - |")
+    # Uniform designs alone win: their own run's classifier figure; a mixed run's uniform designs take the
+    # space's run of uniform designs alone with the same augmentation, or none.
+    result["runs"]["b+scene:uniform"]["kampala"]["validation"]["uniform_designs"]["iou"] = 0.37
+    [c] = chosen_overall(result)
+    assert (c["run"], c["method"], c["r"], c["realness"]) == ("b+scene:uniform", "uniform", 1.0, 0.85)
+    assert c["over_all_building"] == pytest.approx(0.40)
+    result["runs"]["a+scene:r0.5"]["kampala"]["validation"]["uniform_designs"]["iou"] = 0.38
+    [c] = chosen_overall(result)
+    assert (c["run"], c["method"], c["realness"]) == ("a+scene:r0.5", "uniform", None)
+    assert "| kampala | 5 | `a+scene:r0.5`: uniform designs, scene | 38.0 | 30.0 +- 1.0 |" in realism_markdown(result)
