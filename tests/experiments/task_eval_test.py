@@ -804,12 +804,23 @@ def test_one_training_set_is_chosen_per_domain_among_every_run_on_validation_and
     assert [s["run"] for s in chosen_shares(result)] == ["a+scene:r0.5"]
     line = realism_markdown(result).splitlines()[-3]
     assert line == ("| kampala | 5 | `b:critic:r0.5`: the critic's designs, 50% uniform, light | 36.0 | 45.0 +- 1.0 "
-                    "| +25.0 | -5.0 | 0.75 | yes / yes / yes | - |")
+                    "| +25.0 | -5.0 | 0.75 | - | yes / yes / yes | - |")
+    # The classifier on renders of the critic's designs alone: the same designs' run at share 0, whatever its
+    # augmentation (not NAMS's designs of the same space at share 0, nor an unknown share)
+    result["runs"]["b+scene:critic:r0"] = {"kampala": row("b", 0.2, 0.1, r=0, method="critic", designs=[{}],
+                                                          realness={"accuracy": 0.65, "accuracy_std": 0.1})}
+    result["runs"]["b+scene:r0"] = {"kampala": row("b", 0.2, 0.1, r=0, realness={"accuracy": 0.55,
+                                                                                  "accuracy_std": 0.1})}
+    [c] = chosen_overall(result)
+    assert (c["run"], c["realness"], c["realness_alone"]) == ("b:critic:r0.5", 0.75, 0.65)
+    assert "| 0.75 | 0.65 | yes / yes / yes | - |" in realism_markdown(result)
+    del result["runs"]["b+scene:critic:r0"], result["runs"]["b+scene:r0"]
     # Uniform designs alone win: their own run's classifier figure; a mixed run's uniform designs take the
     # space's run of uniform designs alone with the same augmentation, or none.
     result["runs"]["b+scene:uniform"]["kampala"]["validation"]["uniform_designs"]["iou"] = 0.37
     [c] = chosen_overall(result)
-    assert (c["run"], c["method"], c["r"], c["realness"]) == ("b+scene:uniform", "uniform", 1.0, 0.85)
+    assert (c["run"], c["method"], c["r"], c["realness"], c["realness_alone"]) == ("b+scene:uniform", "uniform",
+                                                                                    1.0, 0.85, 0.85)
     assert c["over_all_building"] == pytest.approx(0.40)
     result["runs"]["a+scene:r0.5"]["kampala"]["validation"]["uniform_designs"]["iou"] = 0.38
     [c] = chosen_overall(result)
