@@ -804,10 +804,10 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         models[dataset.space] = h.methods.nams.model_id
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
     for run in spaces:
-        infer, near = not run.endswith(UNIFORM_ONLY), NEAR_STARTS if run.endswith(NEAR_POPULATION) else 0
         named, share = run, diversify_share(run)
-        if share is not None:
+        if share is not None:  # the share comes last: the suffixes before it say how the designs are drawn
             named = run.rpartition(DIVERSIFY)[0]
+        infer, near = not named.endswith(UNIFORM_ONLY), NEAR_STARTS if named.endswith(NEAR_POPULATION) else 0
         method = ("dr" if named.endswith(DR_DESIGNS) else CRITIC_METHOD if named.endswith(CRITIC_POPULATION)
                   else "nams")
         matched = named.endswith(COLOUR_MATCHED)

@@ -154,6 +154,10 @@ def test_a_built_in_space_named_in_the_runs_adds_its_realism_run_without_joining
     assert result["runs"] == {"overhead-v2": {"banepa": {"space": "overhead-v2", "near": 0}}}  # one design a group
     assert result["nams_models"] == {"overhead-v2": "m2"} and "nams_model" not in result
     assert "overhead-v2" not in task_eval.realism_runs() and task_eval.REALISM_SPACES == ("overhead-v1",)
+    # ":near" before a share of uniform designs still draws from the groups' best-ranked designs
+    result = task_eval.run_realism(dataset, ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={"overhead-v2+scene:near:r0"})
+    assert result["runs"]["overhead-v2+scene:near:r0"]["banepa"]["near"] == task_eval.NEAR_STARTS > 0
 
 
 def test_a_scene_augmented_realism_run_trains_its_segmenters_on_renders_with_the_scene_augmentation(
