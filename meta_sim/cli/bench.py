@@ -408,9 +408,10 @@ def bench_sensor_command(out, docs, realdata, cache):
                    "brought to the colour statistics of its adapt scenes), or with :critic (each domain's renders "
                    "drawn from the training designs a real-versus-rendered critic of its adapt scenes finds the most "
                    "real), and any of these with :rSHARE (overhead-towns-v4+scene:r0.5: that share of each domain's "
-                   "cities drawn uniformly instead of from its inferred designs; 0.25 otherwise); their rows replace "
-                   "those "
-                   "in --out and the other rows stay (default: every run)")
+                   "cities drawn uniformly instead of from its inferred designs; 0.25 otherwise), and any of these "
+                   "with :stepsN last (overhead-towns-v8:critic:r0.5:steps2000: every segmenter of the run trains "
+                   "N steps instead of 500); their rows replace those in --out and the other rows stay (default: "
+                   "every run)")
 @click.option("--tables", is_flag=True,
               help="measure nothing: write the tables again from the results in --out (after a change to them)")
 def bench_realism_command(out, docs, pictures, quick, realdata, cache, runs, tables):

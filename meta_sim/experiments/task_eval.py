@@ -754,6 +754,25 @@ RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED, CRITI
 DIVERSIFY = ":r"
 
 
+# Any run's name may end in ":steps" and a count (e.g. "overhead-towns-v8:critic:r0.5:steps2000"): every segmenter of
+# the run (rendered, uniform and real alike) trains that many steps instead of ``TrainSettings.steps``: how far the
+# run's comparisons hold when the instrument learns longer.
+SEGMENTER_STEPS = ":steps"
+MAX_SEGMENTER_STEPS = 100_000
+
+
+def segmenter_steps(run: str) -> tuple[str, int | None]:
+    """``(the run's name without SEGMENTER_STEPS, the step count)``; the name and None for a run without one.
+    MetaSimError for a count that is not a whole number from 1 to ``MAX_SEGMENTER_STEPS``."""
+    head, sep, tail = run.rpartition(SEGMENTER_STEPS)
+    if not sep or not head:
+        return run, None
+    if not tail.isdigit() or not 1 <= int(tail) <= MAX_SEGMENTER_STEPS:
+        raise MetaSimError(f"realism run {run!r}: {SEGMENTER_STEPS} takes a whole number of steps from 1 to "
+                           f"{MAX_SEGMENTER_STEPS}, not {tail!r}")
+    return head, int(tail)
+
+
 def diversify_share(run: str) -> float | None:
     """The diversify-with-rejection rate a run's name ends with (``DIVERSIFY``), None for a run without one;
     MetaSimError for a share that is not a number from 0 to 1."""
@@ -780,6 +799,11 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
     lacks adds that space's run. MetaSimError for an unknown name."""
     import time
 
+    budgets: dict = {}  # a run's name without SEGMENTER_STEPS -> the step counts asked for it (None: the settings')
+    for name in only or ():
+        head, steps = segmenter_steps(name)
+        budgets.setdefault(head, []).append(steps)
+    only = None if only is None else set(budgets)
     augmentable = {space + suffix for space in builtin_spaces() for suffix in AUGMENTED}
     suffixed = {name + suffix for name in (*builtin_spaces(), *augmentable)
                 for suffix in RUN_SUFFIXES}
@@ -792,8 +816,12 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
                            f"{' or '.join(AUGMENTED)} and/or one of {UNIFORM_ONLY}, {NEAR_POPULATION}, {DR_DESIGNS}, "
-                           f"{COLOUR_MATCHED}, {DIVERSIFY}SHARE after it")
+                           f"{COLOUR_MATCHED}, {DIVERSIFY}SHARE after it, and {SEGMENTER_STEPS}N last")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
+    fixed = [_run_name(*v) for v in variants if any(budgets.get(_run_name(*v), []))]
+    if fixed:
+        raise MetaSimError(f"realism run(s) {', '.join(fixed)} of the default model take no {SEGMENTER_STEPS}; "
+                           "name a design space's run")
     spaces = [space for space in spaces if only is None or space in only]
     started = time.perf_counter()
     out = Path(out)
@@ -803,7 +831,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         h = make_harness(dataset, models_settings, settings, root, realdata, bars)
         models[dataset.space] = h.methods.nams.model_id
         result["runs"] = {_run_name(*variant): run_sim_only(h, out, True, *variant)["domains"] for variant in variants}
-    for run in spaces:
+    for run, steps in [(name, steps) for name in spaces for steps in budgets.get(name, [None])]:
         named, share = run, diversify_share(run)
         if share is not None:  # the share comes last: the suffixes before it say how the designs are drawn
             named = run.rpartition(DIVERSIFY)[0]
@@ -819,12 +847,16 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         run_settings = (replace(settings, train=replace(settings.train, colour=augment.removeprefix("+")))
                         if augment else settings)
         run_settings = run_settings if share is None else replace(run_settings, r_real=share)
+        run_settings = run_settings if steps is None else replace(run_settings,
+                                                                   train=replace(run_settings.train, steps=steps))
         other = make_harness(wider, models_settings, run_settings, root, realdata, bars,
                              infer and method != CRITIC_METHOD)
         if other.methods is not None:
             models[space] = other.methods.nams.model_id
-        result["runs"][run] = run_sim_only(other, out, True, near=near, method=method,
-                                           matched=matched)["domains"]
+        rows = run_sim_only(other, out, True, near=near, method=method, matched=matched)["domains"]
+        if steps is not None:
+            rows = {domain: {**row, "segmenter_steps": steps} for domain, row in rows.items()}
+        result["runs"][run if steps is None else f"{run}{SEGMENTER_STEPS}{steps}"] = rows
     result.update(settings={**asdict(settings), "train": asdict(settings.train)}, render_preset=dataset.preset,
                   seconds=time.perf_counter() - started, nams_models=models,
                   **({"nams_model": models[dataset.space]} if dataset.space in models else {}))
@@ -841,7 +873,8 @@ def _space_cell(row: dict) -> str:
             + (f", the {len(row['designs'])} training designs a critic of the adapt scenes finds the most real"
                if row.get("method") == CRITIC_METHOD else "")
             + (", renders colour-matched to the adapt scenes" if row.get("colour_matched") else "")
-            + (f", {row['r']:.0%} of the cities uniform designs" if row.get("r") is not None else ""))
+            + (f", {row['r']:.0%} of the cities uniform designs" if row.get("r") is not None else "")
+            + (f", every segmenter trained {row['segmenter_steps']} steps" if row.get("segmenter_steps") else ""))
 
 
 def _g(value) -> str:
@@ -934,14 +967,15 @@ def chosen_shares(result: dict) -> list[dict]:
     model serves both augmentations): each run's inferred designs at its rate and, as the share 1, the uniform
     designs in the same cities (``_candidates``). The choice looks only at validation IoU (the first of equal
     ones); its test IoU is then read against issue 18's targets. Runs of uniform designs alone, or drawn another
-    way (``near``, DR, the critic, colour-matched) take no part, except that a run of uniform designs alone gives
+    way (``near``, DR, the critic, colour-matched) or with another segmenter budget (``SEGMENTER_STEPS``) take no
+    part, except that a run of uniform designs alone gives
     the classifier's accuracy when the uniform designs are chosen. ``own_real``: the test IoU of the segmenter
     trained on the domain's own adapt scenes, from whichever run measured it."""
     groups: dict = {}
     for c in _candidates(result):
         row = c["row"]
         if (c["uniform_only"] or row.get("near") or row.get("method", "nams") != "nams"
-                or row.get("colour_matched")):
+                or row.get("colour_matched") or row.get("segmenter_steps")):
             continue
         groups.setdefault((c["space"], c["domain"]), []).append(c)
     own_real = _own_real(result)
@@ -954,7 +988,8 @@ def chosen_shares(result: dict) -> list[dict]:
 
 def chosen_overall(result: dict) -> list[dict]:
     """Per real domain, the training set of the best validation IoU among every candidate of every run measured
-    on validation scenes (``_candidates``: any space, method, augmentation and share; the first of equal ones),
+    on validation scenes (``_candidates``: any space, method, augmentation, share and segmenter budget, each
+    judged against the other real domains' segmenter of its own budget; the first of equal ones),
     read against issue 18's targets on the test scenes. ``tried``: the candidates' (run, method, share). The
     more candidates, the more the chosen one's validation IoU flatters it; its test IoU does not."""
     by_domain: dict = {}
