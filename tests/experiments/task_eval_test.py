@@ -830,3 +830,65 @@ def test_one_training_set_is_chosen_per_domain_among_every_run_on_validation_and
     [c] = chosen_overall(result)
     assert (c["run"], c["method"], c["realness"]) == ("a+scene:r0.5", "uniform", None)
     assert "| kampala | 5 | `a+scene:r0.5`: uniform designs, scene | 38.0 | 30.0 +- 1.0 |" in realism_markdown(result)
+
+
+def test_a_realism_run_ending_in_steps_trains_every_segmenter_that_many_steps_and_its_rows_say_so(
+        tmp_path, monkeypatch):
+    """"overhead-v2+scene:r0.5:steps2000": the run of that name without the suffix, its segmenters trained 2,000
+    steps, under its own name beside the run at the default budget; refused for the default model's runs and
+    for a count that is not a whole number of steps in range."""
+    from types import SimpleNamespace
+
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    assert task_eval.segmenter_steps("a+scene:critic:r0.5:steps2000") == ("a+scene:critic:r0.5", 2000)
+    assert task_eval.segmenter_steps("a+scene:r0.5") == ("a+scene:r0.5", None)
+    for bad in ("a:steps0", "a:stepsx", "a:steps", "a:steps100001", "a:steps-5"):
+        with pytest.raises(MetaSimError, match="whole number of steps"):
+            task_eval.segmenter_steps(bad)
+    seen = []
+
+    def harness(dataset, models_settings, settings, *args):
+        seen.append((dataset.space, settings.r_real, settings.train.steps, settings.train.colour))
+        return SimpleNamespace(dataset=dataset, settings=settings,
+                               methods=SimpleNamespace(nams=SimpleNamespace(model_id="m2")))
+
+    monkeypatch.setattr(task_eval, "make_harness", harness)
+    monkeypatch.setattr(task_eval, "run_sim_only", lambda h, out, realness, **options: {"domains": {
+        "banepa": {"space": h.dataset.space, "colour_augment": h.settings.train.colour, "r": h.settings.r_real}}})
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={"overhead-v2+scene:r0.5:steps2000", "overhead-v2+scene:r0.5"})
+    assert sorted(seen) == [("overhead-v2", 0.5, 500, "scene"), ("overhead-v2", 0.5, 2000, "scene")]
+    assert result["runs"]["overhead-v2+scene:r0.5:steps2000"]["banepa"]["segmenter_steps"] == 2000
+    assert "segmenter_steps" not in result["runs"]["overhead-v2+scene:r0.5"]["banepa"]
+    row = result["runs"]["overhead-v2+scene:r0.5:steps2000"]["banepa"]
+    assert task_eval._space_cell(row).endswith("50% of the cities uniform designs, every segmenter trained 2000 steps")
+    with pytest.raises(MetaSimError, match="take no :steps"):
+        task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                              only={"auto+jitter0+plain:steps2000"})
+    with pytest.raises(MetaSimError, match="unknown realism run"):
+        task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                              only={"overhead-v9:steps2000"})
+
+
+def test_a_run_with_another_segmenter_budget_is_judged_against_its_own_real_segmenters_in_the_choice_among_every_run():
+    from meta_sim.experiments.task_eval import chosen_overall, chosen_shares
+
+    def row(val, other, **extra):
+        iou = {"iou_std": 0.01, "precision": 0.5, "recall": 0.5}
+        return {"rendered_only": {**iou, "iou": 0.45}, "uniform_designs": {**iou, "iou": 0.3},
+                "other_real": {"iou": other, "iou_std": 0.02}, "other_domains": ["rio"], "all_building": 0.20,
+                "sensor": "inferred", "space": "a", "colour_augment": "scene", "r": 0.5,
+                "realness": {"accuracy": 0.7, "accuracy_std": 0.1},
+                "validation": {"rendered_only": {**iou, "iou": val}, "uniform_designs": {**iou, "iou": 0.1},
+                               "other_real": {**iou, "iou": other}, "all_building": 0.2}, **extra}
+    result = {"runs": {"a+scene:r0.5": {"kampala": row(0.40, 0.42)},
+                       "a+scene:r0.5:steps2000": {"kampala": row(0.41, 0.55, segmenter_steps=2000)}},
+              "settings": {"seeds": [0, 1], "r_real": 0.25}, "render_preset": "fast", "seconds": 60}
+    [c] = chosen_overall(result)
+    assert c["run"] == "a+scene:r0.5:steps2000" and c["under_other_real"] == pytest.approx(0.10)
+    assert not c["met"]["near_other_real"]
+    [s] = chosen_shares(result)  # the per-space choice keeps to the default budget
+    assert s["run"] == "a+scene:r0.5" and s["met"]["near_other_real"]
