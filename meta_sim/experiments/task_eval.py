@@ -898,15 +898,14 @@ def _candidates(result: dict) -> list[dict]:
     each run's own renders (its designs at its share ``r`` of uniform ones; the settings' ``r_real`` for a run
     without one) and, as the share 1, the uniform designs in the same cities; a run of uniform designs alone
     gives only the latter. ``realness``: the classifier's accuracy on those renders; for the uniform designs
-    of a mixed run, that of the space's run of uniform designs alone with the same augmentation (its classifier
-    saw those renders: the same cities), None without one. ``realness_alone``: the classifier's accuracy on
-    renders of the run's designs without uniform ones (its run at share 0, None without one): issue 18's
-    classifier on "tiles rendered with the design inferred for them"."""
+    of a mixed run, that of the space's run of uniform designs alone (its classifier saw those renders: the same
+    cities; the segmenters' augmentation does not touch them), None without one. ``realness_alone``: the
+    classifier's accuracy on renders of the run's designs without uniform ones (its run at share 0, None without
+    one): issue 18's classifier on "tiles rendered with the design inferred for them"."""
     default_r = result.get("settings", {}).get("r_real", 0.25)
 
-    def key(row: dict, domain: str) -> tuple:
-        return (row.get("space", "rooftops-v1"), domain, row.get("colour_augment", "light"),
-                bool(row.get("colour_matched")))
+    def key(row: dict, domain: str) -> tuple:  # the uniform designs' renders (the segmenters' augmentation aside)
+        return (row.get("space", "rooftops-v1"), domain, bool(row.get("colour_matched")))
     uniform_realness = {key(row, domain): row["realness"]["accuracy"]
                         for run in result["runs"].values() for domain, row in run.items()
                         if "rendered_only" in row and row["rendered_only"] is None and "realness" in row}
@@ -948,7 +947,7 @@ def _judged(best: dict, tried: list, own_real: dict) -> dict:
             "validation_iou": best["validation"]["iou"], "test": best["test"],
             "over_all_building": test - everything, "under_other_real": other - test,
             "realness": realness, "realness_alone": best.get("realness_alone"),
-            "own_real": own_real.get(best["domain"]),
+            "own_real": own_real.get((best["domain"], row.get("segmenter_steps"))),
             "met": {"over_all_building": test - everything >= OVER_ALL_BUILDING,
                     "near_other_real": other - test <= UNDER_OTHER_REAL,
                     "beats_other_real": test > other,
@@ -956,9 +955,10 @@ def _judged(best: dict, tried: list, own_real: dict) -> dict:
 
 
 def _own_real(result: dict) -> dict:
-    """Per domain, the test IoU of the segmenter trained on its own adapt scenes, from whichever run measured it."""
-    return {domain: row["own_real"] for run in result["runs"].values() for domain, row in run.items()
-            if row.get("own_real")}
+    """Per (domain, segmenter budget), the test IoU of the segmenter trained on the domain's own adapt scenes,
+    from whichever run of that budget measured it (``segmenter_steps``, None for the default)."""
+    return {(domain, row.get("segmenter_steps")): row["own_real"] for run in result["runs"].values()
+            for domain, row in run.items() if row.get("own_real")}
 
 
 def chosen_shares(result: dict) -> list[dict]:
@@ -969,7 +969,8 @@ def chosen_shares(result: dict) -> list[dict]:
     ones); its test IoU is then read against issue 18's targets. Runs of uniform designs alone, or drawn another
     way (``near``, DR, the critic, colour-matched) or with another segmenter budget (``SEGMENTER_STEPS``) take no
     part, except that a run of uniform designs alone gives
-    the classifier's accuracy when the uniform designs are chosen. ``own_real``: the test IoU of the segmenter
+    the classifier's accuracy when the uniform designs are chosen (whatever its augmentation: the renders are the
+    same). ``own_real``: the test IoU of the segmenter
     trained on the domain's own adapt scenes, from whichever run measured it."""
     groups: dict = {}
     for c in _candidates(result):
@@ -1022,9 +1023,9 @@ def _chosen_markdown(result: dict) -> list[str]:
              f"building (target +{100 * OVER_ALL_BUILDING:.0f}) and under the other real domains' segmenter (target "
              f"at most {100 * UNDER_OTHER_REAL:.0f}; negative beats it), and the classifier's accuracy on that run's "
              f"renders (target below {REALNESS_TARGET}; for the uniform designs, that of the space's run of uniform "
-             "designs alone with the chosen augmentation, '-' without one). Beside them, the test IoU of the same "
-             "segmenter trained on the domain's own labelled adapt scenes: what it can reach there with real "
-             "training data of the place itself ('-' until a run has measured it).", "",
+             "designs alone, '-' without one). Beside them, the test IoU of the same segmenter trained on the domain's "
+             "own labelled adapt scenes: what it can reach there with real training data of the place itself ('-' "
+             "until a run has measured it).", "",
              "| domain | space | augmentation: shares tried | chosen | validation IoU | test IoU | over all building "
              "| under other real | classifier | targets met: +15 / within 5 / classifier | own real scenes |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]

@@ -629,15 +629,16 @@ def test_the_share_of_uniform_designs_is_chosen_per_domain_on_validation_and_rea
     [c] = chosen_shares(result)
     assert c["r"] == 1.0 and c["realness"] is None and c["met"]["realness"] is False
     assert c["over_all_building"] == pytest.approx(0.10) and not c["met"]["over_all_building"]
-    # ... unless a run of those uniform designs alone with the same augmentation measured it
-    result["runs"]["towns:uniform"] = {"banepa": row(None, 0.0, 0.0, rendered_only=None, colour_augment="light",
+    # ... unless a run of those uniform designs alone measured it, whatever its augmentation (same renders);
+    # not one of another space
+    result["runs"]["other:uniform"] = {"banepa": row(None, 0.0, 0.0, rendered_only=None, space="other",
                                                      realness={"accuracy": 0.75, "accuracy_std": 0.1})}
     assert chosen_shares(result)[0]["realness"] is None
-    result["runs"]["towns+scene:uniform"] = {"banepa": row(None, 0.0, 0.0, rendered_only=None,
-                                                           realness={"accuracy": 0.78, "accuracy_std": 0.1})}
+    result["runs"]["towns:uniform"] = {"banepa": row(None, 0.0, 0.0, rendered_only=None, colour_augment="light",
+                                                     realness={"accuracy": 0.78, "accuracy_std": 0.1})}
     [c] = chosen_shares(result)
     assert c["r"] == 1.0 and c["realness"] == 0.78 and c["met"]["realness"] is True
-    del result["runs"]["towns:uniform"], result["runs"]["towns+scene:uniform"]
+    del result["runs"]["towns:uniform"], result["runs"]["other:uniform"]
     # The same model's run with the light augmentation is a candidate too, and may win
     result["runs"]["towns:r0.75"] = {"banepa": row(0.75, 0.38, 0.40, colour_augment="light")}
     [c] = chosen_shares(result)
@@ -892,3 +893,7 @@ def test_a_run_with_another_segmenter_budget_is_judged_against_its_own_real_segm
     assert not c["met"]["near_other_real"]
     [s] = chosen_shares(result)  # the per-space choice keeps to the default budget
     assert s["run"] == "a+scene:r0.5" and s["met"]["near_other_real"]
+    # the segmenter of the domain's own adapt scenes: from a run of the same budget
+    result["runs"]["a+scene:r0.5"]["kampala"]["own_real"] = {"iou": 0.5, "iou_std": 0.0}
+    result["runs"]["a+scene:r0.5:steps2000"]["kampala"]["own_real"] = {"iou": 0.6, "iou_std": 0.0}
+    assert chosen_overall(result)[0]["own_real"]["iou"] == 0.6 and chosen_shares(result)[0]["own_real"]["iou"] == 0.5
