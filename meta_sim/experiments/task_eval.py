@@ -1003,6 +1003,17 @@ def chosen_overall(result: dict) -> list[dict]:
     return sorted(chosen, key=lambda c: realdomains.DOMAINS.index(c["domain"]))
 
 
+def _accuracy_cell(value: float | None) -> str:
+    return "-" if value is None else format(value, ".2f")
+
+
+def _met_cells(c: dict) -> str:
+    """A chosen training set's targets met ("yes / no / yes") and its own-scenes segmenter, the tables' last cells."""
+    met = c["met"]
+    return (" / ".join("yes" if met[k] else "no" for k in ("over_all_building", "near_other_real", "realness"))
+            + f" | {_iou_cell(c['own_real'])} |")
+
+
 def _tried(tried: list) -> str:
     """The (augmentation, share) pairs tried, by augmentation: "scene 0.25, 0.5, 1; light 1"."""
     augments = sorted({a for a, _ in tried}, key=lambda a: (a != "scene", a))
@@ -1014,9 +1025,6 @@ def _chosen_markdown(result: dict) -> list[str]:
     chosen = [c for c in chosen_shares(result) if len(c["tried"]) > 2]  # a choice among more than one run
     if not chosen:
         return []
-
-    def mark(ok: bool) -> str:
-        return "yes" if ok else "no"
     lines = ["", "Issue 18's targets with the share of uniform designs and the segmenters' colour augmentation chosen "
              "per domain on its validation scenes (those of the best validation IoU among the space's runs, the "
              "share 1 being the uniform designs in the same cities), scored on the test scenes: IoU (%) over all "
@@ -1033,9 +1041,7 @@ def _chosen_markdown(result: dict) -> list[str]:
         lines.append(f"| {c['domain']} | {c['space']} | {_tried(c['tried'])} | {c['colour_augment']} {c['r']:g} | "
                      f"{100 * c['validation_iou']:.1f} | {_iou_cell(c['test'])} | "
                      f"{100 * c['over_all_building']:+.1f} | {100 * c['under_other_real']:+.1f} | "
-                     f"{'-' if c['realness'] is None else format(c['realness'], '.2f')} | "
-                     f"{mark(c['met']['over_all_building'])} / {mark(c['met']['near_other_real'])} / "
-                     f"{mark(c['met']['realness'])} | {_iou_cell(c['own_real'])} |")
+                     f"{_accuracy_cell(c['realness'])} | {_met_cells(c)}")
     return lines
 
 
@@ -1044,9 +1050,6 @@ def _overall_markdown(result: dict) -> list[str]:
     chosen = chosen_overall(result)
     if not chosen:
         return []
-
-    def mark(ok: bool) -> str:
-        return "yes" if ok else "no"
 
     def what(c: dict) -> str:
         designs = {"uniform": "uniform designs", CRITIC_METHOD: "the critic's designs", "dr": "DR's designs"}
@@ -1065,16 +1068,11 @@ def _overall_markdown(result: dict) -> list[str]:
              "| classifier | classifier, the designs alone | targets met: +15 / within 5 / classifier "
              "| own real scenes |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
-
-    def accuracy(value: float | None) -> str:
-        return "-" if value is None else format(value, ".2f")
     for c in chosen:
         lines.append(f"| {c['domain']} | {len(c['tried'])} | {what(c)} | {100 * c['validation_iou']:.1f} | "
                      f"{_iou_cell(c['test'])} | {100 * c['over_all_building']:+.1f} | "
-                     f"{100 * c['under_other_real']:+.1f} | {accuracy(c['realness'])} | "
-                     f"{accuracy(c['realness_alone'])} | "
-                     f"{mark(c['met']['over_all_building'])} / {mark(c['met']['near_other_real'])} / "
-                     f"{mark(c['met']['realness'])} | {_iou_cell(c['own_real'])} |")
+                     f"{100 * c['under_other_real']:+.1f} | {_accuracy_cell(c['realness'])} | "
+                     f"{_accuracy_cell(c['realness_alone'])} | {_met_cells(c)}")
     return lines
 
 
