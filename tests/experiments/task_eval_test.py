@@ -808,8 +808,8 @@ def test_one_training_set_is_chosen_per_domain_among_every_run_on_validation_and
     assert c["realness"] == 0.75 and all(c["met"].values())
     assert [s["run"] for s in chosen_shares(result)] == ["a+scene:r0.5"]
     line = realism_markdown(result).splitlines()[-3]
-    assert line == ("| kampala | 5 | `b:critic:r0.5`: the critic's designs, 50% uniform, light | 36.0 | 45.0 +- 1.0 "
-                    "| +25.0 | -5.0 | 0.75 | - | yes / yes / yes | - |")
+    assert line == ("| kampala | 500 | 5 | `b:critic:r0.5`: the critic's designs, 50% uniform, light | 36.0 "
+                    "| 45.0 +- 1.0 | +25.0 | -5.0 | 0.75 | - | yes / yes / yes | - |")
     # The classifier on renders of the critic's designs alone: the same designs' run at share 0, whatever its
     # augmentation (not NAMS's designs of the same space at share 0, nor an unknown share)
     result["runs"]["b+scene:critic:r0"] = {"kampala": row("b", 0.2, 0.1, r=0, method="critic", designs=[{}],
@@ -830,7 +830,8 @@ def test_one_training_set_is_chosen_per_domain_among_every_run_on_validation_and
     result["runs"]["a+scene:r0.5"]["kampala"]["validation"]["uniform_designs"]["iou"] = 0.38
     [c] = chosen_overall(result)
     assert (c["run"], c["method"], c["realness"]) == ("a+scene:r0.5", "uniform", None)
-    assert "| kampala | 5 | `a+scene:r0.5`: uniform designs, scene | 38.0 | 30.0 +- 1.0 |" in realism_markdown(result)
+    assert ("| kampala | 500 | 5 | `a+scene:r0.5`: uniform designs, scene | 38.0 | 30.0 +- 1.0 |"
+            in realism_markdown(result))
 
 
 def test_a_realism_run_ending_in_steps_trains_every_segmenter_that_many_steps_and_its_rows_say_so(
@@ -874,8 +875,8 @@ def test_a_realism_run_ending_in_steps_trains_every_segmenter_that_many_steps_an
                               only={"overhead-v9:steps2000"})
 
 
-def test_a_run_with_another_segmenter_budget_is_judged_against_its_own_real_segmenters_in_the_choice_among_every_run():
-    from meta_sim.experiments.task_eval import chosen_overall, chosen_shares
+def test_a_run_with_another_segmenter_budget_is_a_choice_of_its_own_judged_against_its_own_real_segmenters():
+    from meta_sim.experiments.task_eval import chosen_overall, chosen_shares, realism_markdown
 
     def row(val, other, **extra):
         iou = {"iou_std": 0.01, "precision": 0.5, "recall": 0.5}
@@ -888,12 +889,20 @@ def test_a_run_with_another_segmenter_budget_is_judged_against_its_own_real_segm
     result = {"runs": {"a+scene:r0.5": {"kampala": row(0.40, 0.42)},
                        "a+scene:r0.5:steps2000": {"kampala": row(0.41, 0.55, segmenter_steps=2000)}},
               "settings": {"seeds": [0, 1], "r_real": 0.25}, "render_preset": "fast", "seconds": 60}
-    [c] = chosen_overall(result)
-    assert c["run"] == "a+scene:r0.5:steps2000" and c["under_other_real"] == pytest.approx(0.10)
-    assert not c["met"]["near_other_real"]
+    # Each budget chooses among its own runs (the longer one's better validation IoU does not displace the
+    # benchmark's budget), the benchmark's first; each is judged against the other real domains of its budget.
+    default, longer = chosen_overall(result)
+    assert (default["steps"], default["run"], len(default["tried"])) == (500, "a+scene:r0.5", 2)
+    assert default["under_other_real"] == pytest.approx(-0.03) and default["met"]["near_other_real"]
+    assert (longer["steps"], longer["run"], len(longer["tried"])) == (2000, "a+scene:r0.5:steps2000", 2)
+    assert longer["under_other_real"] == pytest.approx(0.10) and not longer["met"]["near_other_real"]
+    lines = [x for x in realism_markdown(result).splitlines() if x.startswith("| kampala | ")]
+    assert lines[-2].startswith("| kampala | 500 | 2 | `a+scene:r0.5`: inferred designs, 50% uniform, scene |")
+    assert lines[-1].startswith("| kampala | 2000 | 2 | `a+scene:r0.5:steps2000`:")
     [s] = chosen_shares(result)  # the per-space choice keeps to the default budget
     assert s["run"] == "a+scene:r0.5" and s["met"]["near_other_real"]
     # the segmenter of the domain's own adapt scenes: from a run of the same budget
     result["runs"]["a+scene:r0.5"]["kampala"]["own_real"] = {"iou": 0.5, "iou_std": 0.0}
     result["runs"]["a+scene:r0.5:steps2000"]["kampala"]["own_real"] = {"iou": 0.6, "iou_std": 0.0}
-    assert chosen_overall(result)[0]["own_real"]["iou"] == 0.6 and chosen_shares(result)[0]["own_real"]["iou"] == 0.5
+    assert [c["own_real"]["iou"] for c in chosen_overall(result)] == [0.5, 0.6]
+    assert chosen_shares(result)[0]["own_real"]["iou"] == 0.5
