@@ -275,6 +275,10 @@ class LayoutParams:
         radius 6-30 m, placed at random): fields, gardens and groves, where the town's trees and bushes
         grow as in its other gaps. Its roofs lose a little more than the share (houses cannot lean on a
         patch's edge). 0 packs the town as always; a larger share keeps the patches of a smaller one.
+    large_buildings: 0..1, how many large buildings a dense town has among its houses: halls, markets,
+        schools and blocks of flats of 14-45 m frontage and 12-30 m depth, half of them low halls, half
+        blocks of three to eight storeys, each fronting a lane (about one per `LARGE_M2_PER_BUILDING` of town
+        at 1; fewer fit where the lanes are close). 0 builds houses only, as always.
     water_share: 0..0.9, the share of the city under open water (rivers, lagoons, coasts: chains of discs
         from the city's edge, ``sim/water.py``). The water lies over the ground and the roads, and takes
         away the buildings, pools, cars and bushes it touches and the trees standing in it; the rest of the
@@ -301,10 +305,12 @@ class LayoutParams:
     roof_furniture: float = 0.0
     open_share: float = 0.0
     water_share: float = 0.0
+    large_buildings: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
-        for name in ("car_density", "pool_share", "shrub_density", "roof_furniture", "open_share"):
+        for name in ("car_density", "pool_share", "shrub_density", "roof_furniture", "open_share",
+                     "large_buildings"):
             object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
         object.__setattr__(self, "water_share", _check_number(owner, "water_share", self.water_share, 0.0, 0.9))
         if not isinstance(self.tree_size, str) or self.tree_size not in TREE_SIZES:
@@ -380,7 +386,8 @@ def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
 
 # The knobs added after the first layouts: `to_dict` writes them only when set.
 _CLUTTER_DEFAULTS = {"tree_size": "small", "street_details": False, "car_density": 0.0, "pool_share": 0.0,
-                     "shrub_density": 0.0, "roof_furniture": 0.0, "open_share": 0.0, "water_share": 0.0}
+                     "shrub_density": 0.0, "roof_furniture": 0.0, "open_share": 0.0, "water_share": 0.0,
+                     "large_buildings": 0.0}
 
 
 @dataclass(frozen=True)
@@ -1120,6 +1127,10 @@ DENSE_M2_PER_TREE = 400.0  # at tree_density 1
 OPEN_RADIUS_M = (6.0, 30.0)  # a dense town's open patches (``LayoutParams.open_share``): radius, log-uniform
 OPEN_SAMPLES = 2000  # points a region's open share is measured on
 OPEN_MAX_PATCHES = 400
+LARGE_M2_PER_BUILDING = 600.0  # a dense town's large buildings tried per this much of it, at large_buildings 1
+LARGE_FRONTAGE_M = (14.0, 45.0)  # log-uniform
+LARGE_DEPTH_M = (12.0, 30.0)  # log-uniform, at most the frontage
+LARGE_SHRINK = (1.0, 0.75, 0.55)  # a smaller one tried where a large one does not fit
 
 
 @dataclass(frozen=True)
@@ -1271,8 +1282,9 @@ def _open_patches(rng: np.random.Generator, window: Polygon, share: float) -> po
 
 def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[tuple[Point, Point, float]],
                      roads: polygons.Occupancy, built: polygons.Occupancy, density: float, width: float,
-                     height: float, opens: polygons.Occupancy | None = None) -> list[_Placed]:
-    """Packed houses of one dense region: rows along both sides of every lane, then infill behind them.
+                     height: float, opens: polygons.Occupancy | None = None, large: float = 0.0) -> list[_Placed]:
+    """Packed houses of one dense region: with ``large`` first its large buildings along the lanes, then rows
+    of houses along both sides of every lane, then infill behind them.
 
     Each house keeps `ROAD_CLEARANCE_M` off every road and out of the ``opens`` patches and stays inside its
     region; houses of a row often share walls, and infill houses take the direction of the nearest lane.
@@ -1280,7 +1292,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
     window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
     placed: list[_Placed] = []
 
-    def attempt(cx: float, cy: float, along: float, depth: float, angle: float) -> bool:
+    def attempt(cx: float, cy: float, along: float, depth: float, angle: float, kind: str | None = None) -> bool:
         footprint = rect_polygon(cx - along / 2, cy - depth / 2, cx + along / 2, cy + depth / 2)
         rotation = _r(angle)
         x0, y0, x1, y1 = polygon_bbox(footprint)
@@ -1292,11 +1304,31 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
         if not built.clear(outline, -TOUCH_M):
             return False
         built.add(outline)
-        floors = pick(rng, DENSE_STOREYS)
-        eave = floors * STOREY_M + rng.uniform(-0.2, 0.4)
-        kind = "residential" if eave <= HEIGHT_RANGES_M["residential"][1] else "apartment"
+        if kind is None:  # a house of the town
+            floors = pick(rng, DENSE_STOREYS)
+            eave = floors * STOREY_M + rng.uniform(-0.2, 0.4)
+            kind = "residential" if eave <= HEIGHT_RANGES_M["residential"][1] else "apartment"
+        else:
+            eave = _eave_height(rng, kind)
         placed.append(_Placed(outline, footprint, rotation, kind, _r(eave)))
         return True
+
+    if large > 0.0 and segments:
+        lengths = np.array([math.hypot(b[0] - a[0], b[1] - a[1]) for a, b, _ in segments])
+        for _ in range(rng.poisson(large * polygons.area(window) / LARGE_M2_PER_BUILDING)):
+            (ax, ay), (bx, by), lane = segments[int(rng.choice(len(segments), p=lengths / lengths.sum()))]
+            length = math.hypot(bx - ax, by - ay)
+            dx, dy = (bx - ax) / length, (by - ay) / length
+            side = 1.0 if rng.random() < 0.5 else -1.0
+            kind = "industrial" if rng.random() < 0.5 else "apartment"
+            along = math.exp(rng.uniform(*np.log(LARGE_FRONTAGE_M)))
+            depth = min(along, math.exp(rng.uniform(*np.log(LARGE_DEPTH_M))))
+            mid, front = rng.uniform(0.0, length), lane / 2 + ROAD_CLEARANCE_M + rng.uniform(0.0, 2.0)
+            for shrink in LARGE_SHRINK:
+                off = front + depth * shrink / 2
+                cx, cy = ax + dx * mid - side * dy * off, ay + dy * mid + side * dx * off
+                if attempt(cx, cy, along * shrink, depth * shrink, math.degrees(math.atan2(dy, dx)), kind):
+                    break
 
     spot = 0.5 + 0.5 * density  # share of row places built on
     for (ax, ay), (bx, by), lane in segments:
@@ -1488,7 +1520,8 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
             opens = (_open_patches(open_rng, polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height)),
                                    params.open_share) if params.open_share > 0 else None)
             dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
-                                        params.building_density, width, height, opens)
+                                        params.building_density, width, height, opens,
+                                        params.large_buildings)
             for house in dense[k]:
                 lots.append(Lot(polygons.rounded_polygon(house.outline), -1))
                 sketches.append(_Sketch(len(lots) - 1, house.kind, house.footprint, "rect", house.height_m,

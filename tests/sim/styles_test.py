@@ -306,6 +306,37 @@ def test_open_patches_keep_about_their_share_of_a_dense_town_free_of_houses(dens
     assert len(real[share].trees) > 2 * len(real[0.0].trees)
 
 
+HOUSE_M2 = 12.0 * 14.0 * 1.2  # more than any house of a dense town (its footprint and the roof's overhang)
+
+
+def test_large_buildings_stand_among_a_dense_towns_houses_fronting_its_lanes(dense_city):
+    """``large_buildings`` puts halls and blocks of flats into a dense town (Banepa's and Kampala's towns have
+    them; the houses alone are at most 12 by 14 m): the lanes stay, the town keeps its invariants and its
+    coverage, a larger value gives large buildings more of the roofs, and 0 is the town of houses alone."""
+    def large_roofs(layout):
+        areas = [layout_module.polygon_area(b.roof_outline) for b in layout.buildings]
+        big = [a for a, b in zip(areas, layout.buildings) if b.kind == "industrial" or a > HOUSE_M2]
+        return sum(big) / sum(areas), max(areas)
+
+    assert large_roofs(dense_city) == (0.0, pytest.approx(large_roofs(dense_city)[1]))
+    assert large_roofs(dense_city)[1] < HOUSE_M2
+    cities = {v: generate_layout(3, 345.6, 345.6, LayoutParams(style="dense", large_buildings=v)) for v in (0.3, 1.0)}
+    for city in cities.values():
+        check_styled(city)
+        assert city.roads == dense_city.roads
+        assert abs(_coverage(city)[0] - _coverage(dense_city)[0]) < 0.05
+        kinds = {b.kind for b in city.buildings}
+        assert {"industrial", "apartment", "residential"} <= kinds
+    (share_few, _), (share_many, biggest) = large_roofs(cities[0.3]), large_roofs(cities[1.0])
+    assert 0.0 < share_few < share_many and 0.1 < share_many < 0.4 and biggest > 300.0
+    assert cities[1.0] == generate_layout(3, 345.6, 345.6, LayoutParams(style="dense", large_buildings=1.0))
+    assert LayoutParams.from_dict(LayoutParams(large_buildings=0.3).to_dict()).large_buildings == 0.3
+    assert "large_buildings" not in LayoutParams(style="dense").to_dict()
+    for bad in (-0.1, 1.5, "some"):
+        with pytest.raises(MetaSimError, match="large_buildings"):
+            LayoutParams(large_buildings=bad)
+
+
 def test_a_larger_open_share_keeps_the_patches_of_a_smaller_one():
     from meta_sim.sim.polygons import rounded_polygon
 
