@@ -279,6 +279,9 @@ class LayoutParams:
         schools and blocks of flats of 14-45 m frontage and 12-30 m depth, half of them low halls, half
         blocks of three to eight storeys, each fronting a lane (about one per `LARGE_M2_PER_BUILDING` of town
         at 1; fewer fit where the lanes are close). 0 builds houses only, as always.
+    tall_share: 0..1, the share of a dense town's houses whose storeys are drawn from `TALL_STOREYS` (two to
+        six, as in Banepa's centre, casting long shadows into the lanes) instead of `DENSE_STOREYS` (mostly one
+        or two, as in Kampala's settlements); 0 keeps the town as it was.
     water_share: 0..0.9, the share of the city under open water (rivers, lagoons, coasts: chains of discs
         from the city's edge, ``sim/water.py``). The water lies over the ground and the roads, and takes
         away the buildings, pools, cars and bushes it touches and the trees standing in it; the rest of the
@@ -306,11 +309,12 @@ class LayoutParams:
     open_share: float = 0.0
     water_share: float = 0.0
     large_buildings: float = 0.0
+    tall_share: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "LayoutParams"
         for name in ("car_density", "pool_share", "shrub_density", "roof_furniture", "open_share",
-                     "large_buildings"):
+                     "large_buildings", "tall_share"):
             object.__setattr__(self, name, _check_number(owner, name, getattr(self, name), 0.0, 1.0))
         object.__setattr__(self, "water_share", _check_number(owner, "water_share", self.water_share, 0.0, 0.9))
         if not isinstance(self.tree_size, str) or self.tree_size not in TREE_SIZES:
@@ -387,7 +391,7 @@ def _surface(owner: str, value: Any, allowed: tuple[str, ...]) -> str:
 # The knobs added after the first layouts: `to_dict` writes them only when set.
 _CLUTTER_DEFAULTS = {"tree_size": "small", "street_details": False, "car_density": 0.0, "pool_share": 0.0,
                      "shrub_density": 0.0, "roof_furniture": 0.0, "open_share": 0.0, "water_share": 0.0,
-                     "large_buildings": 0.0}
+                     "large_buildings": 0.0, "tall_share": 0.0}
 
 
 @dataclass(frozen=True)
@@ -1120,6 +1124,7 @@ DENSE_M2_PER_SEED = 200.0  # interior seeds of house clusters, at building_densi
 SEED_TURN_DEG = 5.0  # a cluster's houses stand this much askew of their lane (standard deviation)
 DENSE_GROWTH = (0.45, 0.5)  # a house's chance to get a neighbour on each side: a + b * building_density
 DENSE_STOREYS = {1: 0.45, 2: 0.3, 3: 0.17, 4: 0.08}
+TALL_STOREYS = {2: 0.1, 3: 0.25, 4: 0.3, 5: 0.2, 6: 0.15}  # a town of concrete frame houses (``tall_share``)
 STOREY_M = 3.0
 ROAD_CLEARANCE_M = 0.2  # between any roof outline and a road
 TOUCH_M = 1e-3  # neighbours may share walls: outlines may meet within the 0.1 mm rounding
@@ -1282,15 +1287,20 @@ def _open_patches(rng: np.random.Generator, window: Polygon, share: float) -> po
 
 def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[tuple[Point, Point, float]],
                      roads: polygons.Occupancy, built: polygons.Occupancy, density: float, width: float,
-                     height: float, opens: polygons.Occupancy | None = None, large: float = 0.0) -> list[_Placed]:
+                     height: float, opens: polygons.Occupancy | None = None, large: float = 0.0,
+                     tall: float = 0.0) -> list[_Placed]:
     """Packed houses of one dense region: with ``large`` first its large buildings along the lanes, then rows
-    of houses along both sides of every lane, then infill behind them.
+    of houses along both sides of every lane, then infill behind them; the share ``tall`` of the houses has
+    the storeys of `TALL_STOREYS`.
 
     Each house keeps `ROAD_CLEARANCE_M` off every road and out of the ``opens`` patches and stays inside its
     region; houses of a row often share walls, and infill houses take the direction of the nearest lane.
     """
     window = polygons.clip(region.cell, rect_polygon(0.0, 0.0, width, height))
     placed: list[_Placed] = []
+    storeys = DENSE_STOREYS if tall == 0.0 else {  # one draw either way: the mixture of the two
+        n: (1.0 - tall) * DENSE_STOREYS.get(n, 0.0) + tall * TALL_STOREYS.get(n, 0.0)
+        for n in sorted({*DENSE_STOREYS, *TALL_STOREYS})}
 
     def attempt(cx: float, cy: float, along: float, depth: float, angle: float, kind: str | None = None) -> bool:
         footprint = rect_polygon(cx - along / 2, cy - depth / 2, cx + along / 2, cy + depth / 2)
@@ -1305,7 +1315,7 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
             return False
         built.add(outline)
         if kind is None:  # a house of the town
-            floors = pick(rng, DENSE_STOREYS)
+            floors = pick(rng, storeys)
             eave = floors * STOREY_M + rng.uniform(-0.2, 0.4)
             kind = "residential" if eave <= HEIGHT_RANGES_M["residential"][1] else "apartment"
         else:
@@ -1521,7 +1531,7 @@ def _styled_layout(seed: int, width: float, height: float, params: LayoutParams)
                                    params.open_share) if params.open_share > 0 else None)
             dense[k] = _dense_buildings(building_rng, region, lanes[k], road_space, built,
                                         params.building_density, width, height, opens,
-                                        params.large_buildings)
+                                        params.large_buildings, params.tall_share)
             for house in dense[k]:
                 lots.append(Lot(polygons.rounded_polygon(house.outline), -1))
                 sketches.append(_Sketch(len(lots) - 1, house.kind, house.footprint, "rect", house.height_m,

@@ -337,6 +337,25 @@ def test_large_buildings_stand_among_a_dense_towns_houses_fronting_its_lanes(den
             LayoutParams(large_buildings=bad)
 
 
+def test_a_taller_town_has_the_same_houses_with_more_storeys(dense_city):
+    """``tall_share`` draws a share of a dense town's storeys from `TALL_STOREYS` with the same one draw per
+    house, so the town keeps its lanes and footprints and only grows: Banepa's three- to six-storey centre."""
+    tall = generate_layout(3, 345.6, 345.6, LayoutParams(style="dense", tall_share=0.5))
+    check_styled(tall)
+    assert tall.roads == dense_city.roads
+    assert len(tall.buildings) == len(dense_city.buildings)
+    assert all(np.allclose(a.roof_outline, b.roof_outline, atol=1e-6)  # as placed; the roofs' kinds may change
+               for a, b in zip(tall.buildings, dense_city.buildings))
+    low, high = (np.array([b.height_m for b in city.buildings]) for city in (dense_city, tall))
+    assert (high >= low - 1e-9).all() and high.mean() > 1.3 * low.mean() and high.max() > 17.0 > low.max()
+    assert {b.kind for b in tall.buildings} == {"residential", "apartment"}
+    assert LayoutParams.from_dict(LayoutParams(tall_share=0.5).to_dict()).tall_share == 0.5
+    assert "tall_share" not in LayoutParams(style="dense").to_dict()
+    for bad in (-0.1, 1.5, None):
+        with pytest.raises(MetaSimError, match="tall_share"):
+            LayoutParams(tall_share=bad)
+
+
 def test_a_larger_open_share_keeps_the_patches_of_a_smaller_one():
     from meta_sim.sim.polygons import rounded_polygon
 
