@@ -368,7 +368,7 @@ def run_real(h: Harness, out: Path) -> dict:
 
 def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "none",
                  roof_jitter: float = 0.0, ground: str = "plain", near: int = 0, method: str = "nams",
-                 matched: bool = False) -> dict:
+                 matched: bool = False, own_roofs: bool = False) -> dict:
     """Per real domain: rendered-only training (NAMS's design for the domain) vs the other real
     domains vs all-building, scored on the domain's test scenes, and rendered-only training on uniform
     designs in the same cities (what inferring the domain's design adds); and ("own_real", test scenes only)
@@ -391,7 +391,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
     set and features) instead of NAMS's search; the row says so under "method". ``matched`` brings each
     render of the domain's training set to the colour statistics of its ``adapt`` scenes
     (``sim.colourmatch``: what the target folder shows, no labels) before anything trains on it, the
-    uniform designs' renders too."""
+    uniform designs' renders too. ``own_roofs`` (a harness without NAMS) paints the domain's own roofs on the
+    renders' buildings (`_own_roofs`, from its adapt scenes' labels): an upper bound, never a candidate."""
     from ..nams import near_designs
     from ..task.data import merge
     from ..task.score import all_building
@@ -422,6 +423,8 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         flat_pool = uniform[seen_by]
         if matched:
             rendered, flat_pool = _colour_matched(rendered, adapt_pool), _colour_matched(flat_pool, adapt_pool)
+        if own_roofs:
+            rendered = flat_pool = _own_roofs(flat_pool, adapt_pool, s.target_seed)
         pools = (test_pool, adapt_pool)
         sim = _scored(h, None, rendered, f"{domain} rendered only", pools) if infer else (None, None)
         real = _scored(h, other, None, f"{'+'.join(others)}", pools)
@@ -436,6 +439,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
                         **({"near": near} if infer and near else {}),
                         **({"method": method} if infer and method != "nams" else {}),
                         **({"colour_matched": True} if matched else {}),
+                        **({"own_roofs": True} if own_roofs else {}),
                         **({"r": s.r_real} if diversified else {}),
                         "validation": {"scenes": "adapt", "rendered_only": _mean_iou(sim[1]),
                                        "uniform_designs": _mean_iou(flat[1]), "other_real": _mean_iou(real[1]),
@@ -467,6 +471,7 @@ def run_sim_only(h: Harness, out: Path, realness: bool = False, sensor: str = "n
         tag += f"-near{near}" if infer and near else ""
         tag += f"-{method}" if infer and method != "nams" else ""
         tag += "-matched" if matched else ""
+        tag += "-ownroofs" if own_roofs else ""
         tag += f"-r{s.r_real:g}" if diversified else ""
         prediction_sheet(out / f"realism{tag}.png", picture)
     return {"domains": rows}
@@ -530,6 +535,44 @@ def _colour_matched(rendered: Pool, real: Pool) -> Pool:
     stats = ColourStats.of_images(real.images)
     return Pool(rendered.name, [match_colours(image, stats) for image in rendered.images], rendered.masks,
                 rendered.pixel_size_m, rendered.sources)
+
+
+# The windows of real roof pixels `_own_roofs` paints: 7.2 m square at the working 0.6 m, up to this many per scene.
+OWN_ROOF_WINDOW_PX = 12
+OWN_ROOF_WINDOWS = 400
+
+
+def _own_roofs(rendered: Pool, real: Pool, seed: int) -> Pool:
+    """``rendered`` with every building's pixels replaced by one window of real roof pixels of ``real`` (a
+    window wholly inside its building masks, a pixel off their edges), turned by a multiple of 90 degrees and
+    tiled over the building: renders whose roofs look exactly like the domain's roofs, the rest of each render
+    as it was. It reads ``real``'s building masks, so it measures how far roof textures alone could carry a
+    segmenter (an upper bound), never a way to make training data of a target. MetaSimError when ``real`` has
+    no roof wide enough for a window."""
+    from scipy import ndimage
+
+    rng, size = np.random.default_rng([seed, 18]), OWN_ROOF_WINDOW_PX
+    windows = []
+    for image, mask in zip(real.images, real.masks):
+        inner = ndimage.binary_erosion(mask).astype(np.uint8)
+        centres = np.argwhere(ndimage.minimum_filter(inner, size=size, mode="constant") > 0) - size // 2
+        centres = centres[(centres >= 0).all(1) & (centres + size <= mask.shape).all(1)]
+        for y, x in centres[rng.choice(len(centres), min(OWN_ROOF_WINDOWS, len(centres)), replace=False)]:
+            windows.append(image[y:y + size, x:x + size])
+    if not windows:
+        raise MetaSimError(f"{real.name}: no roof of {size} pixels across to take its look from")
+    images = []
+    for image, mask in zip(rendered.images, rendered.masks):
+        image = image.copy()
+        labels, _ = ndimage.label(mask)
+        for k, box in enumerate(ndimage.find_objects(labels), 1):
+            h, w = box[0].stop - box[0].start, box[1].stop - box[1].start
+            window = np.rot90(windows[rng.integers(len(windows))], rng.integers(4))
+            tiled = np.tile(window, (-(-h // size), -(-w // size), 1))[:h, :w]
+            building = labels[box] == k
+            image[box][building] = tiled[building]
+        images.append(image)
+    return Pool(rendered.name, images, rendered.masks, rendered.pixel_size_m, rendered.sources)
 
 
 def _scored(h: Harness, real: Pool | None, synthetic: Pool | None, label: str, pools) -> list[list]:
@@ -746,7 +789,11 @@ COLOUR_MATCHED = ":matched"
 # A space's run with this suffix (e.g. "overhead-towns-v5+scene:critic") draws each domain's training cities from
 # the CRITIC_DESIGNS training designs a real-versus-rendered critic finds the most real (``critic_designs``).
 CRITIC_POPULATION = ":critic"
-RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED, CRITIC_POPULATION)  # at most one,
+# A space's run with this suffix (e.g. "overhead-towns-v9:ownroofs") is its run of uniform designs alone with
+# each domain's own roofs painted on the renders' buildings (``run_sim_only``'s ``own_roofs``): from the adapt
+# scenes' labels, so an upper bound of what roof textures could give, never a candidate for issue 18's choice.
+OWN_ROOFS = ":ownroofs"
+RUN_SUFFIXES = (UNIFORM_ONLY, NEAR_POPULATION, DR_DESIGNS, COLOUR_MATCHED, CRITIC_POPULATION, OWN_ROOFS)  # at most one,
 # after any AUGMENTED
 # A space's run ending in ":r" and a share (e.g. "overhead-towns-v4+scene:r0.5") renders each domain's training set
 # with that diversify-with-rejection rate (the share of cities drawn uniformly instead of from the inferred
@@ -816,7 +863,7 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         raise MetaSimError(f"unknown realism run(s) {', '.join(unknown)}; choose from {', '.join(names)} "
                            f"or another built-in design space ({', '.join(builtin_spaces())}), with "
                            f"{' or '.join(AUGMENTED)} and/or one of {UNIFORM_ONLY}, {NEAR_POPULATION}, {DR_DESIGNS}, "
-                           f"{COLOUR_MATCHED}, {DIVERSIFY}SHARE after it, and {SEGMENTER_STEPS}N last")
+                           f"{COLOUR_MATCHED}, {OWN_ROOFS}, {DIVERSIFY}SHARE after it, and {SEGMENTER_STEPS}N last")
     variants = [v for v in variants if only is None or _run_name(*v) in only]
     fixed = [_run_name(*v) for v in variants if any(budgets.get(_run_name(*v), []))]
     if fixed:
@@ -835,7 +882,9 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
         named, share = run, diversify_share(run)
         if share is not None:  # the share comes last: the suffixes before it say how the designs are drawn
             named = run.rpartition(DIVERSIFY)[0]
-        infer, near = not named.endswith(UNIFORM_ONLY), NEAR_STARTS if named.endswith(NEAR_POPULATION) else 0
+        own_roofs = named.endswith(OWN_ROOFS)
+        infer = not (named.endswith(UNIFORM_ONLY) or own_roofs)
+        near = NEAR_STARTS if named.endswith(NEAR_POPULATION) else 0
         method = ("dr" if named.endswith(DR_DESIGNS) else CRITIC_METHOD if named.endswith(CRITIC_POPULATION)
                   else "nams")
         matched = named.endswith(COLOUR_MATCHED)
@@ -853,7 +902,8 @@ def run_realism(dataset, models_settings, settings: TaskEvalSettings, out: Path,
                              infer and method != CRITIC_METHOD)
         if other.methods is not None:
             models[space] = other.methods.nams.model_id
-        rows = run_sim_only(other, out, True, near=near, method=method, matched=matched)["domains"]
+        rows = run_sim_only(other, out, True, near=near, method=method, matched=matched,
+                            own_roofs=own_roofs)["domains"]
         if steps is not None:
             rows = {domain: {**row, "segmenter_steps": steps} for domain, row in rows.items()}
         result["runs"][run if steps is None else f"{run}{SEGMENTER_STEPS}{steps}"] = rows
@@ -873,6 +923,8 @@ def _space_cell(row: dict) -> str:
             + (f", the {len(row['designs'])} training designs a critic of the adapt scenes finds the most real"
                if row.get("method") == CRITIC_METHOD else "")
             + (", renders colour-matched to the adapt scenes" if row.get("colour_matched") else "")
+            + (", the domain's own roofs painted on the renders (from its labels: an upper bound, not a candidate)"
+               if row.get("own_roofs") else "")
             + (f", {row['r']:.0%} of the cities uniform designs" if row.get("r") is not None else "")
             + (f", every segmenter trained {row['segmenter_steps']} steps" if row.get("segmenter_steps") else ""))
 
@@ -900,16 +952,17 @@ def _candidates(result: dict) -> list[dict]:
     gives only the latter. ``realness``: the classifier's accuracy on those renders (a run of uniform designs
     alone: its own); for the uniform designs of a mixed run, that of the space's run of uniform designs alone
     (its classifier saw those renders: the same cities; the segmenters' augmentation does not touch them), None
-    without one. ``realness_alone``: the
-    classifier's accuracy on renders of the run's designs without uniform ones (its run at share 0, None without
-    one): issue 18's classifier on "tiles rendered with the design inferred for them"."""
+    without one. ``realness_alone``: the classifier's accuracy on renders of the run's designs without uniform
+    ones (its run at share 0, None without one): issue 18's classifier on "tiles rendered with the design
+    inferred for them". A run that painted the domain's own roofs (``own_roofs``) read its labels: no candidate."""
     default_r = result.get("settings", {}).get("r_real", 0.25)
 
     def key(row: dict, domain: str) -> tuple:  # the uniform designs' renders (the segmenters' augmentation aside)
         return (row.get("space", "rooftops-v1"), domain, bool(row.get("colour_matched")))
     uniform_realness = {key(row, domain): row["realness"]["accuracy"]
                         for run in result["runs"].values() for domain, row in run.items()
-                        if "rendered_only" in row and row["rendered_only"] is None and "realness" in row}
+                        if "rendered_only" in row and row["rendered_only"] is None and "realness" in row
+                        and not row.get("own_roofs")}
     def drawn(row: dict, domain: str) -> tuple:  # the designs a run draws its cities from, whatever its share
         return (row.get("space", "rooftops-v1"), domain, row.get("method", "nams"), row.get("near"),
                 bool(row.get("colour_matched")))
@@ -921,7 +974,7 @@ def _candidates(result: dict) -> list[dict]:
     found = []
     for name, run in result["runs"].items():
         for domain, row in run.items():
-            if "validation" not in row:
+            if "validation" not in row or row.get("own_roofs"):
                 continue
             common = {"run": name, "domain": domain, "space": row.get("space", "rooftops-v1"),
                       "augment": row.get("colour_augment", "light"), "row": row,

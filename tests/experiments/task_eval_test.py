@@ -906,3 +906,64 @@ def test_a_run_with_another_segmenter_budget_is_a_choice_of_its_own_judged_again
     result["runs"]["a+scene:r0.5:steps2000"]["kampala"]["own_real"] = {"iou": 0.6, "iou_std": 0.0}
     assert [c["own_real"]["iou"] for c in chosen_overall(result)] == [0.5, 0.6]
     assert chosen_shares(result)[0]["own_real"]["iou"] == 0.5
+
+
+def test_own_roofs_paints_each_rendered_building_with_one_window_of_the_domains_real_roofs():
+    """The upper bound of roof textures: every rendered building's pixels come from real roof pixels (one
+    window per building, turned and tiled), nothing else of a render changes, the labels stay, the same seed
+    gives the same pool, and a domain without a roof wide enough is refused."""
+    from meta_sim.experiments.task_eval import OWN_ROOF_WINDOW_PX, _own_roofs
+    from meta_sim.task.data import Pool
+
+    rng = np.random.default_rng(0)
+    real_image = np.zeros((60, 60, 3), np.float32)  # ground 0; roofs 0.2-0.8 in red, a gradient in green
+    real_mask = np.zeros((60, 60), bool)
+    for k, (y, x) in enumerate(((2, 2), (2, 30), (30, 2), (30, 30))):
+        real_mask[y:y + 25, x:x + 25] = True
+        real_image[y:y + 25, x:x + 25, 0] = 0.2 + 0.2 * k
+        real_image[y:y + 25, x:x + 25, 1] = np.linspace(0.1, 0.9, 25)[None, :]
+    real = Pool("real", [real_image], [real_mask], 0.6, ["r"])
+    render = rng.uniform(0.0, 1.0, (48, 48, 3)).astype(np.float32)
+    mask = np.zeros((48, 48), bool)
+    mask[4:30, 4:20] = True  # two buildings
+    mask[34:44, 25:47] = True
+    rendered, original = Pool("rendered", [render], [mask], 0.6, ["t"]), render.copy()
+    painted = _own_roofs(rendered, real, 7)
+    image = painted.images[0]
+    assert np.array_equal(painted.masks[0], mask) and np.array_equal(image[~mask], render[~mask])
+    for box in ((slice(4, 30), slice(4, 20)), (slice(34, 44), slice(25, 47))):
+        roof = image[box]
+        assert len(np.unique(roof[..., 0])) == 1 and roof[0, 0, 0] in (np.float32(0.2), np.float32(0.4),
+                                                                       np.float32(0.6), np.float32(0.8))
+        assert roof[..., 1].min() > 0.05 and roof[..., 2].max() == 0.0  # the real roofs' own pixels
+    assert np.array_equal(_own_roofs(rendered, real, 7).images[0], image)
+    assert np.array_equal(rendered.images[0], original)  # the input pool is left as it was
+    small = np.zeros((60, 60), bool)
+    small[10:10 + OWN_ROOF_WINDOW_PX, 10:10 + OWN_ROOF_WINDOW_PX] = True  # the edge pixel off: too narrow
+    with pytest.raises(MetaSimError, match="no roof"):
+        _own_roofs(rendered, Pool("tiny", [real_image], [small], 0.6, ["r"]), 7)
+
+
+def test_an_own_roofs_realism_run_paints_the_uniform_designs_and_is_never_a_candidate(tmp_path, monkeypatch):
+    """"overhead-towns-v3:ownroofs": the space's uniform designs (no NAMS model) with each domain's own roofs
+    painted on, as the row and table say; its labels-fed figures take no part in issue 18's choices."""
+    from meta_sim.experiments import task_eval
+    from meta_sim.pipeline.dataset import DatasetConfig
+    from meta_sim.pipeline.workflow import ModelSettings
+
+    harnesses, painted = [], []
+    monkeypatch.setattr(task_eval, "make_harness", lambda dataset, models, settings, root, realdata, bars, infer=True:
+                        harnesses.append(infer) or task_eval.Harness(None, dataset, models, settings, tmp_path,
+                                                                     REALDATA, None))
+    _stub_realism_work(monkeypatch, lambda h, name, jobs: None)
+    monkeypatch.setattr(task_eval, "_own_roofs", lambda pool, real, seed: painted.append(real.name) or pool)
+    run = "overhead-towns-v3:ownroofs"
+    result = task_eval.run_realism(DatasetConfig(), ModelSettings(), task_eval.TaskEvalSettings(), tmp_path,
+                                   only={run})
+    assert harnesses == [False] and painted == [f"{d} adapt" for d in realdomains.DOMAINS]
+    row = result["runs"][run]["rio"]
+    assert row["own_roofs"] is True and row["rendered_only"] is None
+    line = next(x for x in task_eval.realism_markdown(result).splitlines() if x.startswith("| rio"))
+    assert "the domain's own roofs painted on the renders (from its labels: an upper bound" in line
+    assert (tmp_path / "realism-overhead-towns-v3-uniform-ownroofs.png").is_file()
+    assert task_eval._candidates(result) == [] and task_eval.chosen_overall(result) == []
