@@ -1323,8 +1323,8 @@ def _dense_buildings(rng: np.random.Generator, region: _Region, segments: list[t
         placed.append(_Placed(outline, footprint, rotation, kind, _r(eave)))
         return True
 
-    if large > 0.0 and segments:
-        lengths = np.array([math.hypot(b[0] - a[0], b[1] - a[1]) for a, b, _ in segments])
+    lengths = np.array([math.hypot(b[0] - a[0], b[1] - a[1]) for a, b, _ in segments]) if large > 0.0 else ()
+    if len(lengths) and lengths.sum() > 0.0:
         for _ in range(rng.poisson(large * polygons.area(window) / LARGE_M2_PER_BUILDING)):
             (ax, ay), (bx, by), lane = segments[int(rng.choice(len(segments), p=lengths / lengths.sum()))]
             length = math.hypot(bx - ax, by - ay)
