@@ -20,7 +20,7 @@ from meta_sim.render.loop import render_jobs
 from meta_sim.sim import tiles
 from meta_sim.sim.design import DesignSpace
 from meta_sim.sim.imageio import linear_to_srgb, read_rgb8
-from meta_sim.sim.layout import LayoutParams, layout_for_tiles
+from meta_sim.sim.layout import LayoutParams, layout_for_tiles, polygon_area
 from meta_sim.sim.quality import PRESETS, get_preset
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -712,6 +712,38 @@ def _rasterise_polygons(polygons_, rect, px, gsd):
             inside &= (bx - ax) * (gy - ay) - (by - ay) * (gx - ax) >= 0
         out |= inside
     return out
+
+
+def test_large_buildings_render_labelled_and_a_taller_town_casts_more_shadow(space, bank, tmp_path):
+    """A dense town with `large_buildings` renders its halls and blocks of flats labelled as laid out, and the
+    same town with `tall_share` 1 (the same footprints, more storeys) darkens more of the ground around them."""
+    import dataclasses
+
+    px, gsd, seed = 192, 0.6, 6  # a tile holding five large buildings whole
+    tiles_of = {}
+    for tall in (0.0, 1.0):
+        layout_fields = {"style": "dense", "large_buildings": 1.0, "tall_share": tall}
+        town = dataclasses.replace(space, name=f"rooftops-dense-large-{tall:g}", layout=layout_fields)
+        _, (tiles_of[tall],) = _render(town, [bank], tmp_path / f"t{tall:g}", _design(space, 5, 9), n_tiles=1,
+                                       seed=seed, tile_px=px, pixel_size_m=gsd)
+    layout, (rect,) = layout_for_tiles(seed, 1, px * gsd, LayoutParams(style="dense", large_buildings=1.0))
+    large = [b for b in layout.buildings  # halls, and blocks larger than any house (12 x 14 m and its roof)
+             if b.kind == "industrial" or polygon_area(b.roof_outline) > 12.0 * 14.0 * 1.2]
+    ious = []
+    for b in large:
+        reference = _rasterise_polygons([b.roof_outline], rect, px, gsd)
+        if reference.sum() >= 100:
+            rendered = tiles_of[0.0].instance == b.id
+            ious.append((reference & rendered).sum() / (reference | rendered).sum())
+    assert len(ious) >= 3 and min(ious) > 0.9, ious
+    largest = np.bincount(tiles_of[0.0].instance.ravel())[1:].max() * gsd ** 2
+    assert largest > 12.0 * 14.0 * 1.2, largest  # a roof larger than any house's, in the label pass
+    low, high = tiles_of[0.0], tiles_of[1.0]
+    # the same footprints seen from straight above (a roof that turns sloped may differ at its edge pixels)
+    assert ((low.instance > 0) == (high.instance > 0)).mean() > 0.99
+    ground = _erode(low.instance == 0, 1)
+    brightness = [t.rgb[ground].mean() for t in (low, high)]
+    assert brightness[1] < 0.9 * brightness[0], brightness
 
 
 def test_a_dense_town_renders_with_turned_buildings_labelled_exactly_and_brown_dirt_tracks(space, bank, tmp_path):
