@@ -956,39 +956,37 @@ def _candidates(result: dict) -> list[dict]:
     ones (its run at share 0, None without one): issue 18's classifier on "tiles rendered with the design
     inferred for them". A run that painted the domain's own roofs (``own_roofs``) read its labels: no candidate."""
     default_r = result.get("settings", {}).get("r_real", 0.25)
+    rows = [(name, domain, row) for name, run in result["runs"].items() for domain, row in run.items()
+            if not row.get("own_roofs")]
 
     def key(row: dict, domain: str) -> tuple:  # the uniform designs' renders (the segmenters' augmentation aside)
         return (row.get("space", "rooftops-v1"), domain, bool(row.get("colour_matched")))
-    uniform_realness = {key(row, domain): row["realness"]["accuracy"]
-                        for run in result["runs"].values() for domain, row in run.items()
-                        if "rendered_only" in row and row["rendered_only"] is None and "realness" in row
-                        and not row.get("own_roofs")}
+    uniform_realness = {key(row, domain): row["realness"]["accuracy"] for _, domain, row in rows
+                        if "rendered_only" in row and row["rendered_only"] is None and "realness" in row}
     def drawn(row: dict, domain: str) -> tuple:  # the designs a run draws its cities from, whatever its share
         return (row.get("space", "rooftops-v1"), domain, row.get("method", "nams"), row.get("near"),
                 bool(row.get("colour_matched")))
     # The classifier on renders of the designs alone (issue 18's wording: tiles rendered with the design inferred
     # for them): the run of the same designs at share 0, with either augmentation (the renders are the same).
-    alone_realness = {drawn(row, domain): row["realness"]["accuracy"]
-                      for run in result["runs"].values() for domain, row in run.items()
+    alone_realness = {drawn(row, domain): row["realness"]["accuracy"] for _, domain, row in rows
                       if row.get("rendered_only") is not None and row.get("r") == 0 and "realness" in row}
     found = []
-    for name, run in result["runs"].items():
-        for domain, row in run.items():
-            if "validation" not in row or row.get("own_roofs"):
-                continue
-            common = {"run": name, "domain": domain, "space": row.get("space", "rooftops-v1"),
-                      "augment": row.get("colour_augment", "light"), "row": row,
-                      "uniform_only": row.get("rendered_only") is None}
-            if row.get("rendered_only") is not None:
-                found.append({**common, "r": row.get("r", default_r), "method": row.get("method", "nams"),
-                              "test": row["rendered_only"], "validation": row["validation"]["rendered_only"],
-                              "realness": row.get("realness", {}).get("accuracy"),
-                              "realness_alone": alone_realness.get(drawn(row, domain))})
-            uniform = (row["realness"]["accuracy"] if common["uniform_only"] and "realness" in row  # its own
-                       else uniform_realness.get(key(row, domain)))
-            found.append({**common, "r": 1.0, "method": "uniform", "test": row["uniform_designs"],
-                          "validation": row["validation"]["uniform_designs"], "realness": uniform,
-                          "realness_alone": uniform})
+    for name, domain, row in rows:
+        if "validation" not in row:
+            continue
+        common = {"run": name, "domain": domain, "space": row.get("space", "rooftops-v1"),
+                  "augment": row.get("colour_augment", "light"), "row": row,
+                  "uniform_only": row.get("rendered_only") is None}
+        if row.get("rendered_only") is not None:
+            found.append({**common, "r": row.get("r", default_r), "method": row.get("method", "nams"),
+                          "test": row["rendered_only"], "validation": row["validation"]["rendered_only"],
+                          "realness": row.get("realness", {}).get("accuracy"),
+                          "realness_alone": alone_realness.get(drawn(row, domain))})
+        uniform = (row["realness"]["accuracy"] if common["uniform_only"] and "realness" in row  # its own
+                   else uniform_realness.get(key(row, domain)))
+        found.append({**common, "r": 1.0, "method": "uniform", "test": row["uniform_designs"],
+                      "validation": row["validation"]["uniform_designs"], "realness": uniform,
+                      "realness_alone": uniform})
     return found
 
 
@@ -1023,9 +1021,8 @@ def chosen_shares(result: dict) -> list[dict]:
     designs in the same cities (``_candidates``). The choice looks only at validation IoU (the first of equal
     ones); its test IoU is then read against issue 18's targets. Runs of uniform designs alone, or drawn another
     way (``near``, DR, the critic, colour-matched) or with another segmenter budget (``SEGMENTER_STEPS``) take no
-    part, except that a run of uniform designs alone gives
-    the classifier's accuracy when the uniform designs are chosen (whatever its augmentation: the renders are the
-    same). ``own_real``: the test IoU of the segmenter
+    part, except that a run of uniform designs alone gives the classifier's accuracy when the uniform designs are
+    chosen (whatever its augmentation: the renders are the same). ``own_real``: the test IoU of the segmenter
     trained on the domain's own adapt scenes, from whichever run measured it."""
     groups: dict = {}
     for c in _candidates(result):
