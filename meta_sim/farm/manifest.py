@@ -122,9 +122,9 @@ class Manifest:
         """Every task is what its name says: the name is the hash of its design, city and the shared
         settings, its tiles lie in 0..n_tiles-1 and its outputs are its tiles' file names. A manifest
         edited by hand (or by someone hostile) cannot send a tile anywhere else; MetaSimError if not."""
-        shared = self.shared_settings()
+        shared, order = self.shared_settings(), self.parameter_order()
         for task in self.tasks:
-            if task.name != task_name(task.design, task.city_seed, shared):
+            if task.name != task_name(task.design, task.city_seed, shared, order):
                 raise MetaSimError(f"manifest task {task.name} does not match its design, city and settings "
                                    "(edited by hand?); plan the job again")
             if len(set(task.tiles)) != len(task.tiles) or not all(0 <= j < self.n_tiles for j in task.tiles):
@@ -136,6 +136,13 @@ class Manifest:
         """What every task's pixels depend on besides its design and city (part of each task's name)."""
         return shared_settings(self.space.get("name"), self.preset, self.n_tiles, self.tile_px, self.pixel_size_m,
                                self.appearance)
+
+    def parameter_order(self) -> tuple:
+        """The space's parameter names in declaration order (task names read the design in this order)."""
+        parameters = self.space.get("parameters")
+        if not isinstance(parameters, list):
+            return ()
+        return tuple(p["name"] for p in parameters if isinstance(p, dict) and isinstance(p.get("name"), str))
 
     def subset(self, tasks) -> "Manifest":
         """The same job with only ``tasks``."""
@@ -186,11 +193,15 @@ def parse_shard(text: str) -> tuple[int, int]:
     return int(match[1]), int(match[2])
 
 
-def task_name(design: dict, city_seed: int, settings: dict) -> str:
-    """Readable design ids plus a hash of everything that decides the task's pixels."""
+def task_name(design: dict, city_seed: int, settings: dict, order: tuple = ()) -> str:
+    """Readable design values plus a hash of everything that decides the task's pixels.
+
+    The values are read in the space's declaration order (``order``; names it lacks follow, sorted), never
+    in the dict's own: a manifest is saved with sorted keys, and the name must survive the round trip."""
     content = json.dumps({"design": design, "city_seed": city_seed, **settings}, sort_keys=True)
     digest = hashlib.sha256(content.encode()).hexdigest()[:12]
-    readable = re.sub(r"[^A-Za-z0-9.+-]", "_", "+".join(str(v) for v in design.values()))[:80]
+    names = [n for n in order if n in design] + sorted(set(design) - set(order))
+    readable = re.sub(r"[^A-Za-z0-9.+-]", "_", "+".join(str(design[n]) for n in names))[:80]
     return f"{readable}_s{city_seed}_{digest}"
 
 
@@ -211,7 +222,7 @@ def plan(options: dict, out_dir: Path) -> Manifest:
                              settings.pixel_size_m, appearance)
     tasks = {}
     for job in jobs:
-        name = task_name(job.design, job.city_seed, shared)
+        name = task_name(job.design, job.city_seed, shared, settings.space.names)
         indices = job.tile_indices(settings.n_tiles)
         outputs = tuple(tile_path(Path(), replace(job, name=name), j).name for j in indices)
         tasks.setdefault(name, Task(name, job.design, job.city_seed, indices, outputs))

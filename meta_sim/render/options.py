@@ -52,8 +52,8 @@ RENDER_OPTIONS = (
            "weathering drawn per building (see meta_sim/sim/jitter.py)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),
     Option("--bank", Path, None, "texture bank folder (default: the built-in bank, built on first use)"),
-    Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1, "
-           "or with --bank, one parameter per roof kind of that bank)"),
+    Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1; with "
+           "--bank, one parameter per roof kind of that bank; with --population, the space it was inferred in)"),
     Option("--tile-px", int, 384, "tile width and height in pixels"),
     Option("--gsd", float, 0.3, "ground sampling distance: metres per pixel"),
     Option("--preview", bool, False, "also write an RGB PNG and a colour-coded label PNG per tile", True),

@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.errors import MetaSimError
-from ..sim.design import DesignSpace
+from ..sim.design import DEFAULT_SPACE, DesignSpace, builtin_spaces
 from ..sim.ground import get_mix
 from ..sim.jitter import check_strength
-from ..sim.layout import parse_style, style_text
+from ..sim.layout import MAX_CITY_M, MIN_CITY_M, city_size_m, parse_style, style_text
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
 from ..sim.sensor import get_sensor
@@ -25,7 +25,8 @@ def plan(options: dict):
     """Validated (jobs, settings) from parsed options (``RENDER_OPTIONS`` dests); MetaSimError on bad input.
 
     The design space comes from ``space`` (a built-in name or a JSON file), else from ``bank`` (one
-    parameter per roof kind it has), else the default; held-out texture ids are accepted in designs.
+    parameter per roof kind it has), else from the population preset (the space it was inferred in), else
+    the default; held-out texture ids are accepted in designs.
     """
     if options.get("out") is None:
         raise MetaSimError("give an output folder with --out")
@@ -46,6 +47,7 @@ def plan(options: dict):
             raise MetaSimError(f"-r must be a probability from 0 to 1, not {r!r}")
     if not 0.01 <= options["gsd"] <= 10.0:
         raise MetaSimError("--gsd must be between 0.01 and 10 metres per pixel")
+    _check_city_size(options["tiles"], options["tile_px"], options["gsd"])
     preset = get_preset(options["preset"])
     sensor = get_sensor(options.get("sensor"))
     roof_jitter = check_strength(options.get("roof_jitter", 0.0))
@@ -53,12 +55,19 @@ def plan(options: dict):
     get_mix(ground)
     style = style_text(parse_style(options.get("style") or "suburban"))  # checked, in one spelling
     banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
+    population = load_preset(options["population"]) if options.get("population") is not None else None
     if options.get("space"):
         space = DesignSpace.load(options["space"])
     elif options.get("bank"):
         space = DesignSpace.for_textures(f"bank:{banks[0].name}", banks[0].ids("flat"), banks[0].ids("sloped"))
+    elif population is not None:
+        space = population_space(population, options["population"])
     else:
         space = DesignSpace.load()
+    if population is not None and population.design_space and population.design_space != space.name:
+        raise MetaSimError(f"{options['population']}: the population was inferred in design space "
+                           f"{population.design_space!r}, not {space.name!r}; drop --space (and --bank) or give "
+                           f"that space's JSON with --space FILE")
     heldout = ensure_heldout_banks()
     # Held-out textures a design may name (heldout-v5 holds heldout-v4's: each once).
     extra = {p.name: list(dict.fromkeys(t for bank in heldout for t in bank.ids(p.texture_kind)))
@@ -86,3 +95,26 @@ def plan(options: dict):
         raise MetaSimError(f"design space {space.name!r} declares a city style already; "
                            "drop --style or the space's layout style")
     return jobs, settings
+
+
+def population_space(population, path) -> DesignSpace:
+    """The design space a population preset was inferred in, when the package ships it by that name (the
+    default space when it records none); MetaSimError naming --space otherwise (a space from a file is not
+    found by its name alone)."""
+    name = population.design_space
+    if not name or name in builtin_spaces():
+        return DesignSpace.load(name or DEFAULT_SPACE)
+    raise MetaSimError(f"{path}: the population was inferred in design space {name!r}, which meta-sim does not "
+                       "ship; give that space's JSON with --space FILE")
+
+
+def _check_city_size(n_tiles: int, tile_px: int, gsd: float) -> None:
+    """MetaSimError naming the options to change when the city the tiles cover is smaller or larger than
+    the layout lays out, so that it fails here, before a folder or a farm job is made, not mid-render."""
+    width, height = city_size_m(n_tiles, tile_px * gsd)
+    covers = f"--tiles {n_tiles} of --tile-px {tile_px} at --gsd {gsd:g} cover {width:.1f} x {height:.1f} m"
+    if min(width, height) < MIN_CITY_M:
+        raise MetaSimError(f"{covers}, less than the {MIN_CITY_M:g} m a city needs across; raise --tile-px or --gsd")
+    if max(width, height) > MAX_CITY_M:
+        raise MetaSimError(f"{covers}, more than the {MAX_CITY_M:g} m a city spans at most; lower --tile-px, --gsd or "
+                           "--tiles")
