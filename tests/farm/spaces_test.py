@@ -83,6 +83,17 @@ def test_manifest_of_every_shipped_space_loads_as_planned(space, tmp_path):
     assert status.exit_code == 1 and "0/3 tasks complete" in status.output, status.output  # nothing rendered yet
 
 
+def test_a_manifest_planned_before_the_fix_still_loads(tmp_path):
+    """data/planned-before-the-fix.json: `jobs plan --space overhead-towns-v8` as the code before this test
+    wrote it; every interface refused it then."""
+    path = tmp_path / "job.json"
+    shutil.copy(Path(__file__).parent / "data" / "planned-before-the-fix.json", path)
+    manifest = farm.load(path)
+    assert manifest.space["name"] == "overhead-towns-v8" and len(manifest.tasks) == 2
+    status = _cli("jobs", "status", path)
+    assert status.exit_code == 1 and "0/2 tasks complete" in status.output, status.output
+
+
 def test_task_names_read_the_design_in_the_spaces_order_whatever_the_dicts(tmp_path):
     space = DesignSpace.load("overhead-towns-v5")
     design = space.sample(np.random.default_rng(3), 1)[0]
