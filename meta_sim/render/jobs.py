@@ -3,6 +3,7 @@ the metadata a finished tile carries, and ``designs.json`` beside the tiles. No 
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -19,6 +20,8 @@ from ..sim.design import DesignSpace
 from ..sim.layout import scene_version
 from ..sim.quality import RenderPreset
 from ..sim.sensor import Sensor
+
+READABLE_NAME = 120  # characters of a single design's choices in its tiles' names
 
 
 @dataclass(frozen=True)
@@ -113,8 +116,12 @@ def design_jobs(space: DesignSpace, designs: list[dict], seed: int, cities: int)
 
 
 def single_job(space: DesignSpace, design: dict, seed: int) -> Job:
-    """The job for one given design in city ``seed``, named after its choices and the seed."""
+    """The job for one given design in city ``seed``, named after its choices and the seed; a name too long
+    for a file (a rich space's many values) keeps its start and gains a digest of the whole design."""
     name = "+".join(str(design[n]) for n in space.names)
+    if len(name) > READABLE_NAME:
+        digest = hashlib.sha256(json.dumps(design, sort_keys=True).encode()).hexdigest()[:12]
+        name = f"{name[:READABLE_NAME]}+{digest}"
     return Job(design, seed, f"{name}_s{seed}")
 
 

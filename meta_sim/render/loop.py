@@ -19,10 +19,13 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from ..core.errors import MetaSimError
 from ..core.extras import require
 from ..core.fileio import writable_dir
 from ..sim import meshes, tiles
+from ..sim.appearance import Appearance
 from ..sim.design import DesignSpace
 from ..sim.ground import get_mix
 from ..sim.layout import LayoutParams, layout_for_tiles, parse_style
@@ -66,7 +69,7 @@ def blocks_of(n_tiles: int, cols: int) -> list[list[int]]:
     return [groups[key] for key in sorted(groups)]
 
 
-def _layout_params(space: DesignSpace, design: dict, style: str = "suburban") -> LayoutParams:
+def layout_params(space: DesignSpace, design: dict, style: str = "suburban") -> LayoutParams:
     """The city's layout parameters: the design space's overrides, and the render's style if it has one."""
     overrides = space.layout_overrides(design)
     if style != "suburban":
@@ -78,6 +81,26 @@ def _layout_params(space: DesignSpace, design: dict, style: str = "suburban") ->
         return LayoutParams(**overrides)
     except TypeError as exc:
         raise MetaSimError(f"design space {space.name!r} sets an unknown layout field: {exc}") from None
+
+
+def build_city(layout, rects, pixel_size_m: float, look: Appearance, **home):
+    """The Blender scene of a city laid out as ``layout`` holding the tiles ``rects``, as ``look`` builds it
+    (its ground, greenness, sun, albedo, shadows, view, grain, dust and soil); ``home`` is the add-on's
+    collection and key (``CityScene``). The render worker and the add-on build every city here, so a
+    preview tile is the farm's. Needs ``bpy``; MetaSimError for a look the city cannot take."""
+    from ..blender.scene import CityScene  # bpy only when rendering
+
+    return CityScene(layout, rects, pixel_size_m=pixel_size_m, ground=get_mix(look.ground),
+                     greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
+                     ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
+                     view_height_m=look.view_height_m, ground_grain=look.ground_grain,
+                     road_dust=look.road_dust, soil_redness=look.soil_redness, **home)
+
+
+def finish_tile(look: Appearance, rgb, instance, roof_class, city_seed: int, tile_index: int, preset) -> np.ndarray:
+    """Tile ``tile_index`` of a city as ``look`` shows its linear render (``Appearance.apply``): the sensor sees
+    each tile alone, its noise seeded by the city and the tile."""
+    return look.apply(rgb, instance, roof_class, city_seed, [city_seed, tile_index], preset)
 
 
 def render_jobs(jobs: list[Job], settings: RenderSettings,
@@ -93,7 +116,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
     missing) or a layout field that does not exist; all of these are checked before anything renders.
     """
     require("bpy", "rendering")
-    from ..blender.scene import CityScene, Rect, blender_version, bounding_rect  # bpy only when rendering
+    from ..blender.scene import Rect, blender_version, bounding_rect  # bpy only when rendering
 
     out_dir = Path(settings.out_dir)
     writable_dir(out_dir)
@@ -105,7 +128,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         if missing:
             raise MetaSimError(f"job {job.name}: its design lacks {', '.join(missing)} of design space "
                                f"{settings.space.name!r}")
-        params = _layout_params(settings.space, job.design, settings.style)
+        params = layout_params(settings.space, job.design, settings.style)
         textures = resolve_textures(settings.space, job.design, settings.banks)  # fail early
         wanted = job.tile_indices(settings.n_tiles)
         pending = [j for j in wanted
@@ -133,11 +156,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
         try:
-            scene = CityScene(layout, rects, pixel_size_m=settings.pixel_size_m, ground=get_mix(look.ground),
-                              greenness=look.greenness, sun_elevation_deg=look.sun_elevation_deg,
-                              ground_albedo=look.ground_albedo, shadow_depth=look.shadow_depth,
-                              view_height_m=look.view_height_m, ground_grain=look.ground_grain,
-                              road_dust=look.road_dust, soil_redness=look.soil_redness)
+            scene = build_city(layout, rects, settings.pixel_size_m, look)
         except MetaSimError as exc:  # a look this city cannot take (a view below its towers): say whose
             raise MetaSimError(f"job {work[0][0].name} (city seed {city_seed}): {exc}") from None
         summary.seconds["build"] += time.perf_counter() - clock
@@ -165,9 +184,8 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                             tile_index=j, origin_m=rects[j][:2], size_px=(settings.tile_px, settings.tile_px),
                             pixel_size_m=settings.pixel_size_m, preset=settings.preset,
                             software=software, appearance=settings.header(job), sun=scene.sun)
-                        # the sensor sees each tile alone (its noise seeded by the tile); labels untouched
-                        image = look.apply(rgb[cut], instance[cut], roof_class[cut], job.city_seed,
-                                           [job.city_seed, j], settings.preset)
+                        image = finish_tile(look, rgb[cut], instance[cut], roof_class[cut], job.city_seed, j,
+                                            settings.preset)
                         tiles.write_tile(path, image, instance[cut], roof_class[cut], meta)
                         if settings.preview:
                             write_previews(path, image, instance[cut], roof_class[cut])

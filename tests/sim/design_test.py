@@ -284,7 +284,7 @@ def test_overhead_v3_is_overhead_v2_with_sparse_towns():
 
 def test_overhead_towns_v1_is_overhead_v2_with_every_city_a_dense_town():
     """The towns space: no style to infer, every city the dense style (its cache key says so)."""
-    from meta_sim.render.loop import _layout_params
+    from meta_sim.render.loop import layout_params
     from meta_sim.sim.layout import generate_layout
 
     v2, towns = DesignSpace.load("overhead-v2"), DesignSpace.load("overhead-towns-v1")
@@ -294,7 +294,7 @@ def test_overhead_towns_v1_is_overhead_v2_with_every_city_a_dense_town():
     for design in towns.sample(np.random.default_rng(3), 5):
         overrides = towns.layout_overrides(design)
         assert overrides["style"] == "dense" and overrides["building_density"] == design["building_density"]
-    layout = generate_layout(7, 120.0, 120.0, _layout_params(towns, towns.sample(np.random.default_rng(3), 1)[0]))
+    layout = generate_layout(7, 120.0, 120.0, layout_params(towns, towns.sample(np.random.default_rng(3), 1)[0]))
     assert {layout.style_of(b) for b in layout.buildings} == {"dense"}
 
 

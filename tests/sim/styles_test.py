@@ -63,7 +63,7 @@ def test_style_accepts_a_name_a_mapping_and_pairs_and_normalises_the_shares():
 
 
 def test_style_reaches_the_layout_params_from_a_design_space_json(tmp_path):
-    from meta_sim.render.loop import _layout_params
+    from meta_sim.render.loop import layout_params
     from meta_sim.sim.design import DesignSpace
 
     data = DesignSpace.load().to_dict()
@@ -72,7 +72,7 @@ def test_style_reaches_the_layout_params_from_a_design_space_json(tmp_path):
     path.write_text(json.dumps(data))
     space = DesignSpace.load(str(path))
     design = {p.name: p.choices[0] for p in space.parameters}
-    assert _layout_params(space, design).style == (("suburban", 0.3), ("dense", 0.7))
+    assert layout_params(space, design).style == (("suburban", 0.3), ("dense", 0.7))
 
 
 @pytest.mark.parametrize("style,message", [
