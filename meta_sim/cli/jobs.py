@@ -7,7 +7,11 @@ from pathlib import Path
 
 import click
 
+from ..core.errors import MetaSimError
 from .base import main
+
+# A job beyond this is more often a slip of the keyboard than a plan: days of farm time, a manifest too big to read.
+MANY_TILES = 1_000_000
 
 
 @main.group()
@@ -38,10 +42,15 @@ def _plan_options(command):
               help="manifest file to write (JSON)")
 @click.option("--out-dir", type=click.Path(path_type=Path), default=None,
               help="folder for the tiles [default: MANIFEST-tiles beside the manifest]")
-def jobs_plan(manifest_path, out_dir, **options):
+@click.option("--yes", is_flag=True, help=f"plan a job of more than {MANY_TILES:,} tiles")
+def jobs_plan(manifest_path, out_dir, yes, **options):
     """Write a job manifest: one task per design and city, named by its content (replanning is idempotent)."""
     from ..farm import manifest as farm
 
+    designs = options["random_designs"] or (options["images"] if options["population"] else 1)
+    if designs * options["tiles"] > MANY_TILES and not yes:
+        raise MetaSimError(f"this job asks for {designs * options['tiles']:,} tiles ({designs:,} designs x "
+                           f"--tiles {options['tiles']}); pass --yes to plan more than {MANY_TILES:,}")
     manifest = farm.plan(options, out_dir or farm.default_out_dir(manifest_path))
     farm.save(manifest, manifest_path)
     click.echo(f"{len(manifest.tasks)} tasks, {manifest.n_outputs} tiles -> {manifest.out_dir}; "

@@ -1787,6 +1787,13 @@ def _grid_layout(seed: int, width: float, height: float, params: LayoutParams) -
                       tuple(trees), **details)
 
 
+def city_size_m(n_tiles: int, tile_m: float) -> tuple[float, float]:
+    """(width, height) in metres of the city ``layout_for_tiles`` lays out for ``n_tiles`` tiles of ``tile_m``:
+    what a render checks against ``MIN_CITY_M`` and ``MAX_CITY_M`` before it plans anything."""
+    cols = math.ceil(math.sqrt(n_tiles))
+    return cols * tile_m, math.ceil(n_tiles / cols) * tile_m
+
+
 def layout_for_tiles(seed: int, n_tiles: int, tile_m: float = TILE_M,
                      params: LayoutParams | None = None) -> tuple[CityLayout, list[Rect]]:
     """A city over a near-square grid of tiles (cols = ceil(sqrt(n)), rows = ceil(n / cols)).
@@ -1796,9 +1803,7 @@ def layout_for_tiles(seed: int, n_tiles: int, tile_m: float = TILE_M,
     if isinstance(n_tiles, bool) or not isinstance(n_tiles, (int, np.integer)) or n_tiles < 1:
         raise MetaSimError(f"n_tiles must be a positive integer, got {n_tiles!r}")
     tile_m = _check_number("layout_for_tiles", "tile_m", tile_m, 1.0, MAX_CITY_M)
-    cols = math.ceil(math.sqrt(n_tiles))
-    rows = math.ceil(n_tiles / cols)
-    layout = generate_layout(seed, cols * tile_m, rows * tile_m, params)
+    layout = generate_layout(seed, *city_size_m(int(n_tiles), tile_m), params)
     return layout, layout.tile_grid(tile_m)[: int(n_tiles)]
 
 

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from meta_sim.cli import main as cli
 
 DESIGN = ["--design", "flat_roof=0,sloped_roof=0"]
-SMALL = ["--tiles", "1", "--tile-px", "32"]
+SMALL = ["--tiles", "1", "--tile-px", "32", "--gsd", "1"]
 
 BAD = [
     ("render", "--design", "flat_roof=²,sloped_roof=0", *SMALL, "--out", "{tmp}/out"),
@@ -68,8 +68,8 @@ def _files(folder):
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
 
 
-@pytest.mark.parametrize("args", BAD, ids=[" ".join(a[:2]) + f" #{i}" for i, a in enumerate(BAD)])
-def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args):
+def _refused(tmp_path, args) -> str:
+    """The one line a command refusing ``args`` prints, after checking it exits 2 and leaves no file."""
     before = _files(tmp_path)
     result = CliRunner().invoke(cli, [a.format(tmp=tmp_path) for a in args])
     assert result.exit_code == 2, (result.output, result.exception)
@@ -77,6 +77,28 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args):
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(("error: ", "Error: ")), result.output
     assert _files(tmp_path) == before
+    return lines[0]
+
+
+@pytest.mark.parametrize("args", BAD, ids=[" ".join(a[:2]) + f" #{i}" for i, a in enumerate(BAD)])
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args):
+    _refused(tmp_path, args)
+
+
+# Command lines whose one line must name what fixes them.
+NAMED = [
+    (("render", *DESIGN, "--tiles", "1", "--tile-px", "96", "--out", "{tmp}/out"), "raise --tile-px or --gsd"),
+    (("jobs", "plan", *DESIGN, "--tiles", "1", "--tile-px", "96", "--out", "{tmp}/job.json"),
+     "raise --tile-px or --gsd"),
+    (("jobs", "plan", *DESIGN, "--tiles", "64", "--tile-px", "4096", "--out", "{tmp}/job.json"),
+     "lower --tile-px, --gsd or --tiles"),
+    (("jobs", "plan", "--random-designs", "200000", "--out", "{tmp}/job.json"), "pass --yes"),
+]
+
+
+@pytest.mark.parametrize("args, fix", NAMED, ids=[" ".join(a[:2]) + f" #{i}" for i, (a, _) in enumerate(NAMED)])
+def test_bad_input_names_its_fix(tmp_path, args, fix):
+    assert fix in _refused(tmp_path, args)
 
 
 def test_infer_into_a_folder_of_an_earlier_run_needs_overwrite(tmp_path):

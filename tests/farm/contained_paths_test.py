@@ -91,7 +91,7 @@ def test_a_design_space_choice_cannot_name_a_path(tmp_path, choice, bank):
     space["parameters"][0]["choices"][0] = choice.format(outside=outside)
     (tmp_path / "space.json").write_text(json.dumps(space))
     result = _cli("render", "--space", tmp_path / "space.json", "--design", "flat_roof=0,sloped_roof=0",
-                  "--tiles", "1", "--tile-px", "32", "--out", tmp_path / "out")
+                  "--tiles", "1", "--tile-px", "32", "--gsd", "3.6", "--out", tmp_path / "out")
     assert result.exit_code == 2 and "not a safe name" in result.output, result.output
     assert _files(outside) == [] and not (tmp_path / "out").exists()
 

@@ -223,7 +223,7 @@ def _cli(*args):
 ])
 def test_render_cli_rejects_bad_input_and_writes_nothing(tmp_path, args, message):
     out = tmp_path / "out"
-    result = _cli("render", *args, "--out", out, "--tile-px", 32)
+    result = _cli("render", *args, "--out", out, "--tile-px", 32, "--gsd", 3.6)
     assert result.exit_code == 2, result.output
     assert message in result.output and "Traceback" not in result.output
     assert not out.exists() or not any(out.iterdir())
@@ -429,7 +429,7 @@ def test_render_from_a_population_records_the_sampled_designs(tmp_path, bank):
     assert all((tmp_path / "out" / job["tiles"][0]).is_file() for job in jobs)
     group = tmp_path / "group.json"
     group.write_text(population.read_text().replace('"population"', '"group"', 1))
-    bad = _cli("render", "--population", group, "--tiles", 1, "--tile-px", 32, "--out", tmp_path / "bad")
+    bad = _cli("render", "--population", group, "--tiles", 1, "--tile-px", 32, "--gsd", 3.6, "--out", tmp_path / "bad")
     assert bad.exit_code == 2 and "not a population preset" in bad.output
     assert not (tmp_path / "bad").exists()
 
