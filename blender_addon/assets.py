@@ -21,14 +21,16 @@ import numpy as np
 
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.core.fileio import atomic_path, write_text_atomic
-from ..meta_sim.render.loop import resolve_textures
+from ..meta_sim.render.loop import finish_tile, resolve_textures
 from ..meta_sim.sim import design_assets as lib
+from ..meta_sim.sim.design import DesignSpace
 from ..meta_sim.sim.imageio import read_rgb8
-from ..meta_sim.sim.presets import DesignPreset, load_preset
+from ..meta_sim.sim.presets import DesignPreset
 from ..meta_sim.sim.preview import to_srgb8
 from ..meta_sim.sim.quality import PRESETS, get_preset
 from ..meta_sim.sim.textures import write_png
 from . import city, preferences, tasks
+from . import library as libraries
 
 SETTINGS_FILE = "library.json"
 SETTINGS_FORMAT = "meta-sim-design-library"
@@ -82,44 +84,59 @@ def build_steps(settings, library, folder: Path, keep_settings: bool = False):
         knobs = city.city_knobs(settings) or city.knobs(settings)
         recorded = {"city": knobs, "tile": min(settings.preview_tile, knobs["tiles"] - 1),
                     "quality": preferences.quality(settings)}
-    shown = [lib.population_designs(f.preset) if f.preset.kind == "population" else [f.preset.design]
-             for f in found]
-    keys = {json.dumps(d, sort_keys=True): lib.preview_key(d, recorded["city"], recorded["quality"],
-                                                             library.bank.name) for ds in shown for d in ds}
+    shown = [[(f.space, d) for d in (lib.population_designs(f.preset) if f.preset.kind == "population"
+                                     else [f.preset.design])] for f in found]
+    keys = {_shown_key(space, d): lib.preview_key(d, space, recorded["city"], recorded["quality"], library.bank.name)
+            for ds in shown for space, d in ds}
     cached = {key: out / lib.PREVIEWS_DIR / f"{key}.png" for key in keys.values()}
     rendered = {}
-    missing = [json.loads(text) for text, key in keys.items() if not cached[key].is_file()]
+    missing = {text: pair for ds in shown for pair in ds
+               if not cached[keys[text := _shown_key(*pair)]].is_file()}
     if missing:
-        rendered = yield from _render_previews(library, recorded, missing, keys)
+        rendered = yield from _render_previews(library, recorded, list(missing.values()), keys)
     yield 0.95, "writing the asset library"
     tiles = {key: rendered[key] if key in rendered else read_rgb8(cached[key]) for key in keys.values()}
-    previews = [lib.mosaic([tiles[keys[json.dumps(d, sort_keys=True)]].astype(np.float32) / 255 for d in ds])
+    previews = [lib.mosaic([tiles[keys[_shown_key(*pair)]].astype(np.float32) / 255 for pair in ds])
                 for ds in shown]
     for key, rgb in rendered.items():
         write_png(cached[key], rgb)
     write_text_atomic(out / SETTINGS_FILE, json.dumps({"format": SETTINGS_FORMAT, "version": 1, **recorded},
                                                       indent=1) + "\n")
-    _write_library(out, found, previews, library.space)
+    _write_library(out, found, previews)
     register_library(folder)
     return found, bad
 
 
-def _render_previews(library, recorded: dict, designs: list[dict], keys: dict):
-    """Steps: a tile of each design (sRGB, ``PREVIEW_PX`` square), by preview key."""
+def _shown_key(space, design: dict) -> str:
+    return json.dumps([space.to_dict(), design], sort_keys=True)
+
+
+def _render_previews(library, recorded: dict, shown: list[tuple], keys: dict):
+    """Steps: a finished tile (``PREVIEW_PX`` square, sRGB) of each (space, design), each in its own space as the
+    render worker renders it, by preview key; designs whose city is the same scene share it."""
     knobs, quality = recorded["city"], get_preset(recorded["quality"])
     pixel_size = knobs["tile_px"] * knobs["gsd"] / lib.PREVIEW_PX  # the tile's ground at the preview's pixels
-    out = {}
-    with city.tile_city(library, knobs, recorded["tile"], pixel_size_m=pixel_size) as tile:
-        for k, chosen in enumerate(designs):
-            tile.set_roofs(resolve_textures(library.space, chosen, [library.bank]))
-            text = f"rendering preview {k + 1} of {len(designs)} ({quality.name})"
-            rgb = yield from tasks.scaled(tile.render_rgb_in_strips(tile.rects[0], quality), text,
-                                          0.9 * k / len(designs), 0.9 * (k + 1) / len(designs))
-            out[keys[json.dumps(chosen, sort_keys=True)]] = to_srgb8(quality.tone_map(rgb))
+    tile, out = recorded["tile"], {}
+    by_scene: dict = {}
+    for space, chosen in shown:
+        by_scene.setdefault(city.scene_key(space, knobs, chosen), []).append((space, chosen))
+    done = 0
+    for group in by_scene.values():
+        with city.tile_city(group[0][0], knobs, group[0][1], pixel_size_m=pixel_size) as (scene, _):
+            instance, roof_class = scene.render_labels(scene.rects[tile])
+            for space, chosen in group:
+                scene.set_roofs(resolve_textures(space, chosen, library.banks))
+                text = f"rendering preview {done + 1} of {len(shown)} ({quality.name})"
+                rgb = yield from tasks.scaled(scene.render_rgb_in_strips(scene.rects[tile], quality), text,
+                                              0.9 * done / len(shown), 0.9 * (done + 1) / len(shown))
+                image = finish_tile(city.look(space, knobs, chosen), rgb, instance, roof_class, knobs["seed"], tile,
+                                    quality)
+                out[keys[_shown_key(space, chosen)]] = to_srgb8(image)
+                done += 1
     return out
 
 
-def _write_library(out: Path, found: list, previews: list[np.ndarray], space) -> None:
+def _write_library(out: Path, found: list, previews: list[np.ndarray]) -> None:
     """The catalogs file, then the .blend of the assets (each written to a temporary file, then renamed)."""
     write_text_atomic(out / lib.CATALOG_FILE, lib.catalogs_text(lib.catalog_path(f.preset) for f in found))
     with bpy.data.temp_data() as data:
@@ -128,10 +145,10 @@ def _write_library(out: Path, found: list, previews: list[np.ndarray], space) ->
             scene = data.scenes.new(name)
             scene.asset_mark()
             meta = scene.asset_data
-            meta.description = lib.description(entry.preset, space)
+            meta.description = lib.description(entry.preset, entry.space)
             meta.catalog_id = lib.catalog_id(lib.catalog_path(entry.preset))
             meta.author = "Meta-Sim"
-            for tag in lib.tags(entry.preset, space):
+            for tag in lib.tags(entry.preset, entry.space):
                 meta.tags.new(tag, skip_if_exists=True)
             for key, value in lib.properties(entry).items():
                 meta[key] = value
@@ -174,20 +191,22 @@ def has_library(folder: Path) -> bool:
     return (library_dir(folder) / lib.BLEND_FILE).is_file()
 
 
-def asset_preset(asset, library) -> DesignPreset:
+def asset_preset(asset, library) -> tuple[DesignPreset, DesignSpace]:
     """The preset behind an asset (an ``AssetRepresentation``, or anything with its ``full_library_path`` and
-    ``metadata``), read from its file and checked against the loaded bank's design space."""
+    ``metadata``), read from its file, and its design space (``design_assets.load_in_own_space``)."""
     if not asset.full_library_path:
         raise MetaSimError("this design asset is a copy in the current file; apply it from its Meta-Sim library")
-    return load_preset(lib.preset_of_asset(asset.full_library_path, asset.metadata), library.space)
+    return lib.load_in_own_space(lib.preset_of_asset(asset.full_library_path, asset.metadata), library.space)
 
 
-def apply_asset(settings, library, asset) -> DesignPreset:
-    """Put an asset's design on the city and the roof pickers (nothing changes when its preset does not load)."""
-    preset = asset_preset(asset, library)
-    if not city.apply_design(settings, library, preset.design):
+def apply_asset(scene, settings, library, asset) -> DesignPreset:
+    """Make an asset's design space and design the scene's and put the design on the city (nothing changes when
+    its preset does not load)."""
+    preset, space = asset_preset(asset, library)
+    if city.find(settings) is None:
         raise MetaSimError("generate a city first: a design applies to its roofs")
-    city.set_design(settings, library, preset.design)
+    if not city.apply_design(scene, settings, libraries.switch(settings, space), preset.design):
+        raise MetaSimError("the city has no buildings to put roofs on")
     return preset
 
 

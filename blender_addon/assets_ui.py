@@ -53,7 +53,7 @@ def poll_design_asset(cls, context) -> bool:
 
 
 class META_SIM_OT_apply_asset(tasks.Reporting, bpy.types.Operator):
-    """Put the design asset's roof textures on the city (read from its preset file)"""
+    """Make the design asset's space and design the scene's and put it on the city (read from its preset file)"""
 
     bl_idname = "meta_sim.apply_asset"
     bl_label = "Apply Design to City"
@@ -64,7 +64,7 @@ class META_SIM_OT_apply_asset(tasks.Reporting, bpy.types.Operator):
         return poll_design_asset(cls, context)
 
     def run(self, context, settings):
-        preset = assets.apply_asset(settings, libraries.require(settings), context.asset)
+        preset = assets.apply_asset(context.scene, settings, libraries.require(settings), context.asset)
         self.report({"INFO"}, f"applied {preset.name or context.asset.name}")
         return {"FINISHED"}
 
@@ -107,10 +107,10 @@ class META_SIM_OT_drop_asset(tasks.Reporting, bpy.types.Operator):
         if not city_under_mouse(context, settings, event.mouse_x, event.mouse_y):
             self.report({"WARNING"}, "release the design over the city to apply it")
             return {"CANCELLED"}
-        return self.guarded(lambda: self._apply(settings))
+        return self.guarded(lambda: self._apply(context, settings))
 
-    def _apply(self, settings):
-        preset = assets.apply_asset(settings, libraries.require(settings), self._asset)
+    def _apply(self, context, settings):
+        preset = assets.apply_asset(context.scene, settings, libraries.require(settings), self._asset)
         self.report({"INFO"}, f"applied {preset.name or self._asset.name}")
         return {"FINISHED"}
 

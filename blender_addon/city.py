@@ -11,27 +11,30 @@ import contextlib
 import json
 import shlex
 import uuid
+from dataclasses import replace
 from pathlib import Path
 
 import bpy
 
-from ..meta_sim.blender.scene import CITY_TAG, CityScene, city_buildings, remove_city, set_roofs
+from ..meta_sim.blender.scene import CITY_TAG, city_buildings, remove_city, set_roofs
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.core.fileio import write_text_atomic
-from ..meta_sim.render.jobs import RenderSettings, design_jobs, sample_population, write_job_manifest
-from ..meta_sim.render.loop import resolve_textures
+from ..meta_sim.render.jobs import Job, RenderSettings, design_jobs, sample_population, write_job_manifest
+from ..meta_sim.render.loop import build_city, finish_tile, layout_params, resolve_textures
 from ..meta_sim.render.options import RENDER_OPTIONS
 from ..meta_sim.sim import meshes
 from ..meta_sim.sim.design import DesignSpace
-from ..meta_sim.sim.layout import LayoutParams, layout_for_tiles
+from ..meta_sim.sim.layout import layout_for_tiles
 from ..meta_sim.sim.presets import DesignPreset, save_preset
 from ..meta_sim.sim.preview import label_image, to_srgb8
 from ..meta_sim.sim.quality import get_preset
-from ..meta_sim.sim.textures import write_png
-from . import preferences, previews, tasks
+from ..meta_sim.sim.textures import default_bank_dir, write_png
+from . import design_values, preferences, previews, tasks
 
 COLLECTION_NAME = "Meta-Sim City"
 PARAMS_TAG = "meta_sim_params"  # on the city collection: the knobs it was generated with (JSON)
+SCENE_TAG = "meta_sim_scene"  # on the city collection: what its scene depends on besides the knobs
+LAYOUT_KNOBS = ("building_density", "sloped_share", "tree_density")  # the panel's layout fields
 PREVIEW_IMAGES = ("Meta-Sim Preview", "Meta-Sim Preview Labels")
 JOB_FORMAT = "meta-sim-render-request"
 JOB_FILE = "render-job.json"
@@ -44,13 +47,32 @@ def knobs(settings) -> dict:
             "sloped_share": round(settings.sloped_share, 6), "tree_density": round(settings.tree_density, 6)}
 
 
-def _layout(library, params: dict, tiles: list[int] | None = None):
-    """Layout and tile rectangles for the knobs; the space's fixed overrides win (a flat-only bank)."""
-    fields = {name: params[name] for name in ("building_density", "sloped_share", "tree_density")}
-    layout_params = LayoutParams(**{**fields, **library.space.layout})
-    layout, rects = layout_for_tiles(params["seed"], params["tiles"], params["tile_px"] * params["gsd"],
-                                     layout_params)
-    return layout, rects if tiles is None else [rects[j] for j in tiles]
+def city_space(space: DesignSpace, params: dict) -> DesignSpace:
+    """``space`` with the city's knobs as fixed layout beneath its own (the space's layout and a design's
+    layout parameters win): the design space an exported job hands the render worker."""
+    return replace(space, layout={**{name: params[name] for name in LAYOUT_KNOBS}, **space.layout})
+
+
+def look(space: DesignSpace, params: dict, chosen: dict):
+    """How the city of the knobs looks wearing a design of ``space`` (``RenderSettings.appearance``: the render
+    worker's look of the job the add-on would export)."""
+    settings = RenderSettings(space=city_space(space, params), banks=[], preset=get_preset("fast"), out_dir=Path(),
+                              n_tiles=params["tiles"], tile_px=params["tile_px"], pixel_size_m=params["gsd"])
+    return settings.appearance(Job(chosen, params["seed"], "preview"))
+
+
+def scene_key(space: DesignSpace, params: dict, chosen: dict) -> str:
+    """What the Blender scene of the city wearing a design depends on besides the knobs: its layout fields and
+    the look's scene part (designs with the same key differ only in roofs and post-processing)."""
+    return repr((layout_params(city_space(space, params), chosen), look(space, params, chosen).scene_key()))
+
+
+def _city(space: DesignSpace, params: dict, chosen: dict):
+    """The city of the knobs wearing a design of ``space``, as the render worker plans it: its layout, the
+    rectangles of all its tiles and its look."""
+    fields = layout_params(city_space(space, params), chosen)
+    layout, rects = layout_for_tiles(params["seed"], params["tiles"], params["tile_px"] * params["gsd"], fields)
+    return layout, rects, look(space, params, chosen)
 
 
 def find(settings) -> bpy.types.Collection | None:
@@ -63,43 +85,28 @@ def city_knobs(settings) -> dict | None:
     return json.loads(collection[PARAMS_TAG]) if collection is not None else None
 
 
-def design(settings, library) -> dict:
-    """The design the roof pickers show, validated against the bank's space."""
-    raw = {}
-    for kind, value in (("flat", settings.flat_roof), ("sloped", settings.sloped_roof)):
-        parameter = library.texture_parameter(kind)
-        if parameter is not None:
-            raw[parameter.name] = value
-    return library.space.validate(raw)
-
-
-def set_design(settings, library, chosen: dict) -> None:
-    """Point the roof pickers at a (validated) design."""
-    for kind, prop in (("flat", "flat_roof"), ("sloped", "sloped_roof")):
-        parameter = library.texture_parameter(kind)
-        if parameter is not None:
-            setattr(settings, prop, chosen[parameter.name])
-
-
-def generate_steps(scene: bpy.types.Scene, settings, library):
-    """Steps (see ``tasks``): a new city from the panel's knobs, wearing the pickers' design, replaces the
-    scene's city; returns the report. The old city goes only once the new one is complete: cancelled,
-    the half-built one is removed and the old one stays."""
-    chosen = design(settings, library)
-    params = knobs(settings)
-    layout, rects = yield from tasks.Threaded(lambda progress: _layout(library, params)).wait(
-        "laying out the city", 0.0, 0.4)
+def generate_steps(scene: bpy.types.Scene, settings, library, params: dict | None = None):
+    """Steps (see ``tasks``): a new city of the panel's knobs (or ``params``) wearing the scene's design (its
+    layout, ground, greenness, sun, ... and roofs, as the render worker builds it) replaces the scene's city;
+    returns the report. The old city goes only once the new one is complete: cancelled, the half-built one is
+    removed and the old one stays."""
+    chosen = design_values.design(settings, library.space)
+    params = params or knobs(settings)
+    textures = resolve_textures(library.space, chosen, library.banks)
+    layout, rects, city_look = yield from tasks.Threaded(
+        lambda progress: _city(library.space, params, chosen)).wait("laying out the city", 0.0, 0.4)
     key = f"meta-sim-{uuid.uuid4().hex[:12]}"
     collection = bpy.data.collections.new(COLLECTION_NAME)
     collection[CITY_TAG] = key
     try:
         scene.collection.children.link(collection)
         yield 0.4, "building the city"
-        city = CityScene(layout, rects, pixel_size_m=params["gsd"], collection=collection, key=key)
+        city = build_city(layout, rects, params["gsd"], city_look, collection=collection, key=key)
         city.close()
         collection[PARAMS_TAG] = json.dumps(params)
+        collection[SCENE_TAG] = scene_key(library.space, params, chosen)
         yield 0.9, "putting the roofs on"
-        _put_roofs(key, library, chosen)
+        _put_roofs(key, textures)
     except BaseException:
         remove_city(key)  # a half-built city must not stay behind as orphans
         raise
@@ -115,13 +122,22 @@ def remove(settings) -> int:
     return count
 
 
-def apply_design(settings, library, chosen: dict) -> bool:
-    """Put a design's roof textures on the city; False when there is no city (or it has no buildings)."""
-    return bool(settings.city_key) and _put_roofs(settings.city_key, library, chosen)
+def apply_design(scene: bpy.types.Scene, settings, library, chosen: dict) -> bool:
+    """Make a design of the library's space the scene's and put it on the city: its roofs, and when it changes
+    the city's layout or look, the city built again from the same knobs. False when there is no city or it
+    has no buildings to put roofs on; nothing changes when the design does not fit the space."""
+    design_values.set_design(settings, library.space, chosen)
+    collection = find(settings)
+    if collection is None:
+        return False
+    params = json.loads(collection[PARAMS_TAG])
+    if collection.get(SCENE_TAG) == scene_key(library.space, params, design_values.design(settings, library.space)):
+        return _put_roofs(settings.city_key, resolve_textures(library.space, chosen, library.banks))
+    tasks.run(generate_steps(scene, settings, library, params))
+    return True
 
 
-def _put_roofs(key: str, library, chosen: dict) -> bool:
-    textures = resolve_textures(library.space, chosen, [library.bank])
+def _put_roofs(key: str, textures: dict) -> bool:
     buildings = city_buildings(key)
     if buildings is None:
         return False
@@ -143,42 +159,46 @@ def roof_images(settings) -> dict:
 
 
 def render_preview_steps(settings, library):
-    """Steps (see ``tasks``): render one tile of the city (or of the panel's knobs before a city exists), as
-    the farm would; returns the two images (RGB and the colour-coded label pass).
+    """Steps (see ``tasks``): render one tile of the city (or of the panel's knobs before a city exists) wearing
+    the scene's design, as the render worker renders it; returns the two images (RGB and the colour-coded
+    label pass).
 
-    The tile is rebuilt in a private, temporary collection and removed afterwards (also when
-    cancelled); the images are PNGs in the extension's user folder, written at the end.
+    The city is rebuilt in a private, temporary collection and removed afterwards (also when cancelled); the
+    images are PNGs in the extension's user folder, written at the end.
     """
     params = city_knobs(settings) or knobs(settings)
     tile = min(settings.preview_tile, params["tiles"] - 1)
-    textures = resolve_textures(library.space, design(settings, library), [library.bank])
+    chosen = design_values.design(settings, library.space)
+    textures = resolve_textures(library.space, chosen, library.banks)
     preset = get_preset(preferences.quality(settings))
-    with tile_city(library, params, tile) as city:
+    with tile_city(library.space, params, chosen) as (city, look):
         yield 0.05, "building the preview tile"
         city.set_roofs(textures)
-        instance, roof_class = city.render_labels(city.rects[0])
+        instance, roof_class = city.render_labels(city.rects[tile])
         yield 0.15, "rendering the label pass"
-        rgb = yield from tasks.scaled(city.render_rgb_in_strips(city.rects[0], preset),
+        rgb = yield from tasks.scaled(city.render_rgb_in_strips(city.rects[tile], preset),
                                       f"rendering the tile ({preset.name})", 0.15, 1.0)
+    image = finish_tile(look, rgb, instance, roof_class, params["seed"], tile, preset)
     folder = preferences.user_dir("preview")
     paths = (folder / "preview.png", folder / "preview_labels.png")
-    write_png(paths[0], to_srgb8(preset.tone_map(rgb)))
+    write_png(paths[0], to_srgb8(image))
     write_png(paths[1], label_image(instance, roof_class))
     return tuple(_show(name, path) for name, path in zip(PREVIEW_IMAGES, paths))
 
 
 @contextlib.contextmanager
-def tile_city(library, params: dict, tile: int, pixel_size_m: float | None = None):
-    """One tile of the city of ``params`` in a private, temporary collection (its own render scene),
-    removed when the block ends; ``pixel_size_m`` renders it at another resolution than the knobs'."""
-    layout, rects = _layout(library, params, [tile])
+def tile_city(space: DesignSpace, params: dict, chosen: dict, pixel_size_m: float | None = None):
+    """The city of ``params`` wearing a design of ``space``, with every tile the render worker's scene holds,
+    in a private, temporary collection (its own render scene) removed when the block ends, and its look;
+    ``pixel_size_m`` renders it at another resolution than the knobs'."""
+    layout, rects, city_look = _city(space, params, chosen)
     key = f"meta-sim-preview-{uuid.uuid4().hex[:8]}"
     collection = bpy.data.collections.new("Meta-Sim Preview Tile")
     collection[CITY_TAG] = key
     city = None
     try:
-        city = CityScene(layout, rects, pixel_size_m=pixel_size_m or params["gsd"], collection=collection, key=key)
-        yield city
+        city = build_city(layout, rects, pixel_size_m or params["gsd"], city_look, collection=collection, key=key)
+        yield city, city_look
     finally:
         if city is not None:
             city.close()
@@ -198,18 +218,19 @@ def _show(name: str, path: Path) -> bpy.types.Image:
     return image
 
 
-def export_job(settings, library, job_dir: Path, population: DesignPreset | None = None) -> Path:
+def export_job(settings, library, job_dir: Path, population: DesignPreset | None = None,
+               population_space: DesignSpace | None = None) -> Path:
     """Write ``render-job.json`` (and the design space with the city's layout) for the render worker.
 
-    The worker has no options for the city knobs, but a design space may fix layout
-    fields: the job's ``design-space.json`` is the bank's space with the city's knobs,
-    so the farm renders the same city the artist sees.
+    The worker has no options for the city knobs, but a design space may fix layout fields: the job's
+    ``design-space.json`` is the scene's design space (or the population's, ``population_space``) with the
+    city's knobs beneath its own layout, so the farm renders the same city the artist sees.
 
-    Without ``population`` the job renders the current city with the pickers' design. With
-    it, the job renders ``job_images`` designs drawn from the population (copied into the job
-    as ``population.json``) in ``job_cities`` cities of the panel's knobs, seeds ``seed``,
-    ``seed + 1``, ...; the worker draws the same designs from the same seed, and
-    ``tiles/designs.json`` records them already, as `meta-sim render --population` writes it.
+    Without ``population`` the job renders the current city with the scene's design. With it, the job
+    renders ``job_images`` designs drawn from the population (copied into the job as ``population.json``,
+    in the job's space) in ``job_cities`` cities of the panel's knobs, seeds ``seed``, ``seed + 1``, ...;
+    the worker draws the same designs from the same seed, and ``tiles/designs.json`` records them
+    already, as `meta-sim render --population` writes it.
     """
     if population is None:
         params = city_knobs(settings)
@@ -217,20 +238,24 @@ def export_job(settings, library, job_dir: Path, population: DesignPreset | None
             raise MetaSimError("generate a city first: the job renders the current city")
     else:
         params = knobs(settings)
+    default = default_bank_dir(cache_dir=preferences.cache_dir())
+    if settings.bank_source != "DEFAULT" and any(bank.root == default for bank in library.banks[1:]):
+        raise MetaSimError(f"design space {library.space.name!r} takes textures of the default bank, and a render "
+                           "job names one bank: choose the Default texture bank to export it")
     job_dir = Path(job_dir)
-    space = library.space.to_dict()
-    space["name"] = f"{library.space.name}+city-s{params['seed']}"
-    space["layout"] = {**{name: params[name] for name in ("building_density", "sloped_share", "tree_density")},
-                       **space["layout"]}
+    base = population_space or library.space
+    space = city_space(base, params).to_dict()
+    space["name"] = f"{base.name}+city-s{params['seed']}"
     space_path, out = job_dir / "design-space.json", job_dir / "tiles"
     options = {"seed": params["seed"], "tiles": params["tiles"], "preset": preferences.quality(settings),
                "out": str(out), "space": str(space_path), "tile_px": params["tile_px"], "gsd": params["gsd"],
                "bank": None if settings.bank_source == "DEFAULT" else str(library.bank.root)}
     if population is None:
-        chosen = design(settings, library)
+        chosen = design_values.design(settings, library.space)
         options["design"] = library.space.format(chosen)
         what = {"design": chosen}
     else:
+        population = replace(population, design_space=space["name"])  # the job's space: the knobs are its layout
         options.update(population=str(job_dir / "population.json"), images=settings.job_images,
                        r=round(settings.job_rejection, 6), cities=settings.job_cities)
         jobs, render_settings = _population_jobs(DesignSpace.from_dict(space), population, options)
@@ -252,7 +277,7 @@ def export_job(settings, library, job_dir: Path, population: DesignPreset | None
                "blender_command": shlex.join(["blender", "-b", "--python-exit-code", "1", "--python",
                                               "jobs/render_tiles.py", "--", *argv]),
                "plan_command": shlex.join(["meta-sim", "jobs", "plan", *plan_argv]),
-               **what, "city": params}
+               "design_space": base.name, **what, "city": params}
         write_text_atomic(path, json.dumps(job, indent=1) + "\n")
     except OSError as exc:
         raise MetaSimError(f"cannot write the job into {job_dir}: {exc.strerror}; choose another folder") from None

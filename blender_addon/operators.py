@@ -13,7 +13,7 @@ from bpy_extras.io_utils import ExportHelper
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.sim.design_assets import PRESETS_SUBDIR
 from ..meta_sim.sim.presets import DesignPreset, save_preset
-from . import assets, city, presets_ui, tasks
+from . import assets, city, design_values, presets_ui, tasks
 from . import library as libraries
 
 
@@ -50,7 +50,7 @@ def poll_has_city(cls, settings) -> bool:
 
 
 class META_SIM_OT_load_bank(tasks.Stepped, bpy.types.Operator):
-    """Load the chosen texture bank (the default one is built on first use, a few seconds)"""
+    """Load the chosen texture bank and design space (banks are built on first use, seconds)"""
 
     bl_idname = "meta_sim.load_bank"
     bl_label = "Load Texture Bank"
@@ -62,8 +62,9 @@ class META_SIM_OT_load_bank(tasks.Stepped, bpy.types.Operator):
 
     def steps(self, context, settings):
         library = yield from libraries.load_steps(settings)
+        design_values.fit(settings, library.space)
         return (f"texture bank {library.bank.name}: {len(library.bank.ids('flat'))} flat, "
-                f"{len(library.bank.ids('sloped'))} sloped textures")
+                f"{len(library.bank.ids('sloped'))} sloped textures; design space {library.space.name}")
 
 
 class META_SIM_OT_generate_city(tasks.Stepped, bpy.types.Operator):
@@ -98,11 +99,11 @@ class META_SIM_OT_remove_city(tasks.Reporting, bpy.types.Operator):
         return {"FINISHED"}
 
 
-class META_SIM_OT_apply_roofs(tasks.Reporting, bpy.types.Operator):
-    """Put the picked flat and sloped roof textures on the city"""
+class META_SIM_OT_apply_design(tasks.Reporting, bpy.types.Operator):
+    """Put the panel's design on the city: its roofs, and the city built again when its layout or look changed"""
 
-    bl_idname = "meta_sim.apply_roofs"
-    bl_label = "Apply Roofs"
+    bl_idname = "meta_sim.apply_design"
+    bl_label = "Apply Design"
     bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
@@ -112,7 +113,7 @@ class META_SIM_OT_apply_roofs(tasks.Reporting, bpy.types.Operator):
 
     def run(self, context, settings):
         library = libraries.require(settings)
-        if not city.apply_design(settings, library, city.design(settings, library)):
+        if not city.apply_design(context.scene, settings, library, design_values.design(settings, library.space)):
             raise MetaSimError("the city has no buildings to put roofs on")
         return {"FINISHED"}
 
@@ -165,10 +166,10 @@ class META_SIM_OT_export_job(tasks.Reporting, bpy.types.Operator):
     def run(self, context, settings):
         library = libraries.require(settings)
         job_dir = _folder(settings.job_dir, "job")
-        population = None
+        population = space = None
         if settings.job_designs == "POPULATION":
-            population = presets_ui.load_population(presets_ui.population_row(settings), library)
-        path = city.export_job(settings, library, job_dir, population)
+            population, space = presets_ui.load_population(presets_ui.population_row(settings), library)
+        path = city.export_job(settings, library, job_dir, population, space)
         what = "" if population is None else f" of {settings.job_images} designs sampled from the population"
         self.report({"INFO"}, f"render job{what} written to {path}")
         return {"FINISHED"}
@@ -202,7 +203,7 @@ class META_SIM_OT_load_presets(tasks.Reporting, bpy.types.Operator):
 
 
 class META_SIM_OT_apply_preset(tasks.Reporting, bpy.types.Operator):
-    """Set the roof textures to the selected preset's design and put them on the city"""
+    """Make the selected preset's design space and design the scene's, and put the design on the city"""
 
     bl_idname = "meta_sim.apply_preset"
     bl_label = "Apply Preset"
@@ -223,21 +224,21 @@ class META_SIM_OT_apply_preset(tasks.Reporting, bpy.types.Operator):
         return True
 
     def run(self, context, settings):
-        library = libraries.require(settings)
         row = settings.presets[settings.presets_index]
         # Read again: the file may have changed since the list was loaded. Nothing is set before it validates.
-        preset = presets_ui.load(row.path, library)
-        applied = city.apply_design(settings, library, preset.design)
-        city.set_design(settings, library, preset.design)
+        preset, space = presets_ui.load(row.path, libraries.require(settings))
+        library = libraries.switch(settings, space)
+        applied = city.apply_design(context.scene, settings, library, preset.design)
+        name = preset.name or row.name
         if applied:
-            self.report({"INFO"}, f"applied {preset.name or row.name}: {library.space.format(preset.design)}")
+            self.report({"INFO"}, f"applied {name} ({space.name}): {space.format(preset.design)}")
         else:
-            self.report({"INFO"}, f"roof pickers set to {preset.name or row.name}; generate a city to see it")
+            self.report({"INFO"}, f"design set to {name} ({space.name}); generate a city to see it")
         return {"FINISHED"}
 
 
 class META_SIM_OT_save_preset(tasks.Reporting, bpy.types.Operator, ExportHelper):
-    """Save the picked roof textures as a design preset (the JSON format `meta-sim infer` writes)"""
+    """Save the panel's design as a design preset (the JSON format `meta-sim infer` writes)"""
 
     bl_idname = "meta_sim.save_preset"
     bl_label = "Save Design Preset"
@@ -258,7 +259,7 @@ class META_SIM_OT_save_preset(tasks.Reporting, bpy.types.Operator, ExportHelper)
         if path.suffix != ".json":
             path = path.with_suffix(".json")
         preset = DesignPreset(kind="group", name=path.stem, design_space=library.space.name,
-                              design=city.design(settings, library), search={"method": "manual"})
+                              design=design_values.design(settings, library.space), search={"method": "manual"})
         save_preset(path, preset)
         folder = _presets_folder_of(path, settings)
         added = ""
@@ -282,6 +283,6 @@ def _presets_folder_of(path: Path, settings) -> Path:
     return parent
 
 
-CLASSES = (META_SIM_OT_load_bank, META_SIM_OT_generate_city, META_SIM_OT_remove_city, META_SIM_OT_apply_roofs,
+CLASSES = (META_SIM_OT_load_bank, META_SIM_OT_generate_city, META_SIM_OT_remove_city, META_SIM_OT_apply_design,
            META_SIM_OT_render_preview, META_SIM_OT_export_job, META_SIM_OT_load_presets,
            META_SIM_OT_apply_preset, META_SIM_OT_save_preset)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import bpy
 
-from . import assets, city, preferences, presets_ui, previews
+from . import assets, city, design_values, preferences, presets_ui, previews
 from . import library as libraries
 
 
@@ -24,9 +24,20 @@ class META_SIM_PT_city(_MetaSimPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         settings = context.scene.meta_sim
+        layout.prop(settings, "space")
+        if settings.space == libraries.FILE_SPACE:
+            layout.prop(settings, "space_file", text="")
+        space = libraries.space_quietly(settings)
+        bound = {p.layout_field for p in space.parameters if p.layout_field} | set(space.layout) if space else set()
         column = layout.column(align=True)
-        for name in ("seed", "city_tiles", "building_density", "sloped_share", "tree_density"):
-            column.prop(settings, name)
+        column.prop(settings, "seed")
+        column.prop(settings, "city_tiles")
+        for name in city.LAYOUT_KNOBS:
+            line = column.row(align=True)
+            line.enabled = name not in bound  # the design space sets it
+            line.prop(settings, name)
+        if bound & set(city.LAYOUT_KNOBS):
+            layout.label(text=f"Greyed out: set by the design space {space.name}", icon="INFO")
         column = layout.column(align=True)
         column.prop(settings, "tile_px")
         column.prop(settings, "gsd")
@@ -42,7 +53,7 @@ class META_SIM_PT_city(_MetaSimPanel, bpy.types.Panel):
 
 class META_SIM_PT_textures(_MetaSimPanel, bpy.types.Panel):
     bl_idname = "META_SIM_PT_textures"
-    bl_label = "Roof Textures"
+    bl_label = "Design"
     bl_parent_id = "META_SIM_PT_city"
 
     def draw(self, context):
@@ -55,19 +66,12 @@ class META_SIM_PT_textures(_MetaSimPanel, bpy.types.Panel):
             if default is not None:
                 layout.label(text=f"Default from the preferences: {default}", icon="PREFERENCES")
         library = libraries.get_quietly(settings)
-        if library is None:
+        if library is None or not design_values.fits(settings, library.space):
             layout.operator("meta_sim.load_bank", icon="IMPORT")
             return
-        layout.label(text=f"Bank {library.bank.name}: {len(library.bank)} textures")
-        for kind, prop in (("flat", "flat_roof"), ("sloped", "sloped_roof")):
-            if library.texture_parameter(kind) is None:
-                layout.label(text=f"No {kind} textures in this bank: no {kind} roofs", icon="INFO")
-                continue
-            box = layout.box()
-            box.label(text=f"{kind.title()} roofs")
-            box.template_icon_view(settings, prop, show_labels=True, scale=4.0, scale_popup=5.0)
-            box.prop(settings, prop, text="")
-        layout.operator("meta_sim.apply_roofs", icon="MATERIAL")
+        layout.label(text=f"Bank {library.bank.name}: {len(library.bank)} textures; space {library.space.name}")
+        design_values.draw(layout, settings, library)
+        layout.operator("meta_sim.apply_design", icon="MATERIAL")
 
 
 class META_SIM_PT_render(_MetaSimPanel, bpy.types.Panel):
@@ -134,13 +138,14 @@ OUTSIDE = {"low": "too few", "high": "roofs everywhere"}
 
 
 def draw_preset_details(box, settings, item):
-    """The selected preset: its textures large, vote shares and roof evidence, target; a population's
-    distribution."""
+    """The selected preset: its design space, its textures large with vote shares and roof evidence, its other
+    values, target; a population's distribution."""
     if item.error:
         box.label(text="Cannot apply this preset:", icon="ERROR")
         box.label(text=item.error)
         return
     library = libraries.get_quietly(settings)
+    box.label(text=f"Design space {item.design_space}", icon="PRESET")
     row = box.row()
     for kind in ("flat", "sloped"):
         texture = getattr(item, kind)
@@ -154,14 +159,18 @@ def draw_preset_details(box, settings, item):
                 outside = getattr(item, f"{kind}_evidence_outside")
                 column.label(text=f"roof pixels {evidence:.1%}" + (f": {OUTSIDE[outside]}, unreliable" if outside
                                                                     else ""), icon="ERROR" if outside else "NONE")
+    if item.values:
+        column = box.column(align=True)
+        for name, value in json.loads(item.values):
+            column.label(text=f"{name}: {value:.4g}" if isinstance(value, float) else f"{name}: {value}")
     box.label(text=f"Target: {item.target}", icon="IMAGE_DATA")
     if item.distribution:
         box.label(text="Distribution over the target's groups:")
         for parameter, choices in json.loads(item.distribution).items():
             column = box.column(align=True)
             column.label(text=parameter)
-            for texture, share in choices:
-                column.label(text=f"{share:.0%}  {texture}", icon_value=previews.texture_icon(library, texture))
+            for choice, share in choices:
+                column.label(text=f"{share:.0%}  {choice}", icon_value=previews.texture_icon(library, choice))
 
 
 CLASSES = (META_SIM_PT_city, META_SIM_PT_textures, META_SIM_PT_render, META_SIM_PT_presets)

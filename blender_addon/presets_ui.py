@@ -1,8 +1,10 @@
 """The design presets browser: a folder of `meta-sim infer` presets as list rows, and the list that draws them.
 
 Presets are JSON data read by ``meta_sim.presets`` (never executed, unlike
-Blender's own ``AddPresetBase`` presets). A file that does not load, is from a
-newer meta-sim or names textures the bank lacks becomes a row with its error.
+Blender's own ``AddPresetBase`` presets), each in the design space it names (the
+scene's, or one meta-sim ships). A file that does not load, is from a newer
+meta-sim, names a space meta-sim does not ship or a value its space does not
+allow becomes a row with its error, and is never applied.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ from pathlib import Path
 import bpy
 
 from ..meta_sim.core.errors import MetaSimError
-from ..meta_sim.sim.design_assets import preset_files
-from ..meta_sim.sim.presets import DesignPreset, load_preset
+from ..meta_sim.sim.design import DesignSpace
+from ..meta_sim.sim.design_assets import load_in_own_space, preset_files
+from ..meta_sim.sim.presets import DesignPreset
 from . import library as libraries
 from . import previews
 
@@ -22,14 +25,14 @@ TOP_CHOICES = 3  # of a population's distribution, per parameter
 
 
 def read_folder(folder: Path, library) -> list[dict]:
-    """One row per preset file of the folder (``design_assets.preset_files``), each validated against the
-    library's design space."""
+    """One row per preset file of the folder (``design_assets.preset_files``), each validated in its own space."""
     return [_row(path, library) for path in preset_files(folder)]
 
 
-def load(path: str, library) -> DesignPreset:
-    """A preset checked against the library (every texture id must be in the bank's space)."""
-    return load_preset(path, library.space)
+def load(path: str, library) -> tuple[DesignPreset, DesignSpace]:
+    """A preset and its design space (the scene's when it names it), checked: every value must be one its
+    space allows."""
+    return load_in_own_space(path, library.space)
 
 
 def population_row(settings):
@@ -40,26 +43,29 @@ def population_row(settings):
     return next((row for row in selected + rows if row.kind == "population" and not row.error), None)
 
 
-def load_population(row, library) -> DesignPreset:
-    """The population preset of ``row``, read again (the file may have changed since the list was loaded)."""
-    preset = load(row.path, library)
+def load_population(row, library) -> tuple[DesignPreset, DesignSpace]:
+    """The population preset of ``row`` and its space, read again (the file may have changed since the list
+    was loaded)."""
+    preset, space = load(row.path, library)
     if preset.kind != "population" or not preset.designs:
         raise MetaSimError(f"{row.path} is no longer a population preset; load the preset folder again")
-    return preset
+    return preset, space
 
 
 def _row(path: Path, library) -> dict:
     row = {"name": path.stem, "path": str(path)}
     try:
-        preset = load(str(path), library)
+        preset, space = load(str(path), library)
     except MetaSimError as exc:
         return {**row, "error": str(exc).replace(f"{path}: ", "")}
-    names = {kind: library.texture_parameter(kind) for kind in ("flat", "sloped")}
-    row.update(name=preset.name or path.stem, kind=preset.kind, target=preset.target())
+    names = {kind: space.texture_parameter(kind) for kind in ("flat", "sloped")}
+    row.update(name=preset.name or path.stem, kind=preset.kind, target=preset.target(), design_space=space.name)
     for kind, parameter in names.items():
         if parameter is not None:
             row[kind] = str(preset.design[parameter.name])
             row[f"{kind}_share"] = preset.confidence(parameter.name)
+    textures = {p.name for p in names.values() if p is not None}
+    row["values"] = json.dumps([[name, preset.design[name]] for name in space.names if name not in textures])
     for kind, evidence in preset.roof_evidence().items():
         if kind in names:
             row[f"{kind}_evidence"], row[f"{kind}_evidence_outside"] = evidence["share"], evidence["outside"] or ""
@@ -80,7 +86,8 @@ def fill(settings, rows: list[dict]) -> None:
 
 
 class META_SIM_UL_presets(bpy.types.UIList):
-    """Flat and sloped thumbnails, name, vote shares and target of each preset; the error of a bad one."""
+    """Flat and sloped thumbnails, name, vote shares, design space and target of each preset; the error of a
+    bad one."""
 
     bl_idname = "META_SIM_UL_presets"
 
@@ -98,6 +105,7 @@ class META_SIM_UL_presets(bpy.types.UIList):
         shares = [f"{getattr(item, f'{kind}_share'):.0%}" for kind in ("flat", "sloped") if getattr(item, kind)]
         outside = any(getattr(item, f"{kind}_evidence_outside") for kind in ("flat", "sloped"))
         row.label(text=" / ".join(shares), icon="ERROR" if outside else "NONE")
+        row.label(text=item.design_space)
         row.label(text=item.target)
 
 

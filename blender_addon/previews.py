@@ -34,24 +34,27 @@ def icon_for_file(path: str, reload: bool = False) -> int:
 
 
 def texture_icon(library, texture_id: str) -> int:
-    """Thumbnail of a bank texture, 0 when the library does not hold it."""
-    if library is None or not library.bank.contains(texture_id):
-        return 0
-    return icon_for_file(str(library.bank.image_path(texture_id)))
+    """Thumbnail of a texture of the library's banks, 0 when none holds it."""
+    bank = library.bank_of(texture_id) if library is not None else None
+    return icon_for_file(str(bank.image_path(texture_id))) if bank is not None else 0
 
 
-def texture_items(library, kind: str) -> list:
-    """EnumProperty items (id, name, description, icon, number) for the textures a roof parameter allows."""
-    parameter = library.texture_parameter(kind) if library is not None else None
-    if parameter is None:
-        return _enum_items.setdefault(("none", kind), [("NONE", "No textures", f"the bank has no {kind} textures",
-                                                        "ERROR", 0)])
-    key = (str(library.bank.root), kind)
+def choice_items(library, parameter) -> list:
+    """EnumProperty items (id, name, description, icon, number) for a categorical parameter's choices: a roof
+    texture parameter's with their thumbnails (once its library is loaded)."""
+    if parameter is None or not hasattr(parameter, "choices"):
+        return _enum_items.setdefault(("none",), [("NONE", "None", "the design space is not loaded", "ERROR", 0)])
+    textures = library if parameter.texture_kind else None
+    key = (parameter, None if textures is None else tuple(str(bank.root) for bank in textures.banks))
     if key not in _enum_items:
         items = []
-        for number, texture_id in enumerate(parameter.choices):
-            entry = library.bank.by_id(texture_id)
-            items.append((texture_id, entry.name, f"{texture_id}: repeats every {entry.repeat_m:g} m",
-                          texture_icon(library, texture_id), number))
+        for number, choice in enumerate(parameter.choices):
+            bank = textures.bank_of(choice) if textures is not None else None
+            if bank is None:
+                items.append((choice, choice, f"{parameter.name} = {choice}", 0, number))
+            else:
+                entry = bank.by_id(choice)
+                items.append((choice, entry.name, f"{choice}: repeats every {entry.repeat_m:g} m",
+                              texture_icon(textures, choice), number))
         _enum_items[key] = items
     return _enum_items[key]

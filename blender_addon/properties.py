@@ -15,19 +15,18 @@ from bpy.props import (
 from ..meta_sim.render.options import RENDER_OPTIONS
 from ..meta_sim.render.plan import LIMITS, MAX_DESIGNS
 from ..meta_sim.sim.layout import LayoutParams
-from . import library, preferences, previews
+from . import design_values, library, preferences
 
 _DEFAULTS = LayoutParams()
 _RENDER_DEFAULTS = {opt.dest: opt.default for opt in RENDER_OPTIONS}  # a population job's, as the CLI's
 _MAX_CITIES = {name: high for name, _, high in LIMITS}["cities"]
 
 
-def _flat_items(self, context):
-    return previews.texture_items(library.get_quietly(self), "flat")
-
-
-def _sloped_items(self, context):
-    return previews.texture_items(library.get_quietly(self), "sloped")
+def _space_changed(self, context) -> None:
+    """The design's rows follow the space chosen (a space that cannot be read yet: when it is loaded)."""
+    space = library.space_quietly(self)
+    if space is not None:
+        design_values.fit(self, space)
 
 
 class MetaSimPresetRow(bpy.types.PropertyGroup):
@@ -36,6 +35,9 @@ class MetaSimPresetRow(bpy.types.PropertyGroup):
     path: StringProperty(name="File", subtype="FILE_PATH")
     kind: StringProperty(name="Kind")
     target: StringProperty(name="Target", description="The target imagery the design was inferred from")
+    design_space: StringProperty(name="Design Space", description="The space the design was inferred in")
+    values: StringProperty(name="Values", description="JSON, [[parameter, value], ...]: the design's values "
+                           "other than its roof textures")
     flat: StringProperty(name="Flat Roof")
     sloped: StringProperty(name="Sloped Roof")
     flat_share: FloatProperty(name="Flat Vote Share", subtype="FACTOR")
@@ -75,8 +77,12 @@ class MetaSimSettings(bpy.types.PropertyGroup):
         ("FOLDER", "Folder", "A bank folder written by `meta-sim textures build --from PHOTOS`"),
     ])
     bank_folder: StringProperty(name="Bank Folder", subtype="DIR_PATH")
-    flat_roof: EnumProperty(name="Flat Roof", description="Texture of every flat roof", items=_flat_items)
-    sloped_roof: EnumProperty(name="Sloped Roof", description="Texture of every sloped roof", items=_sloped_items)
+    space: EnumProperty(name="Design Space", description="The parameters a design sets (as --space of "
+                        "`meta-sim render`)", items=library.SPACE_ITEMS, update=_space_changed)
+    space_file: StringProperty(name="Design Space File", description="A design space JSON file",
+                               subtype="FILE_PATH", update=_space_changed)
+    design: CollectionProperty(type=design_values.MetaSimDesignValue, name="Design",
+                               description="The design: a value per parameter of the design space")
 
     render_preset: EnumProperty(name="Quality", items=[
         ("DEFAULT", "Default", "The default preview quality of the add-on's preferences"),
@@ -107,7 +113,7 @@ class MetaSimSettings(bpy.types.PropertyGroup):
     presets_index: IntProperty(name="Preset", default=0)
 
 
-CLASSES = (MetaSimPresetRow, MetaSimSettings)
+CLASSES = (*design_values.CLASSES, MetaSimPresetRow, MetaSimSettings)
 
 
 def register() -> None:

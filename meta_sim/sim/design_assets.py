@@ -25,7 +25,7 @@ import numpy as np
 
 from ..core.errors import MetaSimError
 from ..core.names import inside
-from .design import DesignSpace
+from .design import DesignSpace, builtin_spaces
 from .presets import DesignPreset, load_preset
 
 LIBRARY_DIR = "meta-sim-assets"  # inside the presets folder
@@ -46,11 +46,39 @@ _NAMESPACE = uuid.UUID("5d1c9a62-3f0e-4d84-9a27-8f1d6c0b7e41")  # catalog ids: s
 
 @dataclass(frozen=True)
 class Found:
-    """A preset file that loaded and fits the design space."""
+    """A preset file that loaded and fits its design space."""
 
     path: Path
     rel: str  # relative to the presets folder, with '/'
     preset: DesignPreset
+    space: DesignSpace
+
+
+def preset_space(name: str, current: DesignSpace) -> DesignSpace:
+    """The design space a preset names: ``current`` when it has that name (or the preset names none), else
+    the shipped space of that name; MetaSimError for a space meta-sim does not ship."""
+    if not name or name == current.name:
+        return current
+    if name in builtin_spaces():
+        return DesignSpace.load(name)
+    raise MetaSimError(f"design space {name!r} is not one meta-sim ships; choose its JSON file as the design "
+                       "space (City > Design Space > File) and load the presets again")
+
+
+def load_in_own_space(path: str | os.PathLike, current: DesignSpace) -> tuple[DesignPreset, DesignSpace]:
+    """A preset file and the space it was inferred in (``preset_space``), its design and a population's
+    designs checked against that space; MetaSimError (one line, naming the file) otherwise."""
+    preset = load_preset(path)
+    try:
+        space = preset_space(preset.design_space, current)
+        try:
+            preset.design = space.validate(preset.design)
+            preset.designs = [{**entry, "design": space.validate(entry["design"])} for entry in preset.designs]
+        except MetaSimError as exc:
+            raise MetaSimError(f"does not fit design space {space.name!r}: {exc}") from None
+    except MetaSimError as exc:
+        raise MetaSimError(f"{path}: preset {preset.name!r} {exc}") from None
+    return preset, space
 
 
 def preset_files(folder: str | os.PathLike) -> list[Path]:
@@ -66,13 +94,14 @@ def preset_files(folder: str | os.PathLike) -> list[Path]:
     return files
 
 
-def scan(folder: str | os.PathLike, space: DesignSpace) -> tuple[list[Found], list[tuple[Path, str]]]:
-    """Every preset of ``folder`` that loads and fits ``space``, and every file that does not, with why."""
+def scan(folder: str | os.PathLike, current: DesignSpace) -> tuple[list[Found], list[tuple[Path, str]]]:
+    """Every preset of ``folder`` that loads and fits its own space (``load_in_own_space``; ``current`` for one
+    of the scene's space), and every file that does not, with why."""
     folder = Path(folder)
     good, bad = [], []
     for path in preset_files(folder):
         try:
-            good.append(Found(path, path.relative_to(folder).as_posix(), load_preset(path, space)))
+            good.append(Found(path, path.relative_to(folder).as_posix(), *load_in_own_space(path, current)))
         except MetaSimError as exc:
             bad.append((path, str(exc).replace(f"{path}: ", "")))
     return good, bad
@@ -189,10 +218,10 @@ def preset_of_asset(library_file: str | os.PathLike, metadata: Mapping) -> Path:
     return path
 
 
-def preview_key(design: Mapping, params: Mapping, quality: str, bank: str) -> str:
+def preview_key(design: Mapping, space: DesignSpace, params: Mapping, quality: str, bank: str) -> str:
     """The name of a design's cached preview: what the rendered tile depends on."""
-    text = json.dumps({"design": design, "city": params, "quality": quality, "bank": bank, "px": PREVIEW_PX},
-                      sort_keys=True)
+    text = json.dumps({"design": design, "space": space.to_dict(), "city": params, "quality": quality,
+                       "bank": bank, "px": PREVIEW_PX}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 

@@ -145,6 +145,20 @@ def settings(addon):
     return s
 
 
+def _pick(settings, **values):
+    """Choose values in the panel's design (a categorical parameter's menu or picker, a continuous one's number)."""
+    for name, value in values.items():
+        row = settings.design[name]
+        if isinstance(value, str):
+            row.choice = value
+        else:
+            row.value = value
+
+
+def _picked(settings) -> dict:
+    return {row.name: row.choice for row in settings.design}
+
+
 def _counts():
     import bpy
 
@@ -228,13 +242,13 @@ def test_picked_textures_go_on_the_matching_roofs(addon, settings, bank):
     import bpy
 
     bpy.ops.meta_sim.generate_city()
-    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[3], bank.ids("sloped")[7]
+    _pick(settings, flat_roof=bank.ids("flat")[3], sloped_roof=bank.ids("sloped")[7])
     before = _counts()
-    assert bpy.ops.meta_sim.apply_roofs() == {"FINISHED"}
+    assert bpy.ops.meta_sim.apply_design() == {"FINISHED"}
     images = _roof_images_on_polygons(addon)
     assert images == {1: str(bank.image_path(bank.ids("flat")[3])), 2: str(bank.image_path(bank.ids("sloped")[7]))}
-    settings.flat_roof = bank.ids("flat")[4]
-    bpy.ops.meta_sim.apply_roofs()
+    _pick(settings, flat_roof=bank.ids("flat")[4])
+    bpy.ops.meta_sim.apply_design()
     assert _counts() == before  # the replaced roof material and its image are gone
     assert _roof_images_on_polygons(addon)[1] == str(bank.image_path(bank.ids("flat")[4]))
 
@@ -288,19 +302,19 @@ def test_presets_browser_applies_good_presets_and_rejects_bad_ones(addon, settin
     assert bpy.ops.meta_sim.apply_preset() == {"FINISHED"}
     applied = _roof_images_on_polygons(addon)
     assert applied[1] == str(bank.image_path(bank.ids("flat")[5]))
-    assert settings.flat_roof == bank.ids("flat")[5]
+    assert _picked(settings)["flat_roof"] == bank.ids("flat")[5]
     for name, message in (("broken.json", "not valid JSON"), ("future.json", "newer"),
                           ("unknown.json", "flat-no-such-texture")):
         settings.presets_index = list(settings.presets).index(rows[name])
         with pytest.raises(RuntimeError, match=message):  # the button is greyed out, saying why
             bpy.ops.meta_sim.apply_preset()
-        assert _roof_images_on_polygons(addon) == applied and settings.flat_roof == bank.ids("flat")[5]
+        assert _roof_images_on_polygons(addon) == applied and _picked(settings)["flat_roof"] == bank.ids("flat")[5]
 
 
 def test_save_preset_writes_the_infer_format(settings, tmp_path, bank):
     import bpy
 
-    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[1], bank.ids("sloped")[2]
+    _pick(settings, flat_roof=bank.ids("flat")[1], sloped_roof=bank.ids("sloped")[2])
     assert bpy.ops.meta_sim.save_preset(filepath=str(tmp_path / "mine.json")) == {"FINISHED"}
     preset = load_preset(tmp_path / "mine.json", DesignSpace.load())
     assert preset.kind == "group" and preset.name == "mine"
@@ -602,8 +616,8 @@ def test_every_operator_polls_and_says_why_it_is_disabled(addon, settings, prese
     bpy.ops.meta_sim.remove_city()
     settings.job_designs = "CURRENT"
     states = disabled()  # a bank, but no city, no job folder, no presets folder, no preset
-    assert set(states) == {"remove_city", "apply_roofs", "export_job", "load_presets", "apply_preset"}
-    assert "Generate a city first" in states["remove_city"] and "Generate a city first" in states["apply_roofs"]
+    assert set(states) == {"remove_city", "apply_design", "export_job", "load_presets", "apply_preset"}
+    assert "Generate a city first" in states["remove_city"] and "Generate a city first" in states["apply_design"]
     assert "Choose a job folder" in states["export_job"]
     assert "Choose a presets folder" in states["load_presets"]
     assert "select a preset" in states["apply_preset"]
@@ -833,7 +847,7 @@ def test_a_presets_folder_becomes_an_asset_library(addon, settings, infer_folder
     assert (_library_assets(blend)["kampala-005"].pixels == group.pixels).all()
     assert [Path(e.path).resolve() for e in bpy.context.preferences.filepaths.asset_libraries].count(
         blend.parent.resolve()) == 1
-    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[5], bank.ids("sloped")[2]
+    _pick(settings, flat_roof=bank.ids("flat")[5], sloped_roof=bank.ids("sloped")[2])
     settings.render_preset = "fast"
     bpy.ops.meta_sim.render_preview()
     tile = read_rgb8(bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath))
@@ -875,8 +889,8 @@ def test_applying_an_asset_changes_exactly_the_roof_materials(addon, settings, i
 
     assets = addon.blender_addon.assets
     bpy.ops.meta_sim.generate_city()
-    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[1], bank.ids("sloped")[1]
-    bpy.ops.meta_sim.apply_roofs()
+    _pick(settings, flat_roof=bank.ids("flat")[1], sloped_roof=bank.ids("sloped")[1])
+    bpy.ops.meta_sim.apply_design()
     settings.presets_folder = str(infer_folder)
     bpy.ops.meta_sim.build_assets()
     asset = _library_assets(infer_folder / "meta-sim-assets" / "meta-sim-designs.blend")["kampala-006"]
@@ -884,32 +898,32 @@ def test_applying_an_asset_changes_exactly_the_roof_materials(addon, settings, i
     before, counts = _materials(), _counts()
     buildings = sys.modules[f"{MODULE}.meta_sim.blender.scene"].city_buildings(settings.city_key).name
 
-    assets.apply_asset(settings, library, asset)
+    assets.apply_asset(bpy.context.scene, settings, library, asset)
     after = _materials()
     changed = {(name, slot) for name in before for slot, (a, b) in enumerate(zip(before[name], after[name])) if a != b}
     assert changed == {(buildings, 1), (buildings, 2)} and _counts() == counts  # the old roofs are gone
     assert after[buildings][1:] == [f"roof:{bank.ids('flat')[6]}", f"roof:{bank.ids('sloped')[2]}"]
-    assert (settings.flat_roof, settings.sloped_roof) == (bank.ids("flat")[6], bank.ids("sloped")[2])
+    assert _picked(settings) == {"flat_roof": bank.ids("flat")[6], "sloped_roof": bank.ids("sloped")[2]}
     assert addon.blender_addon.assets_ui.META_SIM_OT_apply_asset.bl_options >= {"UNDO"}
 
     # the preset file is the truth: edited, the asset applies the edit; broken or gone, nothing changes
     preset = load_preset(infer_folder / "presets" / "kampala-006.json")
     preset.design = {"flat_roof": bank.ids("flat")[8], "sloped_roof": bank.ids("sloped")[2]}
     save_preset(infer_folder / "presets" / "kampala-006.json", preset)
-    assets.apply_asset(settings, library, asset)
+    assets.apply_asset(bpy.context.scene, settings, library, asset)
     assert _materials()[buildings][1] == f"roof:{bank.ids('flat')[8]}"
     applied = _materials()
     (infer_folder / "presets" / "kampala-006.json").write_text("{")
     with pytest.raises(Exception, match="not valid JSON"):
-        assets.apply_asset(settings, library, asset)
+        assets.apply_asset(bpy.context.scene, settings, library, asset)
     (infer_folder / "presets" / "kampala-006.json").unlink()
     with pytest.raises(Exception, match="is gone; rebuild the asset library"):
-        assets.apply_asset(settings, library, asset)
+        assets.apply_asset(bpy.context.scene, settings, library, asset)
     escaping = SimpleNamespace(full_library_path=asset.full_library_path,
                                metadata={**asset.metadata, "preset": "../../outside.json"})
     with pytest.raises(Exception, match="points outside its folder"):
-        assets.apply_asset(settings, library, escaping)
-    assert _materials() == applied and settings.flat_roof == bank.ids("flat")[8]
+        assets.apply_asset(bpy.context.scene, settings, library, escaping)
+    assert _materials() == applied and _picked(settings)["flat_roof"] == bank.ids("flat")[8]
 
 
 def test_saving_a_preset_adds_it_to_the_folders_asset_library(addon, settings, infer_folder, bank):
@@ -923,7 +937,7 @@ def test_saving_a_preset_adds_it_to_the_folders_asset_library(addon, settings, i
     previews = {p: p.stat().st_mtime_ns for p in (library_dir / "previews").iterdir()}
     settings.seed += 1  # a new city in the panel: the library keeps the city its previews show
     bpy.ops.meta_sim.generate_city()
-    settings.flat_roof, settings.sloped_roof = bank.ids("flat")[7], bank.ids("sloped")[3]
+    _pick(settings, flat_roof=bank.ids("flat")[7], sloped_roof=bank.ids("sloped")[3])
     assert bpy.ops.meta_sim.save_preset(filepath=str(infer_folder / "presets" / "mine.json")) == {"FINISHED"}
     found = _library_assets(library_dir / "meta-sim-designs.blend")
     assert set(found) == {"kampala-005", "kampala-006", "population", "mine"}

@@ -52,7 +52,7 @@ def test_scan_reads_the_top_and_presets_folder_and_keeps_the_bad_files_apart(fol
 def test_asset_names_are_unique(folder, space):
     found, _ = lib.scan(folder, space)
     assert lib.asset_names(found) == ["kampala-population", "kampala-001", "kampala-002"]
-    twin = lib.Found(found[1].path, "other/kampala-001.json", found[1].preset)
+    twin = lib.Found(found[1].path, "other/kampala-001.json", found[1].preset, space)
     assert lib.asset_names([found[1], twin]) == ["presets/kampala-001", "other/kampala-001"]
 
 
@@ -91,7 +91,7 @@ def test_a_group_unlike_every_design_says_so(space):
     far = _group(space, 1, "rio-000")
     far.search["far"] = True  # infer searched it again by the roof colours alone (nams ColourComparison.far)
     assert "Unlike every design the model knows" in lib.description(far, space)
-    assert lib.properties(lib.Found(Path("x.json"), "presets/x.json", far))["far_from_every_design"] == 1
+    assert lib.properties(lib.Found(Path("x.json"), "presets/x.json", far, space))["far_from_every_design"] == 1
     assert lib.tags(far, space)[-1] == lib.FAR_TAG
     far.search["far"] = "yes"  # only a true boolean counts
     assert lib.FAR_TAG not in lib.tags(far, space) and "Unlike" not in lib.description(far, space)
@@ -115,11 +115,13 @@ def test_an_asset_finds_its_preset_only_inside_the_presets_folder(folder, space)
 
 def test_preview_keys_and_the_population_mosaic(space):
     design, knobs = {"flat_roof": "a", "sloped_roof": "b"}, {"seed": 1}
-    key = lib.preview_key(design, knobs, "fast", "default-v1")
-    assert key == lib.preview_key(dict(reversed(design.items())), knobs, "fast", "default-v1")
-    assert len({key, lib.preview_key(design, {"seed": 2}, "fast", "default-v1"),
-                lib.preview_key(design, knobs, "balanced", "default-v1"),
-                lib.preview_key({**design, "flat_roof": "c"}, knobs, "fast", "default-v1")}) == 4
+    key = lib.preview_key(design, space, knobs, "fast", "default-v1")
+    assert key == lib.preview_key(dict(reversed(design.items())), space, knobs, "fast", "default-v1")
+    flat = DesignSpace.load("rooftops-flat-v1")
+    assert len({key, lib.preview_key(design, space, {"seed": 2}, "fast", "default-v1"),
+                lib.preview_key(design, space, knobs, "balanced", "default-v1"),
+                lib.preview_key(design, flat, knobs, "fast", "default-v1"),
+                lib.preview_key({**design, "flat_roof": "c"}, space, knobs, "fast", "default-v1")}) == 5
     tiles = [np.full((4, 4, 3), v, dtype=np.float32) for v in (0.1, 0.5, 0.9)]
     assert lib.mosaic(tiles[:1]) is tiles[0]
     grid = lib.mosaic(tiles)
@@ -127,3 +129,30 @@ def test_preview_keys_and_the_population_mosaic(space):
     assert [grid[0, 0, 0], grid[0, 2, 0], grid[2, 0, 0], grid[2, 2, 0]] == pytest.approx([0.1, 0.5, 0.9, 0.1])
     pop = population([_group(space, k, f"g{k}") for k in (1, 1, 2, 3, 4, 5)], space, "p")
     assert lib.population_designs(pop)[0] == pop.designs[0]["design"] and len(lib.population_designs(pop)) == 4
+
+
+def test_each_preset_is_read_in_the_space_it_names(tmp_path, space):
+    towns = DesignSpace.load("overhead-towns-v5")
+    design = towns.sample(np.random.default_rng(4), 1)[0]
+    preset = DesignPreset(kind="group", name="banepa-000", design_space=towns.name, design=design)
+    save_preset(tmp_path / "towns.json", preset)
+    save_preset(tmp_path / "roofs.json", _group(space, 3, "roofs"))
+    unnamed = _group(space, 4, "unnamed")
+    unnamed.design_space = ""  # an old preset names no space: the scene's
+    save_preset(tmp_path / "unnamed.json", unnamed)
+    save_preset(tmp_path / "unknown.json", DesignPreset(kind="group", name="x", design_space="my-space-v9",
+                                                        design=design))
+    bright = towns.parameter("brightness")
+    save_preset(tmp_path / "outside.json", DesignPreset(kind="group", name="too-bright", design_space=towns.name,
+                                                        design={**design, "brightness": bright.high * 2}))
+    found, bad = lib.scan(tmp_path, space)
+    assert {f.rel: f.space.name for f in found} == {"roofs.json": space.name, "towns.json": towns.name,
+                                                   "unnamed.json": space.name}
+    assert next(f for f in found if f.rel == "towns.json").preset.design == design
+    reasons = {path.name: why for path, why in bad}
+    assert set(reasons) == {"unknown.json", "outside.json"}
+    assert "'my-space-v9' is not one meta-sim ships" in reasons["unknown.json"]
+    assert "brightness" in reasons["outside.json"] and "out of range" in reasons["outside.json"]
+    assert all("\n" not in why for why in reasons.values())
+    mine = DesignSpace.from_dict({**towns.to_dict(), "name": "my-space-v9"})  # the scene's own space from a file
+    assert lib.load_in_own_space(tmp_path / "unknown.json", mine)[1] is mine
