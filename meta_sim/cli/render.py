@@ -9,7 +9,7 @@ import click
 from ..core.extras import require
 from ..core.fileio import writable_dir
 from ..core.progress import LineBar, on_terminal
-from .base import main
+from .base import _Bars, main
 
 
 def _render_command():
@@ -28,7 +28,11 @@ def _render_command():
         from ..render.plan import plan
 
         require("bpy", "rendering")  # before planning builds the banks
-        jobs, settings = plan(options)
+        bars = _Bars()
+        try:
+            jobs, settings = plan(options, bars)
+        finally:
+            bars.close()
         writable_dir(settings.out_dir)
         total = len(jobs) * settings.n_tiles
         bar = tqdm(total=total, unit="tile", desc="render") if on_terminal() else LineBar(total, "render", "tile")

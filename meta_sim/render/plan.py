@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.errors import MetaSimError
+from ..core.progress import Bars
 from ..sim.design import DEFAULT_SPACE, DesignSpace, builtin_spaces
 from ..sim.ground import get_mix
 from ..sim.jitter import check_strength
@@ -12,7 +13,7 @@ from ..sim.layout import MAX_CITY_M, MIN_CITY_M, city_size_m, parse_style, style
 from ..sim.presets import load_preset
 from ..sim.quality import get_preset
 from ..sim.sensor import get_sensor
-from ..sim.textures import ensure_default_bank, ensure_heldout_banks, load_bank
+from ..sim.textures import build_steps, ensure_default_bank, ensure_heldout_banks, heldout_ids, load_bank
 from .jobs import RenderSettings, design_jobs, sample_designs, sample_population, single_job
 
 # Bounds of the whole-number options: a city seed is a numpy seed (not negative); beyond these a render
@@ -21,12 +22,13 @@ LIMITS = (("seed", 0, 2**63 - 1), ("tiles", 1, 4096), ("tile_px", 16, 8192), ("c
 MAX_DESIGNS = 10_000_000
 
 
-def plan(options: dict):
+def plan(options: dict, bars: Bars | None = None):
     """Validated (jobs, settings) from parsed options (``RENDER_OPTIONS`` dests); MetaSimError on bad input.
 
     The design space comes from ``space`` (a built-in name or a JSON file), else from ``bank`` (one
     parameter per roof kind it has), else from the population preset (the space it was inferred in), else
-    the default; held-out texture ids are accepted in designs.
+    the default; held-out texture ids are accepted in designs. ``bars`` shows the texture banks built on
+    first use: the default bank, and only those held-out sets whose textures the designs name.
     """
     if options.get("out") is None:
         raise MetaSimError("give an output folder with --out")
@@ -54,7 +56,8 @@ def plan(options: dict):
     ground = options.get("ground") or "plain"
     get_mix(ground)
     style = style_text(parse_style(options.get("style") or "suburban"))  # checked, in one spelling
-    banks = [load_bank(options["bank"])] if options.get("bank") else [ensure_default_bank()]
+    banks = ([load_bank(options["bank"])] if options.get("bank") else
+             [ensure_default_bank(progress=bars("texture bank default", build_steps()) if bars else None)])
     population = load_preset(options["population"]) if options.get("population") is not None else None
     if options.get("space"):
         space = DesignSpace.load(options["space"])
@@ -68,10 +71,10 @@ def plan(options: dict):
         raise MetaSimError(f"{options['population']}: the population was inferred in design space "
                            f"{population.design_space!r}, not {space.name!r}; drop --space (and --bank) or give "
                            f"that space's JSON with --space FILE")
-    heldout = ensure_heldout_banks()
-    # Held-out textures a design may name (heldout-v5 holds heldout-v4's: each once).
-    extra = {p.name: list(dict.fromkeys(t for bank in heldout for t in bank.ids(p.texture_kind)))
-             for p in space.parameters if getattr(p, "texture_kind", None)}
+    if style != "suburban" and "style" in space.layout:
+        raise MetaSimError(f"design space {space.name!r} declares a city style already; "
+                           "drop --style or the space's layout style")
+    extra = {p.name: heldout_ids(p.texture_kind) for p in space.parameters if getattr(p, "texture_kind", None)}
     if options.get("design") is not None:
         jobs = [single_job(space, space.parse(options["design"], extra), options["seed"])]
     elif options.get("population") is not None:
@@ -86,14 +89,13 @@ def plan(options: dict):
     else:
         designs = sample_designs(space, options["random_designs"], options["seed"])
         jobs = design_jobs(space, designs, options["seed"], options["cities"])
+    named = {job.design[name] for job in jobs for name in extra}
+    heldout = ensure_heldout_banks(ids=[t for t in named if not banks[0].contains(t)], bars=bars)
     settings = RenderSettings(space=space, banks=banks + heldout, preset=preset,
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
                               preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter,
                               ground=ground, style=style)
-    if style != "suburban" and "style" in space.layout:
-        raise MetaSimError(f"design space {space.name!r} declares a city style already; "
-                           "drop --style or the space's layout style")
     return jobs, settings
 
 

@@ -600,3 +600,21 @@ def test_the_cli_builds_either_held_out_set(tmp_path):
         assert load_bank(out).name == name
         assert load_similarity(out / SIMILARITY_TO_DEFAULT_FILE).rows == tuple(recipe.id for recipe in
                                                                                recipes(heldout=name))
+
+
+def test_the_held_out_sets_built_are_the_first_holding_each_id_named(tmp_path, bank):
+    from meta_sim.sim.textures import build_steps, ensure_heldout_banks
+
+    shown = []
+
+    def bars(label, total):
+        shown.append([label, total, 0])
+        return lambda n=1: shown[-1].__setitem__(2, shown[-1][2] + n)
+
+    assert ensure_heldout_banks(16, tmp_path, ids=[bank.ids("flat")[0]], bars=bars) == []
+    assert not (tmp_path / "banks").exists()
+    built = ensure_heldout_banks(16, tmp_path, ids=["flat-deck-olive", "flat-deck-lime"], bars=bars)
+    assert [b.name for b in built] == ["heldout-v2", "heldout-v4"]  # heldout-v5 holds heldout-v4's too
+    assert sorted(p.name for p in (tmp_path / "banks").iterdir()) == ["heldout-v2-16", "heldout-v4-16"]
+    assert shown == [["texture bank heldout-v2", build_steps("heldout-v2"), build_steps("heldout-v2")],
+                     ["texture bank heldout-v4", build_steps("heldout-v4"), build_steps("heldout-v4")]]

@@ -26,7 +26,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from ...core.cache import cache_root
 from ...core.errors import MetaSimError
 from ...core.fileio import atomic_dir, write_bytes_atomic
 from ...core.names import inside, safe_name
-from ...core.progress import Progress
+from ...core.progress import Bars, Progress
 from ..imageio import read_rgb8, read_rgb8_square
 from . import procedural
 from .pngio import write_png
@@ -274,19 +274,15 @@ def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: boo
     Writes ``<kind>/<id>.png``, ``manifest.json`` and ``similarity.json``
     (bank against itself); a held-out set also gets
     ``similarity_to_default.json`` (held-out rows, default-bank columns).
-    ``progress`` is told of each texture generated (``len(procedural.recipes(heldout))`` in all);
-    an exception it raises (a cancel) stops the build.
+    ``progress`` is told of each texture generated (``build_steps(heldout)`` in all, the default
+    textures a held-out set is compared with among them); an exception it raises (a cancel) stops the build.
     """
     check_size(size)
     if isinstance(heldout, str):
         _heldout_name(heldout)
     out = Path(out_dir)
     recipes = procedural.recipes(heldout=heldout)
-    images = []
-    for recipe in recipes:
-        images.append(procedural.generate(recipe, size))
-        if progress is not None:
-            progress(1)
+    images = list(_generated(recipes, size, progress))
     by_id = {r.id: r for r in recipes}
     bank = _write_bank(
         out,
@@ -299,12 +295,26 @@ def build_default_bank(out_dir: str | os.PathLike, size: int = 256, heldout: boo
     save_similarity(Similarity(ids, ids, similarity_matrix(hists, hists)), out / SIMILARITY_FILE)
     if procedural.heldout_set(heldout) is not None:
         default = procedural.recipes()
-        default_hists = _histograms(procedural.generate(r, size) for r in default)
+        default_hists = _histograms(_generated(default, size, progress))
         save_similarity(
             Similarity(ids, tuple(r.id for r in default), similarity_matrix(hists, default_hists)),
             out / SIMILARITY_TO_DEFAULT_FILE,
         )
     return bank
+
+
+def build_steps(heldout: bool | str = False) -> int:
+    """The steps ``build_default_bank`` reports to its ``progress`` for the default bank or a held-out set."""
+    steps = len(procedural.recipes(heldout=heldout))
+    return steps + len(procedural.recipes()) if procedural.heldout_set(heldout) is not None else steps
+
+
+def _generated(recipes, size: int, progress: Progress | None):
+    """Each recipe's texture in turn, ``progress`` told of each."""
+    for recipe in recipes:
+        yield procedural.generate(recipe, size)
+        if progress is not None:
+            progress(1)
 
 
 def _read_folder_options(src: Path, images: dict[str, Path]) -> dict[str, dict]:
@@ -438,14 +448,31 @@ def ensure_default_bank(size: int = 256, cache_dir: str | os.PathLike | None = N
 
 
 def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = None,
-                        name: str = procedural.FIRST_HELDOUT) -> TextureBank:
+                        name: str = procedural.FIRST_HELDOUT, progress: Progress | None = None) -> TextureBank:
     """The cached held-out set ``name`` (textures not in the default bank), built on first use:
     ``heldout-v5`` (E2's validation textures; ``heldout-v4``, those of a day, are among them), ``heldout-v2``
     (E2's test textures), ``heldout-v3`` (its check textures) or ``heldout-v1`` (E2's validation textures until
-    2026-12-03, and a single seed's)."""
-    return _ensure(heldout_bank_dir(size, cache_dir, name), lambda d: build_default_bank(d, size, heldout=name))
+    2026-12-03, and a single seed's); ``progress`` as in `build_default_bank`."""
+    return _ensure(heldout_bank_dir(size, cache_dir, name),
+                   lambda d: build_default_bank(d, size, heldout=name, progress=progress))
 
 
-def ensure_heldout_banks(size: int = 256, cache_dir: str | os.PathLike | None = None) -> list[TextureBank]:
-    """Every held-out set, cached: what a render looks texture ids up in besides its bank."""
-    return [ensure_heldout_bank(size, cache_dir, name) for name in procedural.HELDOUT_SETS]
+def ensure_heldout_banks(size: int = 256, cache_dir: str | os.PathLike | None = None,
+                         ids: Iterable[str] | None = None, bars: Bars | None = None) -> list[TextureBank]:
+    """The held-out sets, cached: what a render looks texture ids up in besides its bank. Every set, or with
+    ``ids`` only the first set holding each held-out one among them (none for a render of bank textures
+    alone), so a fresh cache builds only what is named. ``bars`` shows the build of each set missing."""
+    names = list(procedural.HELDOUT_SETS)
+    if ids is not None:
+        holder = {recipe.id: name for name in reversed(names) for recipe in procedural.recipes(heldout=name)}
+        wanted = {holder[i] for i in ids if i in holder}
+        names = [name for name in names if name in wanted]
+    return [ensure_heldout_bank(size, cache_dir, name,
+                                bars(f"texture bank {name}", build_steps(name)) if bars else None) for name in names]
+
+
+def heldout_ids(kind: str) -> list[str]:
+    """The ids of every held-out texture of ``kind``, each once, in set order: what a design may name besides its
+    bank's textures. Read from the recipes, so no bank is built."""
+    return list(dict.fromkeys(recipe.id for name in procedural.HELDOUT_SETS
+                              for recipe in procedural.recipes(kind, heldout=name)))
