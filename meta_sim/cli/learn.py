@@ -153,13 +153,14 @@ def _search_options(command):
 
 
 @main.command("infer")
-@click.argument("target_dir", type=click.Path(path_type=Path))
+@click.argument("target_dir", metavar="TARGET_DIR[:METRES]")
 @click.option("--model", type=click.Path(path_type=Path), required=True, help="NAMS checkpoint (nams.pt)")
 @click.option("--out", type=click.Path(path_type=Path), required=True, help="folder for presets and report")
 @click.option("--overwrite", is_flag=True, help="replace the outputs of an earlier run in --out (as a whole)")
 @click.option("--group-size", type=int, default=9, show_default=True, help="target tiles per inferred design")
 @click.option("--gsd", type=float, default=None,
-              help="metres per pixel of the targets (default: GeoTIFF/EXR metadata, else the render's)")
+              help="metres per pixel of the targets that nothing else states (TARGET_DIR:METRES, GeoTIFF/EXR "
+                   "metadata, world files, a pixel_size.txt in TARGET_DIR); default: the model's, with a warning")
 @click.option("--views", type=click.Choice(["1", "2", "4", "8"]), default=None,
               help="augmentation views per tile (default: as trained)")
 @click.option("--weights", type=click.Path(path_type=Path), default=None, help="backbone weights, if needed")
@@ -177,8 +178,10 @@ def _search_options(command):
 @_torch_threads
 def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views, weights, seed, method, profile,
                   near, M, k, S, iterations, lr, r):
-    """Infer rooftop designs for a folder of target images; write presets and a report."""
+    """Infer rooftop designs for a folder of target images (TARGET_DIR:METRES states their metres per pixel);
+    write presets and a report."""
     from ..pipeline.infer import InferSettings, infer
+    from ..sim.pixelsize import ImageFolder
 
     if profile:
         from ..pipeline.profiles import get_profile
@@ -196,7 +199,8 @@ def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views
                              weights=str(weights) if weights else None, near=near)
     bars = _Bars()
     try:
-        report = infer(target_dir, model, out, settings, bars, overwrite=overwrite)
+        report = infer(ImageFolder.parse(target_dir), model, out, settings, bars, overwrite=overwrite,
+                       warn=lambda line: click.echo(line, err=True))
     finally:
         bars.close()
     for s in report["skipped"]:

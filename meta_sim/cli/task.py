@@ -20,8 +20,10 @@ def task():
 
 
 @task.command("train")
-@click.option("--real", type=click.Path(path_type=Path), multiple=True,
-              help="labelled real images: a folder with images/ and masks/ (same names); repeatable")
+@click.option("--real", metavar="DIR[:METRES]", multiple=True,
+              help="labelled real images: a folder with images/ and masks/ (same names), with its metres per "
+                   "pixel after a colon unless its files state it (GeoTIFF, world files, a pixel_size.txt in DIR); "
+                   "repeatable")
 @click.option("--synthetic", type=click.Path(path_type=Path), multiple=True,
               help="rendered tiles (*.exr, e.g. from `meta-sim render --population`); repeatable")
 @click.option("--mix", default="6:1", show_default=True,
@@ -33,7 +35,8 @@ def task():
 @click.option("--gsd", type=float, default=0.6, show_default=True,
               help="working metres per pixel: every image is brought to it")
 @click.option("--real-gsd", type=float, default=None,
-              help="metres per pixel of real images whose files do not say (GeoTIFF, world file)")
+              help="metres per pixel of the real images that nothing else states (DIR:METRES, GeoTIFF tags, "
+                   "world files, pixel_size.txt)")
 @click.option("--augment/--no-augment", default=True, show_default=True,
               help="random rotations, flips and colour balance of the crops")
 @click.option("--colour-augment", type=click.Choice(["light", "ground", "camera", "scene"]), default="light",
@@ -51,12 +54,14 @@ def task():
 def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, augment, colour_augment, width, depth,
                   encoder, seed, out):
     """Train a building segmenter on real and/or rendered images; deterministic for a seed."""
-    from ..task.data import merge, real_pool, tile_pool
+    from ..sim.pixelsize import ImageFolder, summary, summary_line
+    from ..task.data import merge, real_pools, tile_pool
     from ..task.train import TrainSettings, parse_mix, train_segmenter
     from ..task.unet import save_segmenter
 
     if not real and not synthetic:
         raise MetaSimError("give --real and/or --synthetic training folders")
+    folders = [ImageFolder.parse(f, "--real", fallback_m=real_gsd, fallback_flag="--real-gsd") for f in real]
     settings = TrainSettings(steps=steps, batch=batch, crop=crop, lr=lr, mix=parse_mix(mix, batch)
                              if real and synthetic else (batch, 0), pixel_size_m=gsd, augment=augment,
                              colour=colour_augment, seed=seed,
@@ -64,12 +69,15 @@ def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, a
     writable_dir(out.parent)
     bars = _Bars()
     try:
-        real_images = merge([real_pool(f, gsd, real_gsd, bars) for f in real])
+        real = real_pools(folders, gsd, bars)
+        real_images = merge(real)
         rendered = merge([tile_pool(f, gsd, bars) for f in synthetic])
         segmenter = train_segmenter(real_images, rendered, settings, bars("train segmenter", steps))
     finally:
         bars.close()
     save_segmenter(out, segmenter)
+    for folder, pool in zip(folders, real):
+        click.echo(f"{folder.path}: {summary_line(summary(pool.own_sizes))}")
     crops = segmenter.training["crops"]
     click.echo(f"wrote {out}: {steps} steps of {crops[0]} real + {crops[1]} synthetic crops of {crop} px "
                f"at {gsd} m per pixel")
@@ -77,29 +85,38 @@ def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, a
 
 @task.command("eval")
 @click.argument("model", type=click.Path(path_type=Path))
-@click.argument("labelled", type=click.Path(path_type=Path))
+@click.argument("labelled", metavar="LABELLED[:METRES]")
 @click.option("--real-gsd", type=float, default=None,
-              help="metres per pixel of real images whose files do not say")
+              help="metres per pixel of the real images that nothing else states (LABELLED:METRES, GeoTIFF tags, "
+                   "world files, pixel_size.txt); without any, the model's own, with a warning")
 @click.option("--out", type=click.Path(path_type=Path), required=True,
               help="folder for scores.json and predictions.png")
 @_torch_threads
 def eval_command(model, labelled, real_gsd, out):
-    """Score a segmenter on LABELLED (rendered tiles, or images/ and masks/): IoU, precision, recall."""
+    """Score a segmenter on LABELLED (rendered tiles, or images/ and masks/, LABELLED:METRES stating the real
+    images' metres per pixel): IoU, precision, recall."""
+    from ..sim.pixelsize import ImageFolder, assumed_warning, summary
     from ..task.data import labelled_pool
     from ..task.score import all_building, count, overlay, prediction_sheet, truth_picture
     from ..task.unet import load_segmenter
 
     segmenter = load_segmenter(model)
+    folder = ImageFolder.parse(labelled, fallback_m=real_gsd, fallback_flag="--real-gsd",
+                               assumed_m=segmenter.pixel_size_m)
     writable_dir(out)
     bars = _Bars()
     try:
-        pool = labelled_pool(labelled, segmenter.pixel_size_m, real_gsd, bars)
+        pool = labelled_pool(folder, segmenter.pixel_size_m, bars)
+        warning = assumed_warning(folder, pool.own_sizes)
+        if warning:
+            click.echo(warning, err=True)
         counts, called = count(segmenter, pool.images, pool.masks)
     finally:
         bars.close()
     metrics = counts.metrics()
     scores = {**metrics, "all_building_iou": all_building(pool.masks).iou(), "images": len(pool),
-              "pixel_size_m": segmenter.pixel_size_m, "model": str(model), "labelled": str(labelled),
+              "pixel_size_m": segmenter.pixel_size_m, "model": str(model), "labelled": str(folder.path),
+              "pixel_sizes": {str(folder.path): summary(pool.own_sizes)},
               "per_image": [{"source": s, "tp": int(tp), "fp": int(fp), "fn": int(fn)}
                             for s, tp, fp, fn in zip(pool.sources, counts.tp, counts.fp, counts.fn)]}
     write_text_atomic(out / "scores.json", json.dumps(scores, indent=2) + "\n")

@@ -13,8 +13,9 @@ import json
 import math
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -37,8 +38,9 @@ REPORT_GROUPS = 12  # groups drawn in report.png
 class InferSettings(SearchOptions):
     """How `meta-sim infer` searches: the search settings (``SearchOptions``), then tiles per target
     group, the search ``method`` ("auto", "adjoint" or "exhaustive"), the seed of the search's random
-    starts and rejection draws, the targets' metres per pixel (``gsd``; None: each file's own, else
-    the render's), the dihedral views averaged per tile, and a backbone's weights file."""
+    starts and rejection draws, the metres per pixel of targets nothing else states (``gsd``, below the
+    folder's own ways: ``pixelsize``; None: the render's, with a warning), the dihedral views averaged per
+    tile, and a backbone's weights file."""
 
     group_size: int = 9
     method: str = "auto"
@@ -69,14 +71,16 @@ def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "target"
 
 
-def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: InferSettings = InferSettings(),
-          bars: Bars | None = None, overwrite: bool = False) -> dict:
-    """Infer the designs behind the images in ``target_dir`` with the NAMS checkpoint at
-    ``checkpoint_path``; write presets and a report into ``out_dir`` and return the report.
+def infer(target_dir, checkpoint_path: Path, out_dir: Path, settings: InferSettings = InferSettings(),
+          bars: Bars | None = None, overwrite: bool = False, warn: Callable[[str], None] | None = None) -> dict:
+    """Infer the designs behind the images in ``target_dir`` (a path, or a ``pixelsize.ImageFolder`` that
+    states their pixel size) with the NAMS checkpoint at ``checkpoint_path``; write presets and a report
+    into ``out_dir`` and return the report.
 
     Every readable image directly in ``target_dir`` (unreadable files are skipped and listed in the
-    report) is brought to the checkpoint's render pixel size (from ``settings.gsd``, else the file's
-    metadata; without either it is taken as rendered) and cut into tiles of the checkpoint's size;
+    report) is brought to the checkpoint's render pixel size from its own, as ``pixelsize.resolve_pixel_size``
+    finds it before any image is read (``settings.gsd`` for images nothing else states; without it they are
+    taken as rendered, and ``warn`` gets one line saying so), and cut into tiles of the checkpoint's size;
     the tiles, in file-name order, form groups of ``settings.group_size``. Each group's features
     (the checkpoint's extractor, averaged over tiles and views) are normalised and searched, and
     ``out_dir`` gets ``presets/<folder>-NNN.json`` (one design preset per group, with its vote
@@ -84,7 +88,8 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     sample are each group's ``near`` best-ranked ones), and ``report.json``,
     ``report.md`` and ``report.png`` (each group's first tile beside the textures of its design,
     for the first 12 groups). The returned dict is what ``report.json`` holds: counts, skipped
-    files, model id, method, seconds, the population and each group's design and confidence.
+    files, model id, method, seconds, the pixel sizes the images were read at and what stated them,
+    the population and each group's design and confidence.
 
     The outputs are written into a new folder beside ``out_dir`` and put in its place at the end, so
     ``out_dir`` holds one whole run: an existing ``out_dir`` with files in it is replaced only with
@@ -92,11 +97,12 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
 
     Raises MetaSimError when the checkpoint is missing, unreadable or not a NAMS model, its
     extractor cannot be rebuilt (e.g. a backbone without ``settings.weights``), ``target_dir`` is
-    not a folder or holds no readable image, an image is too small for a tile, or a setting is out
-    of range.
+    not a folder or holds no readable image, an image's pixel size is stated two ways that disagree
+    or by a malformed file, an image is too small for a tile, or a setting is out of range.
     """
     from ..nams import load_checkpoint
     from ..sim.imageio import list_images
+    from ..sim.pixelsize import ImageFolder, assumed_warning, resolve_pixel_size
     from .roofcolour import checkpoint_extractor
 
     settings.check()
@@ -107,32 +113,37 @@ def infer(target_dir: Path, checkpoint_path: Path, out_dir: Path, settings: Infe
     writable_dir(out_dir.parent)
     ckpt = load_checkpoint(checkpoint_path, "nams")
     extractor = checkpoint_extractor(ckpt, Path(settings.weights) if settings.weights else None)
-    paths, skipped = list_images(target_dir)
-    run = _Run(ckpt, extractor, settings, _slug(Path(target_dir).resolve().name))
+    render_gsd = float(ckpt.extra.get("pixel_size_m", 0.3))
+    targets = replace(ImageFolder.of(target_dir, flag=f"{target_dir}:METRES"), fallback_m=settings.gsd,
+                      fallback_flag="--gsd", assumed_m=render_gsd)
+    paths, skipped = list_images(targets.path)
+    sizes = {path: resolve_pixel_size(path, targets) for path in paths}
+    warning = assumed_warning(targets, list(sizes.values()))
+    if warning and warn:
+        warn(warning)
+    run = _Run(ckpt, extractor, settings, _slug(targets.path.resolve().name))
     progress = bars("target images", len(paths)) if bars else None
     nodata = {}
-    tiles = _tile_stream(paths, skipped, nodata, int(ckpt.extra.get("tile_px", 384)), settings.gsd,
-                         float(ckpt.extra.get("pixel_size_m", 0.3)), progress)
+    tiles = _tile_stream(sizes, skipped, nodata, int(ckpt.extra.get("tile_px", 384)), render_gsd, progress)
     with atomic_dir(out_dir, replace=True) as folder:
         for batch in _chunks(_chunks(tiles, settings.group_size), BATCH_GROUPS):
             run.search(batch, folder)
         if not run.presets:
             listing = "; ".join(f"{p.name} ({why})" for p, why in skipped[:5])
-            raise MetaSimError(f"no readable images in {target_dir}; {len(skipped)} files skipped: {listing}")
-        return run.finish(folder, target_dir, paths, skipped, nodata)
+            raise MetaSimError(f"no readable images in {targets.path}; {len(skipped)} files skipped: {listing}")
+        return run.finish(folder, targets.path, sizes, skipped, nodata)
 
 
-def _tile_stream(paths, skipped: list, nodata: dict, tile_px: int, gsd: float | None, render_gsd: float,
-                 progress):
-    """``(path, tile)`` for every tile of every image, in order, read one image (or one window of a large
-    one) at a time. An image whose pixels cannot be read is added to ``skipped`` with the reason; tiles
-    left out as no-data are counted per image in ``nodata``."""
+def _tile_stream(sizes: dict, skipped: list, nodata: dict, tile_px: int, render_gsd: float, progress):
+    """``(path, tile)`` for every tile of every image (``sizes``: each path's ``PixelSize``), in order, read
+    one image (or one window of a large one) at a time. An image whose pixels cannot be read is added to
+    ``skipped`` with the reason; tiles left out as no-data are counted per image in ``nodata``."""
     from ..sim.imageio import image_tiles
 
-    for path in paths:
+    for path, size in sizes.items():
         dropped = []
         try:
-            for tile in image_tiles(path, tile_px, gsd, render_gsd, dropped):
+            for tile in image_tiles(path, tile_px, size.metres, render_gsd, dropped):
                 yield path, tile
         except MetaSimError as exc:
             skipped.append((path, str(exc).removeprefix(f"{path}: ")))
@@ -203,10 +214,12 @@ class _Run:
             self.tiles += len(group)
             self.method = result.method
 
-    def finish(self, out_dir: Path, target_dir, paths, skipped, nodata: dict) -> dict:
+    def finish(self, out_dir: Path, target_dir: Path, sizes: dict, skipped, nodata: dict) -> dict:
         """The population preset and the report, once every group is written; returns the report."""
+        from ..sim.pixelsize import summary
+
         ckpt, presets = self.ckpt, self.presets
-        images = len([p for p in paths if p not in {s for s, _ in skipped}])
+        read = [size for path, size in sizes.items() if path not in {s for s, _ in skipped}]
         near = self.settings.near
         pop = population(presets, ckpt.space, f"{self.stem}-population", ckpt.model_id,
                          self.near if near else None, near)
@@ -214,7 +227,8 @@ class _Run:
         evidence = [p.roof_evidence() for p in presets]
         outside = {kind: {end: sum(e[kind]["outside"] == end for e in evidence) for end in ("low", "high")}
                    for kind in self.evidence_reference if evidence and kind in evidence[0]}
-        report = {"target_dir": str(target_dir), "images": images, "tiles": self.tiles,
+        report = {"target_dir": str(target_dir), "images": len(read), "tiles": self.tiles,
+                  "pixel_sizes": {str(target_dir): summary(read)},
                   "group_count": len(presets),
                   "skipped": [{"path": str(p), "reason": r} for p, r in skipped], "model_id": ckpt.model_id,
                   "nodata_tiles": nodata,
@@ -237,6 +251,7 @@ class _Run:
 
 
 def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space) -> None:
+    from ..sim.pixelsize import summary_line
     from ..sim.textures import ensure_default_bank, ensure_heldout_banks
     from ..sim.textures.pngio import write_png
     from ..sim.textures.sheet import render_sheet
@@ -247,6 +262,8 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
              f"{report['images']} images, {report['tiles']} tiles, {report['group_count']} groups; "
              f"search `{report['method']}`, {report['seconds']['search_per_group']:.4f} s per group; "
              f"model `{report['model_id']}` ({report['architecture']} NAMS).", "",
+             *[f"Pixel size of {folder}: {summary_line(sizes)}." for folder, sizes in report["pixel_sizes"].items()],
+             "",
              "| group | " + " | ".join(space.names) + " |" + "".join(f" {k} roof pixels |" for k in kinds),
              "|---|" + "---|" * (len(space.names) + len(kinds))]
     for g in report["groups"]:

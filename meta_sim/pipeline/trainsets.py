@@ -3,8 +3,9 @@ real image/mask folders, with the same keys, so one training loop takes either o
 
 Each item is a dict: ``image`` float32 (3, H, W) in display sRGB (or linear light for rendered tiles),
 ``mask`` uint8 (H, W), 1 on buildings; ``roof_class`` int64 (H, W), 0 background (or a wall), 1 flat, 2 sloped;
-``instance`` int64 (H, W), the building id (0: none); ``meta``: the tile's path, pixel size and, for
-rendered tiles, design (JSON), city seed and tile index. Real masks tell buildings only: their
+``instance`` int64 (H, W), the building id (0: none); ``meta``: the tile's path, pixel size, its own pixel
+size before resampling and what stated it (``pixelsize.SOURCES``) and, for rendered tiles, design (JSON), city
+seed and tile index. Real masks tell buildings only: their
 ``roof_class`` and ``instance`` are 0 and ``meta["labels"]`` says "mask". Items are read when asked for,
 so the datasets work with DataLoader worker processes started by spawning (``loader`` does that):
 forked workers, Linux's default, hang at exit once OpenImageIO has run in the parent.
@@ -20,7 +21,8 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 
 from ..core.errors import MetaSimError
-from ..sim.imageio import RENDER_PIXEL_SIZE_M, image_pixel_size_m, linear_to_srgb, read_image, read_rgb8, resample
+from ..sim.imageio import RENDER_PIXEL_SIZE_M, linear_to_srgb, read_image, read_rgb8, resample
+from ..sim.pixelsize import ImageFolder, PixelSize, resolve_pixel_size
 from ..sim.tiles import read_tile
 
 COLOURS = ("srgb", "linear")
@@ -62,6 +64,7 @@ class TileDataset(Dataset):
         tile = read_tile(path)
         rgb = linear_to_srgb(tile.rgb) if self.colour == "srgb" else np.clip(np.nan_to_num(tile.rgb), 0.0, None)
         size = float(tile.meta.get("pixel_size_m", RENDER_PIXEL_SIZE_M))
+        own = PixelSize(size, "metadata" if "pixel_size_m" in tile.meta else "assumed")
         building, roof_class, instance = tile.building > 0, tile.roof_class, tile.instance
         if self.working and self.working != size:
             rgb = resample(rgb, size, self.working)
@@ -71,35 +74,41 @@ class TileDataset(Dataset):
         meta = {"path": str(path), "pixel_size_m": size,
                 "design": json.dumps(tile.meta.get("design", {}), sort_keys=True),
                 "city_seed": int(tile.meta.get("city_seed", -1)), "tile_index": int(tile.meta.get("tile_index", -1)),
-                "labels": "render"}
+                "labels": "render", **_origin(own)}
         return _item(rgb, building, roof_class, instance, meta)
 
 
 class RealDataset(Dataset):
     """Real images with building masks: ``images/NAME`` beside ``masks/NAME`` (any image file; a mask
-    pixel above half its range is a building), brought from their pixel size (``pixel_size_m``, else the
-    file's metadata) to ``working_pixel_size_m``. MetaSimError when a size is known neither way."""
+    pixel above half its range is a building), brought from their pixel size to ``working_pixel_size_m``.
+
+    Each image's size is resolved once, here, by ``pixelsize.resolve_pixel_size``: from ``folder`` (an
+    ``ImageFolder`` saying how the command states sizes) when given, else from ``pixel_size_m`` (the
+    images' stated size), the files' metadata, their world files or a ``pixel_size.txt`` in the folder
+    holding ``images/`` and ``masks/``. MetaSimError when a size is unknown or two stated sizes disagree.
+    """
 
     def __init__(self, images: str | Path, masks: str | Path, pixel_size_m: float | None = None,
-                 working_pixel_size_m: float = RENDER_PIXEL_SIZE_M):
+                 working_pixel_size_m: float = RENDER_PIXEL_SIZE_M, folder: ImageFolder | None = None):
         images, masks = Path(images), Path(masks)
-        for folder in (images, masks):
-            if not folder.is_dir():
-                raise MetaSimError(f"{folder} is not a folder")
-        pixel_size_m, working_pixel_size_m = _pixel_size(pixel_size_m), _pixel_size(working_pixel_size_m)
+        for path in (images, masks):
+            if not path.is_dir():
+                raise MetaSimError(f"{path} is not a folder")
+        folder = folder or ImageFolder(images.parent, pixel_size_m)
         by_name = {p.name: p for p in masks.iterdir() if p.is_file() and not p.name.startswith(".")}
-        self.pairs = [(p, by_name[p.name], pixel_size_m) for p in sorted(images.iterdir())
+        self.pairs = [(p, by_name[p.name], resolve_pixel_size(p, folder)) for p in sorted(images.iterdir())
                       if p.is_file() and not p.name.startswith(".") and p.name in by_name]
         if not self.pairs:
             raise MetaSimError(f"no image in {images} has a mask of the same name in {masks}")
-        self.working = float(working_pixel_size_m)
+        self.working = _pixel_size(working_pixel_size_m)
 
     @classmethod
     def from_pairs(cls, pairs, working_pixel_size_m: float = RENDER_PIXEL_SIZE_M) -> RealDataset:
         """Over explicit ``(image, mask, pixel size or None)`` triples, for images whose masks are not
-        named alike or whose pixel sizes differ."""
+        named alike or whose pixel sizes differ; a size None is resolved as in a folder of its own."""
         data = cls.__new__(cls)
-        data.pairs = [(Path(i), Path(m), _pixel_size(s)) for i, m, s in pairs]
+        data.pairs = [(Path(i), Path(m), resolve_pixel_size(i, ImageFolder(Path(i).parent, s)))
+                      for i, m, s in pairs]
         if not data.pairs:
             raise MetaSimError("no image/mask pairs given")
         data.working = _pixel_size(working_pixel_size_m)
@@ -109,18 +118,22 @@ class RealDataset(Dataset):
         return len(self.pairs)
 
     def __getitem__(self, index: int) -> dict:
-        image_path, mask_path, size = self.pairs[index]
-        size = size or image_pixel_size_m(image_path)
-        if size is None:
-            raise MetaSimError(f"{image_path}: its pixel size is unknown; give it (pixel_size_m, --gsd)")
-        rgb = resample(read_image(image_path), size, self.working)
-        building = resample(read_rgb8(mask_path)[:, :, :1].astype(np.float32) / 255.0, size, self.working)[:, :, 0]
+        image_path, mask_path, own = self.pairs[index]
+        rgb = resample(read_image(image_path), own.metres, self.working)
+        building = resample(read_rgb8(mask_path)[:, :, :1].astype(np.float32) / 255.0, own.metres,
+                            self.working)[:, :, 0]
         if building.shape != rgb.shape[:2]:
             raise MetaSimError(f"{mask_path}: the mask is not the size of {image_path}")
         zeros = np.zeros(building.shape, np.int64)
         meta = {"path": str(image_path), "pixel_size_m": self.working, "design": "", "city_seed": -1,
-                "tile_index": -1, "labels": "mask"}
+                "tile_index": -1, "labels": "mask", **_origin(own)}
         return _item(rgb, building > 0.5, zeros, zeros, meta)
+
+
+def _origin(own: PixelSize) -> dict:
+    """An item's own pixel size and what stated it (``pixelsize.SOURCES``), before it was brought to the
+    working size."""
+    return {"own_pixel_size_m": own.metres, "own_pixel_size_source": own.source}
 
 
 def _nearest(labels: np.ndarray, shape: tuple) -> np.ndarray:

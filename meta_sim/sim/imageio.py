@@ -138,9 +138,10 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
                 render_gsd: float = RENDER_PIXEL_SIZE_M, dropped: list | None = None) -> Iterator[np.ndarray]:
     """The tiles of the image at ``path`` as ``load_targets`` cuts them, row of tiles by row of tiles.
 
-    The pixel size is ``gsd`` when given, else the file's own metadata, else ``render_gsd``. An image
-    of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one in windows of the source rows that one
-    row of tiles needs, so memory stays bounded whatever its size (the tiles are the same).
+    ``gsd`` is the image's pixel size (as ``pixelsize.resolve_pixel_size`` finds it); None takes it as
+    ``render_gsd``. An image of up to ``MAX_WHOLE_PIXELS`` is read whole; a larger one in windows of the
+    source rows that one row of tiles needs, so memory stays bounded whatever its size (the tiles are
+    the same).
 
     No-data pixels (alpha 0, a TIFF's ``GDAL_NODATA`` value or its internal mask) are not imagery: a tile
     more than ``NODATA_MAX_SHARE`` no-data is left out (``dropped``, when given, gets one entry for it);
@@ -151,15 +152,14 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
     """
     path = Path(path)
     width, height = image_size(path)
-    size = gsd if gsd is not None else image_pixel_size_m(path)
-    scale = 1.0 if size is None else size / render_gsd
+    scale = 1.0 if gsd is None else gsd / render_gsd
     if abs(scale - 1.0) < 1e-6:
         out_h, out_w = height, width
     else:
         out_h, out_w = round(height * scale), round(width * scale)
         if min(out_h, out_w) < 1 or max(out_h, out_w) > _MAX_SIDE_PX:
-            raise MetaSimError(f"resampling a {width}x{height} image from {size} m to {render_gsd} m pixels "
-                               f"would make it {out_w}x{out_h}; check the pixel size (pass --gsd)")
+            raise MetaSimError(f"resampling a {width}x{height} image from {gsd} m to {render_gsd} m pixels "
+                               f"would make it {out_w}x{out_h}; check the pixel size stated for it")
     if min(out_h, out_w) < MIN_TILE_PX:
         raise MetaSimError(f"{path}: {out_w}x{out_h} px at {render_gsd} m/px is smaller than "
                            f"the {MIN_TILE_PX} px minimum; remove it or use larger images")
@@ -168,8 +168,8 @@ def image_tiles(path: str | Path, tile_px: int, gsd: float | None = None,
         pixels, names, fmt = _read_pixels(path, "float")
         masked = _read_mask(path, mask, 0, height, width) if mask is not None else None
         img = _with_validity(_display(pixels, names, fmt), pixels, names, nodata, masked)
-        if size is not None:
-            img = resample(img, size, render_gsd)
+        if gsd is not None:
+            img = resample(img, gsd, render_gsd)
         yield from _imagery(cut_tiles(img, tile_px), dropped)
         return
     yield from _imagery(_windowed_tiles(path, tile_px, scale, (height, width), (out_h, out_w), nodata, mask),
@@ -371,10 +371,11 @@ def _pick_rgb(pixels: np.ndarray, names: tuple) -> np.ndarray:
 
 
 def image_pixel_size_m(path: str | Path) -> float | None:
-    """Ground size of one pixel in metres, from the file's metadata, or None when it does not say.
+    """Ground size of one pixel in metres, from the file's own metadata, or None when it does not say.
 
-    Read from our EXR tiles' ``metasim:pixel_size_m`` header, from GeoTIFF tags (see
-    ``_geotiff_pixel_size_m``), else from a world file beside the image (``world_file_pixel_size_m``).
+    Read from our EXR tiles' ``metasim:pixel_size_m`` header, else from GeoTIFF tags (see
+    ``_geotiff_pixel_size_m``). Files beside the image (world files, ``pixel_size.txt``) are
+    ``pixelsize.resolve_pixel_size``'s to read.
     """
     path = Path(path)
     image = oiio.ImageInput.open(str(path))
@@ -391,51 +392,14 @@ def image_pixel_size_m(path: str | Path) -> float | None:
             return _valid_size(float(json.loads(value) if isinstance(value, str) else value))
         except (TypeError, ValueError):
             return None
-    size = _geotiff_pixel_size_m(path) if format_name == "tiff" else None
-    return size if size is not None else world_file_pixel_size_m(path)
+    return _geotiff_pixel_size_m(path) if format_name == "tiff" else None
 
 
 # Files GIS tools put beside an image: its world file, projection, statistics and overviews. They are
 # read with the image they belong to, never listed as targets.
 SIDECAR_SUFFIXES = (".tfw", ".tifw", ".tiffw", ".pgw", ".pngw", ".jgw", ".jpgw", ".jpegw", ".wld", ".prj", ".xml",
                     ".ovr", ".aux")
-_FEET = {"foot_us": 1200.0 / 3937.0, "us survey foot": 1200.0 / 3937.0, "foot": 0.3048, "international foot": 0.3048}
-
-
-def world_file_pixel_size_m(path: str | Path) -> float | None:
-    """The pixel size from the image's world file (``.tfw``, ``.pgw``, ``.jgw``, ``.wld``, ...), or None.
-
-    A world file holds six numbers: the pixel's x size, two rotation terms, its y size (negative), and
-    the top-left pixel's centre. Their unit comes from the ``.prj`` beside it when there is one (a
-    geographic CRS in degrees is converted at the image's latitude; a projected one in metres or feet);
-    without a ``.prj`` they are taken as metres.
-    """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    names = [suffix[:2] + suffix[-1:] + "w", suffix + "w", ".wld"] if len(suffix) > 1 else [".wld"]
-    world = next((w for w in (path.with_suffix(s) for s in names) if w.is_file()), None)
-    if world is None:
-        return None
-    try:
-        a, d, b, e, _, f = (float(v) for v in world.read_text().split()[:6])
-    except (OSError, UnicodeDecodeError, ValueError):
-        return None
-    if not all(math.isfinite(v) for v in (a, d, b, e, f)):
-        return None
-    sx, sy = math.hypot(a, d), math.hypot(b, e)
-    prj = path.with_suffix(".prj")
-    wkt = prj.read_text(errors="replace")[:20000].lower() if prj.is_file() else ""
-    if wkt.startswith("geogcs") or wkt.startswith("geogcrs"):
-        lat = math.radians(max(-89.0, min(89.0, f)))
-        return _valid_size(0.5 * (sx * math.cos(lat) + sy) * _METRES_PER_DEGREE)
-    unit = 1.0
-    for name, metres in _FEET.items():
-        if f'unit["{name}"' in wkt or f"lengthunit[\"{name}\"" in wkt:
-            unit = metres
-            break
-    return _valid_size(0.5 * (sx + sy) * unit)
-
-
+PIXEL_SIZE_FILE = "pixel_size.txt"  # a folder's stated pixel size (``pixelsize``), never a target image
 def _valid_size(size: float) -> float | None:
     return size if math.isfinite(size) and 0.0 < size < 1e5 else None
 
@@ -448,7 +412,7 @@ _TIFF_TYPES = {2: "s", 3: "H", 4: "I", 12: "d", 16: "Q"}  # ASCII, SHORT, LONG, 
 _LINEAR_UNITS_M = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0}
 _WEB_MERCATOR = (3857, 3785, 900913)
 _EARTH_RADIUS_M = 6378137.0
-_METRES_PER_DEGREE = math.pi * _EARTH_RADIUS_M / 180.0
+METRES_PER_DEGREE = math.pi * _EARTH_RADIUS_M / 180.0
 
 
 def _geotiff_pixel_size_m(path: Path) -> float | None:
@@ -483,7 +447,7 @@ def _geotiff_pixel_size_m(path: Path) -> float | None:
         if keys.get(2054, 9102) != 9102:  # GeogAngularUnitsGeoKey: only degrees
             return None
         lat = math.radians(max(-89.0, min(89.0, centre_y)))
-        return _valid_size(0.5 * (sx * math.cos(lat) + sy) * _METRES_PER_DEGREE)
+        return _valid_size(0.5 * (sx * math.cos(lat) + sy) * METRES_PER_DEGREE)
     if model != 1:
         return None
     if 3076 in keys:  # ProjLinearUnitsGeoKey
@@ -656,7 +620,8 @@ def list_images(folder: str | Path) -> tuple[list[Path], list[tuple[Path, str]]]
         raise MetaSimError(f"{folder} is not a folder; pass a folder of images")
     paths, skipped = [], []
     for path in sorted(folder.iterdir(), key=lambda p: p.name):
-        if path.name.startswith(".") or not path.is_file() or path.suffix.lower() in SIDECAR_SUFFIXES:
+        if (path.name.startswith(".") or not path.is_file() or path.suffix.lower() in SIDECAR_SUFFIXES
+                or path.name == PIXEL_SIZE_FILE):
             continue
         try:
             image_size(path)
@@ -675,8 +640,8 @@ def load_targets(paths, tile_px: int, gsd: float | None = None, render_gsd: floa
                  progress: Callable[[int], None] | None = None) -> list[tuple[Path, np.ndarray]]:
     """Every image read, brought to the render pixel size and cut into tiles: ``(path, tile)`` pairs.
 
-    The pixel size is ``gsd`` when given, else the file's own metadata,
-    else assumed equal to ``render_gsd``. ``progress(1)`` after each image.
+    ``gsd`` is every image's pixel size; None takes them as ``render_gsd``. ``progress(1)`` after
+    each image.
     """
     targets = []
     for path in map(Path, paths):

@@ -42,21 +42,24 @@ class Batch:
 
 
 class Pool:
-    """Labelled images (``image`` float32 (H, W, 3), ``mask`` bool (H, W)), all at one pixel size."""
+    """Labelled images (``image`` float32 (H, W, 3), ``mask`` bool (H, W)), all at one pixel size;
+    ``own_sizes``, when known, each image's ``pixelsize.PixelSize`` before it was brought to it."""
 
     def __init__(self, name: str, images: list[np.ndarray], masks: list[np.ndarray], pixel_size_m: float,
-                 sources: list[str]):
+                 sources: list[str], own_sizes: list | None = None):
         if not images:
             raise MetaSimError(f"{name}: no labelled images")
         self.name, self.images, self.masks, self.pixel_size_m = name, images, masks, float(pixel_size_m)
-        self.sources = sources
+        self.sources, self.own_sizes = sources, own_sizes
         areas = np.array([m.size for m in masks], dtype=np.float64)
         self.weights = torch.from_numpy(areas / areas.sum())
 
     @classmethod
     def from_dataset(cls, name: str, dataset, bars: Bars | None = None) -> Pool:
         """Every item of a ``TileDataset`` or ``RealDataset`` (made with a working pixel size)."""
-        images, masks, sources, sizes = [], [], [], set()
+        from ..sim.pixelsize import PixelSize
+
+        images, masks, sources, sizes, own = [], [], [], set(), []
         progress = bars(f"read {name}", len(dataset)) if bars else None
         for k in range(len(dataset)):
             item = dataset[k]
@@ -64,11 +67,12 @@ class Pool:
             masks.append(item["mask"].numpy() > 0)
             sources.append(item["meta"]["path"])
             sizes.add(round(item["meta"]["pixel_size_m"], 6))
+            own.append(PixelSize(item["meta"]["own_pixel_size_m"], item["meta"]["own_pixel_size_source"]))
             if progress:
                 progress(1)
         if len(sizes) != 1:
             raise MetaSimError(f"{name}: images at several pixel sizes ({sorted(sizes)}); give a working size")
-        return cls(name, images, masks, sizes.pop(), sources)
+        return cls(name, images, masks, sizes.pop(), sources, own)
 
     def __len__(self) -> int:
         return len(self.images)
@@ -130,19 +134,26 @@ def join(batches: list[Batch]) -> Batch:
     return Batch(*(torch.cat([getattr(b, f) for b in batches]) for f in ("image", "mask", "valid")))
 
 
-def real_pool(folder, working_pixel_size_m: float, pixel_size_m: float | None = None,
-              bars: Bars | None = None) -> Pool:
+def real_pool(folder, working_pixel_size_m: float, bars: Bars | None = None) -> Pool:
     """The labelled real images of ``folder`` (``images/NAME`` beside ``masks/NAME``), at the working
-    pixel size; their own size is ``pixel_size_m`` or the files' metadata."""
-    from pathlib import Path
+    pixel size; ``folder`` a path or a ``pixelsize.ImageFolder`` that says how their own sizes are
+    stated (``RealDataset`` resolves them)."""
+    return real_pools([folder], working_pixel_size_m, bars)[0]
 
+
+def real_pools(folders: list, working_pixel_size_m: float, bars: Bars | None = None) -> list[Pool]:
+    """``real_pool`` of each of ``folders``; every image's pixel size is resolved before any image is
+    read, so a size missing in the last folder stops a command before it reads the first."""
     from ..pipeline.trainsets import RealDataset
+    from ..sim.pixelsize import ImageFolder
 
-    folder = Path(folder)
-    if not (folder / "images").is_dir() or not (folder / "masks").is_dir():
-        raise MetaSimError(f"{folder} must hold images/ and masks/ folders (a mask per image, same name)")
-    return Pool.from_dataset(folder.name, RealDataset(folder / "images", folder / "masks", pixel_size_m,
-                                                      working_pixel_size_m), bars)
+    datasets = []
+    for folder in map(ImageFolder.of, folders):
+        if not (folder.path / "images").is_dir() or not (folder.path / "masks").is_dir():
+            raise MetaSimError(f"{folder.path} must hold images/ and masks/ folders (a mask per image, same name)")
+        datasets.append((folder.path.name, RealDataset(folder.path / "images", folder.path / "masks",
+                                                        working_pixel_size_m=working_pixel_size_m, folder=folder)))
+    return [Pool.from_dataset(name, dataset, bars) for name, dataset in datasets]
 
 
 def tile_pool(folder, working_pixel_size_m: float, bars: Bars | None = None) -> Pool:
@@ -154,17 +165,20 @@ def tile_pool(folder, working_pixel_size_m: float, bars: Bars | None = None) -> 
     return Pool.from_dataset(Path(folder).name, TileDataset(folder, "srgb", working_pixel_size_m), bars)
 
 
-def labelled_pool(folder, working_pixel_size_m: float, pixel_size_m: float | None = None,
-                  bars: Bars | None = None) -> Pool:
-    """A folder of rendered tiles, or of real images and masks: whichever it holds."""
-    from pathlib import Path
+def labelled_pool(folder, working_pixel_size_m: float, bars: Bars | None = None) -> Pool:
+    """A folder of rendered tiles, or of real images and masks: whichever it holds (``folder`` as for
+    ``real_pool``). Rendered tiles carry their own pixel size: one stated for their folder is an error."""
+    from ..sim.pixelsize import ImageFolder
 
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise MetaSimError(f"{folder} is not a folder")
-    if any(p.suffix == ".exr" and not p.name.startswith(".") for p in folder.iterdir()):
-        return tile_pool(folder, working_pixel_size_m, bars)
-    return real_pool(folder, working_pixel_size_m, pixel_size_m, bars)
+    folder = ImageFolder.of(folder)
+    if not folder.path.is_dir():
+        raise MetaSimError(f"{folder.path} is not a folder")
+    if any(p.suffix == ".exr" and not p.name.startswith(".") for p in folder.path.iterdir()):
+        if folder.stated_m is not None:
+            raise MetaSimError(f"{folder.path} holds rendered tiles, whose files carry their pixel size; drop the "
+                               f":{folder.stated_m:g}")
+        return tile_pool(folder.path, working_pixel_size_m, bars)
+    return real_pool(folder, working_pixel_size_m, bars)
 
 
 def merge(pools: list[Pool]) -> Pool | None:

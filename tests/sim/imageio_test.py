@@ -268,22 +268,13 @@ def test_a_large_image_read_in_windows_gives_the_tiles_of_a_whole_read(tmp_path,
         read_image(path)
 
 
-def test_world_files_give_the_pixel_size_and_are_not_listed_as_images(tmp_path):
-    from meta_sim.sim.imageio import image_pixel_size_m
-
+def test_world_files_and_pixel_size_txt_are_not_listed_as_images(tmp_path):
     png = _write(tmp_path / "ortho.png", np.zeros((40, 30, 3), np.uint8), oiio.UINT8)
-    assert image_pixel_size_m(png) is None
     (tmp_path / "ortho.pgw").write_text("0.25\n0.0\n0.0\n-0.25\n500000.125\n4100000.125\n")
-    assert image_pixel_size_m(png) == pytest.approx(0.25)
-    (tmp_path / "ortho.prj").write_text('PROJCS["NAD83 / New York Long Island (ftUS)",GEOGCS["NAD83"],'
-                                        'UNIT["US survey foot",0.3048006096012192]]')
-    assert image_pixel_size_m(png) == pytest.approx(0.25 * 1200 / 3937)
-    (tmp_path / "ortho.prj").write_text('GEOGCS["WGS 84",DATUM["WGS_1984"],UNIT["degree",0.0174532925199433]]')
-    (tmp_path / "ortho.pgw").write_text("0.000003\n0\n0\n-0.000003\n32.6\n60.0\n")
-    assert image_pixel_size_m(png) == pytest.approx(0.5 * (0.000003 * 0.5 + 0.000003) * 111319.49, rel=1e-3)
     tif = _write(tmp_path / "b.tif", np.zeros((20, 20, 3), np.uint8), oiio.UINT8)
     (tmp_path / "b.tfw").write_text("garbage\n")
-    assert image_pixel_size_m(tif) is None
+    (tmp_path / "pixel_size.txt").write_text("0.25\n")
+    assert image_pixel_size_m(png) is None  # world files are the resolver's (tests/sim/pixelsize_test.py)
     paths, skipped = list_images(tmp_path)
     assert paths == [tif, png] and skipped == []
 

@@ -101,3 +101,76 @@ def test_bad_task_command_lines_fail_cleanly(tmp_path):
         assert result.exit_code == 2, (args, result.output)
         assert message in result.output and "Traceback" not in result.output
     assert not (tmp_path / "x.pt").exists()
+
+
+def test_each_real_folder_is_read_at_the_pixel_size_it_states(tmp_path):
+    from meta_sim.sim.pixelsize import ImageFolder
+    from meta_sim.task.data import real_pool
+
+    by_file, by_world, by_flag = (_real(tmp_path / name) for name in ("by_file", "by_world", "by_flag"))
+    (by_file / "pixel_size.txt").write_text("# metres per pixel\n0.3\n")
+    for image in (by_world / "images").glob("*.png"):
+        image.with_suffix(".pgw").write_text("0.15\n0\n0\n-0.15\n500000\n4100000\n")
+    given = [str(by_file), str(by_world), f"{by_flag}:0.6"]
+    pools = [real_pool(ImageFolder.parse(text, "--real", fallback_m=1.2), 0.6) for text in given]
+    # 64 px at 0.3, 0.15 and 0.6 m, each brought to 0.6 m: resampled by a half, a quarter and not at all
+    assert [p.images[0].shape for p in pools] == [(32, 32, 3), (16, 16, 3), (64, 64, 3)]
+    assert [p.masks[0].sum() for p in pools] == [140, 28, 560]  # the 20 x 28 px building at each scale (edges halved)
+    assert [(s.metres, s.source) for s in (p.own_sizes[0] for p in pools)] == [
+        (0.3, "pixel_size.txt"), (0.15, "world file"), (0.6, "flag")]
+
+    result = CliRunner().invoke(main, ["task", "train", *[a for text in given for a in ("--real", text)],
+                                       "--real-gsd", "1.2", *TINY, "--out", str(tmp_path / "m.pt")])
+    assert result.exit_code == 0, result.output
+    assert f"{by_file}: 0.3 m per pixel (stated by pixel_size.txt) for 3 images" in result.stdout
+    assert f"{by_world}: 0.15 m per pixel (stated by world file) for 3 images" in result.stdout
+    assert f"{by_flag}: 0.6 m per pixel (stated by flag) for 3 images" in result.stdout
+
+
+def test_bad_pixel_sizes_are_one_line_errors_naming_the_fix(tmp_path):
+    real, odd = _real(tmp_path / "real"), _real(tmp_path / "odd")
+    (odd / "pixel_size.txt").write_text("about half a metre\n")
+    out = ["--out", str(tmp_path / "x.pt")]
+    cases = [
+        (["--real", str(real)], f"give its pixel size: --real {real}:METRES, a pixel_size.txt in {real} or --real-gsd"),
+        (["--real", f"{real}:zero"], "the pixel size after ':' must be a number of metres per pixel"),
+        (["--real", f"{real}:50"], "the pixel size after ':' must be a number of metres per pixel"),
+        (["--real", str(real), "--real-gsd", "-1"], "--real-gsd: a pixel size must be from 0.01 to 10"),
+        (["--real", f"{real}:0.3", "--real", str(odd)], f"{odd / 'pixel_size.txt'} must hold one number"),
+    ]
+    for args, message in cases:
+        result = CliRunner().invoke(main, ["task", "train", *args, *TINY, *out])
+        assert result.exit_code == 2, (args, result.output)
+        assert result.output.count("\n") == 1 and message in result.output and "Traceback" not in result.output
+    (odd / "pixel_size.txt").unlink()
+    (odd / "images" / "r0.pgw").write_text("0.3\n0\n0\n-0.6\n0\n0\n")
+    result = CliRunner().invoke(main, ["task", "train", "--real", str(odd), *TINY, *out])
+    assert result.exit_code == 2 and "r0.pgw: its pixels are not square (0.3 by 0.6); correct or remove it" \
+        in result.output
+    assert not (tmp_path / "x.pt").exists()
+
+
+def test_eval_records_the_pixel_sizes_and_warns_once_when_it_assumes_them(tmp_path):
+    real, rendered = _real(tmp_path / "real"), _rendered(tmp_path / "rendered")
+    runner = CliRunner()
+    trained = runner.invoke(main, ["task", "train", "--real", f"{real}:0.3", *TINY, "--steps", "1",
+                                   "--gsd", "0.3", "--out", str(tmp_path / "m.pt")])
+    assert trained.exit_code == 0, trained.output
+    assumed = runner.invoke(main, ["task", "eval", str(tmp_path / "m.pt"), str(real), "--out", str(tmp_path / "a")])
+    assert assumed.exit_code == 0, assumed.output
+    warnings = [line for line in assumed.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == [f"warning: 3 of 3 images in {real} do not state their pixel size; taken as the model's 0.3 m. "
+                        f"State it: {real}:METRES, a pixel_size.txt in {real} or --real-gsd"]
+    scores = json.loads((tmp_path / "a" / "scores.json").read_text())
+    assert scores["pixel_sizes"] == {str(real): [{"pixel_size_m": 0.3, "source": "assumed", "stated": False,
+                                                  "images": 3}]}
+    stated = runner.invoke(main, ["task", "eval", str(tmp_path / "m.pt"), f"{real}:0.15", "--out", str(tmp_path / "s")])
+    assert stated.exit_code == 0 and "warning" not in stated.output
+    scores = json.loads((tmp_path / "s" / "scores.json").read_text())
+    assert scores["pixel_sizes"][str(real)] == [{"pixel_size_m": 0.15, "source": "flag", "stated": True, "images": 3}]
+    tiles = runner.invoke(main, ["task", "eval", str(tmp_path / "m.pt"), str(rendered), "--out", str(tmp_path / "t")])
+    assert json.loads((tmp_path / "t" / "scores.json").read_text())["pixel_sizes"][str(rendered)] == [
+        {"pixel_size_m": 0.3, "source": "metadata", "stated": True, "images": 2}] and "warning" not in tiles.output
+    refused = runner.invoke(main, ["task", "eval", str(tmp_path / "m.pt"), f"{rendered}:0.3", "--out",
+                                   str(tmp_path / "r")])
+    assert refused.exit_code == 2 and "carry their pixel size; drop the :0.3" in refused.output
