@@ -32,18 +32,21 @@ def textures():
               help="with --from: physical size of one photo repeat in metres")
 def textures_build(out, source, heldout, size, repeat_m):
     """Write a texture bank: images, manifest.json and the HSV similarity matrix."""
+    from ..core.fileio import made_folder
     from ..sim import textures as tx
-    from ..sim.textures.bank import check_size
+    from ..sim.textures.bank import build_into, check_size
 
     check_size(size)
     if source is not None:
         if out is None:
             raise MetaSimError("with --from, give the bank folder to write with --out")
-        bank = tx.build_bank_from_folder(source, out, repeat_m=repeat_m, size=size)
+        with made_folder(out.parent):
+            bank = build_into(out, lambda d: tx.build_bank_from_folder(source, d, repeat_m=repeat_m, size=size))
     elif out is None:
         bank = tx.ensure_heldout_bank(name=heldout) if heldout else tx.ensure_default_bank()
     else:
-        bank = tx.build_default_bank(out, size=size, heldout=heldout or False)
+        with made_folder(out.parent):
+            bank = build_into(out, lambda d: tx.build_default_bank(d, size=size, heldout=heldout or False))
     counts = {kind: len(bank.ids(kind)) for kind in ("flat", "sloped")}
     click.echo(f"bank {bank.root}: {counts['flat']} flat, {counts['sloped']} sloped textures")
 

@@ -11,6 +11,7 @@ a whole folder (a texture bank).
 from __future__ import annotations
 
 import functools
+import itertools
 import os
 import re
 import shutil
@@ -142,6 +143,24 @@ def writable_dir(path: str | os.PathLike, option: str = "--out") -> Path:
     except OSError as exc:
         raise MetaSimError(f"cannot write to folder {path}: {exc.strerror}; choose another {option}") from None
     return path
+
+
+@contextmanager
+def made_folder(path: str | os.PathLike, option: str = "--out") -> Iterator[Path]:
+    """``path`` as a folder this process can write in (``writable_dir``) for a block that writes into it.
+    When the block fails, the folders made for it are removed again if they are still empty, so a command
+    that fails leaves no empty folder behind."""
+    path = Path(path)
+    made = list(itertools.takewhile(lambda folder: not folder.exists(), (path, *path.parents)))
+    try:
+        yield writable_dir(path, option)
+    except BaseException:
+        for folder in made:  # the deepest first: a parent empties as its child goes
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:

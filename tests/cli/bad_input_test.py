@@ -26,6 +26,8 @@ BAD = [
     ("textures", "build", "--size", "0", "--out", "{tmp}/bank"),
     ("textures", "build", "--size", "100000", "--out", "{tmp}/bank"),
     ("textures", "build", "--from", "{tmp}/no-photos", "--out", "{tmp}/bank"),
+    ("textures", "build", "--from", "{tmp}/no-photos", "--out", "{tmp}/new/bank"),
+    ("textures", "build", "--size", "16", "--out", "/proc/meta-sim-nope/bank"),
     ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "--group-size", "0"),
     ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "-S", "0"),
     ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "-M", "0"),
@@ -108,3 +110,12 @@ def test_infer_into_a_folder_of_an_earlier_run_needs_overwrite(tmp_path):
                                       "--out", str(tmp_path / "out")])
     assert result.exit_code == 2 and "--overwrite" in result.output
     assert (tmp_path / "out" / "report.md").read_text() == "earlier run"
+
+
+def test_textures_build_into_a_file_or_a_folder_of_other_files_is_refused(tmp_path):
+    (tmp_path / "file").write_text("mine")
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "holiday.jpg").write_text("mine")
+    assert "is a file" in _refused(tmp_path, ["textures", "build", "--size", "16", "--out", "{tmp}/file"])
+    assert "not a texture bank" in _refused(tmp_path, ["textures", "build", "--size", "16", "--out", "{tmp}/photos"])
+    assert (tmp_path / "file").read_text() == "mine" and (tmp_path / "photos" / "holiday.jpg").read_text() == "mine"

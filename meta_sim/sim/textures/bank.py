@@ -408,6 +408,23 @@ def build_bank_from_folder(
     return bank
 
 
+def build_into(out: str | os.PathLike, build: Callable[[Path], TextureBank]) -> TextureBank:
+    """The bank ``build`` writes into a folder, put at ``out`` as a whole (``core.fileio.atomic_dir``): a bank
+    there before is replaced, and on any error ``out`` is left as it was. MetaSimError when ``out`` is a file,
+    a folder holding files that are not a bank (they would be lost), or cannot be written."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise MetaSimError(f"{out} is a file; give --out a folder for the bank")
+    if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).is_file():
+        raise MetaSimError(f"{out} holds files that are not a texture bank; give --out a new or empty folder")
+    try:
+        with atomic_dir(out, replace=True) as tmp:
+            build(tmp)
+    except OSError as exc:
+        raise MetaSimError(f"cannot write the bank {out}: {exc.strerror or exc}; choose another --out") from None
+    return load_bank(out)
+
+
 # --- cached default banks -------------------------------------------------
 
 
