@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
-from ..core.fileio import writable_dir, write_text_atomic
+from ..core.fileio import made_folder, write_text_atomic
 from .base import _Bars, _torch_threads, main
 
 SHEET_ROWS = 8
@@ -61,21 +61,23 @@ def train_command(real, synthetic, mix, steps, batch, crop, lr, gsd, real_gsd, a
 
     if not real and not synthetic:
         raise MetaSimError("give --real and/or --synthetic training folders")
+    if out.is_dir():
+        raise MetaSimError(f"--out {out} is a folder; give the checkpoint file to write, such as {out / 'seg.pt'}")
     folders = [ImageFolder.parse(f, "--real", fallback_m=real_gsd, fallback_flag="--real-gsd") for f in real]
     settings = TrainSettings(steps=steps, batch=batch, crop=crop, lr=lr, mix=parse_mix(mix, batch)
                              if real and synthetic else (batch, 0), pixel_size_m=gsd, augment=augment,
                              colour=colour_augment, seed=seed,
                              width=width, depth=depth, encoder=str(encoder) if encoder else None).check()
-    writable_dir(out.parent)
     bars = _Bars()
-    try:
-        real = real_pools(folders, gsd, bars)
-        real_images = merge(real)
-        rendered = merge([tile_pool(f, gsd, bars) for f in synthetic])
-        segmenter = train_segmenter(real_images, rendered, settings, bars("train segmenter", steps))
-    finally:
-        bars.close()
-    save_segmenter(out, segmenter)
+    with made_folder(out.parent):
+        try:
+            real = real_pools(folders, gsd, bars)
+            real_images = merge(real)
+            rendered = merge([tile_pool(f, gsd, bars) for f in synthetic])
+            segmenter = train_segmenter(real_images, rendered, settings, bars("train segmenter", steps))
+        finally:
+            bars.close()
+        save_segmenter(out, segmenter)
     for folder, pool in zip(folders, real):
         click.echo(f"{folder.path}: {summary_line(summary(pool.own_sizes))}")
     crops = segmenter.training["crops"]
@@ -103,26 +105,26 @@ def eval_command(model, labelled, real_gsd, out):
     segmenter = load_segmenter(model)
     folder = ImageFolder.parse(labelled, fallback_m=real_gsd, fallback_flag="--real-gsd",
                                assumed_m=segmenter.pixel_size_m)
-    writable_dir(out)
     bars = _Bars()
-    try:
-        pool = labelled_pool(folder, segmenter.pixel_size_m, bars)
-        warning = assumed_warning(folder, pool.own_sizes)
-        if warning:
-            click.echo(warning, err=True)
-        counts, called = count(segmenter, pool.images, pool.masks)
-    finally:
-        bars.close()
-    metrics = counts.metrics()
-    scores = {**metrics, "all_building_iou": all_building(pool.masks).iou(), "images": len(pool),
-              "pixel_size_m": segmenter.pixel_size_m, "model": str(model), "labelled": str(folder.path),
-              "pixel_sizes": {str(folder.path): summary(pool.own_sizes)},
-              "per_image": [{"source": s, "tp": int(tp), "fp": int(fp), "fn": int(fn)}
-                            for s, tp, fp, fn in zip(pool.sources, counts.tp, counts.fp, counts.fn)]}
-    write_text_atomic(out / "scores.json", json.dumps(scores, indent=2) + "\n")
-    rows = [[("LABELS", truth_picture(image, mask)), ("PREDICTED", overlay(image, mask, c))]
-            for image, mask, c in list(zip(pool.images, pool.masks, called))[:SHEET_ROWS]]
-    prediction_sheet(out / "predictions.png", rows)
+    with made_folder(out):
+        try:
+            pool = labelled_pool(folder, segmenter.pixel_size_m, bars)
+            warning = assumed_warning(folder, pool.own_sizes)
+            if warning:
+                click.echo(warning, err=True)
+            counts, called = count(segmenter, pool.images, pool.masks)
+        finally:
+            bars.close()
+        metrics = counts.metrics()
+        scores = {**metrics, "all_building_iou": all_building(pool.masks).iou(), "images": len(pool),
+                  "pixel_size_m": segmenter.pixel_size_m, "model": str(model), "labelled": str(folder.path),
+                  "pixel_sizes": {str(folder.path): summary(pool.own_sizes)},
+                  "per_image": [{"source": s, "tp": int(tp), "fp": int(fp), "fn": int(fn)}
+                                for s, tp, fp, fn in zip(pool.sources, counts.tp, counts.fp, counts.fn)]}
+        write_text_atomic(out / "scores.json", json.dumps(scores, indent=2) + "\n")
+        rows = [[("LABELS", truth_picture(image, mask)), ("PREDICTED", overlay(image, mask, c))]
+                for image, mask, c in list(zip(pool.images, pool.masks, called))[:SHEET_ROWS]]
+        prediction_sheet(out / "predictions.png", rows)
     click.echo(f"IoU {metrics['iou']:.3f}  precision {metrics['precision']:.3f}  recall {metrics['recall']:.3f}  "
                f"(all-building IoU {scores['all_building_iou']:.3f}) on {len(pool)} images")
     click.echo(f"wrote {out / 'scores.json'} and {out / 'predictions.png'} (green hits, red false alarms, "

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import asdict, dataclass
 
 import torch
@@ -72,13 +73,18 @@ class TrainSettings:
 
 
 def parse_mix(text: str, batch: int) -> tuple[int, int]:
-    """``"6:1"`` to the crops of each kind in a batch of ``batch`` (6:1 and 7 give 6 and 1)."""
+    """``"6:1"`` to the crops of each kind in a batch of ``batch`` (6:1 and 7 give 6 and 1). A mix is read when
+    both real and synthetic images are given, so a kind without a share is an error: its images would be read
+    and never trained on."""
     try:
         real, synthetic = (float(x) for x in text.split(":"))
     except ValueError:
         raise MetaSimError(f"--mix takes REAL:SYNTHETIC, e.g. 6:1, not {text!r}") from None
-    if real < 0 or synthetic < 0 or real + synthetic == 0:
+    if not (math.isfinite(real) and math.isfinite(synthetic)) or real < 0 or synthetic < 0 or real + synthetic == 0:
         raise MetaSimError(f"--mix needs non-negative parts, not both zero: {text!r}")
+    if real == 0 or synthetic == 0:
+        unused = "--real" if real == 0 else "--synthetic"
+        raise MetaSimError(f"--mix {text} gives {unused} no crops; drop {unused}, or give it a share such as 6:1")
     n_real = round(batch * real / (real + synthetic))
     if synthetic > 0 and n_real == batch and batch > 1:
         n_real = batch - 1  # a synthetic share, however small, gets a crop

@@ -174,3 +174,27 @@ def test_eval_records_the_pixel_sizes_and_warns_once_when_it_assumes_them(tmp_pa
     refused = runner.invoke(main, ["task", "eval", str(tmp_path / "m.pt"), f"{rendered}:0.3", "--out",
                                    str(tmp_path / "r")])
     assert refused.exit_code == 2 and "carry their pixel size; drop the :0.3" in refused.output
+
+
+def test_task_commands_refuse_before_training_and_leave_no_folder_behind(tmp_path):
+    real, rendered = _real(tmp_path / "real"), _rendered(tmp_path / "rendered")
+    (tmp_path / "models").mkdir()
+    (tmp_path / "empty").mkdir()
+    runner = CliRunner()
+    train = ["task", "train", "--real", str(real), "--real-gsd", "0.3", *TINY]
+    assert runner.invoke(main, [*train, "--out", str(tmp_path / "seg.pt")]).exit_code == 0
+    before = sorted(tmp_path.rglob("*"))
+    new = str(tmp_path / "new" / "out")
+    cases = [
+        ([*train, "--out", str(tmp_path / "models")], "is a folder"),
+        ([*train, "--synthetic", str(rendered), "--mix", "6:0", "--out", new], "drop --synthetic"),
+        ([*train, "--synthetic", str(rendered), "--mix", "0:1", "--out", new], "drop --real"),
+        ([*train, "--synthetic", str(tmp_path / "empty"), "--out", new], "no rendered tiles"),  # fails reading
+        (["task", "eval", str(tmp_path / "seg.pt"), str(tmp_path / "empty"), "--out", new], "images/ and masks/"),
+    ]
+    for args, message in cases:
+        result = runner.invoke(main, args)
+        assert result.exit_code == 2, (args, result.output)
+        last = result.output.strip().splitlines()[-1]  # after any progress lines
+        assert last.startswith("error: ") and message in last and "Traceback" not in result.output, result.output
+        assert sorted(tmp_path.rglob("*")) == before, args

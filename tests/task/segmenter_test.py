@@ -82,9 +82,9 @@ def test_counts_and_trivial_answer():
 
 
 def test_mix_and_settings_are_checked():
-    assert parse_mix("6:1", 7) == (6, 1) and parse_mix("1:0", 7) == (7, 0) and parse_mix("0:1", 5) == (0, 5)
+    assert parse_mix("6:1", 7) == (6, 1) and parse_mix("1:6", 7) == (1, 6)
     assert parse_mix("100:1", 7) == (6, 1)  # a synthetic share gets a crop
-    for bad in ("6", "a:b", "-1:2", "0:0"):
+    for bad in ("6", "a:b", "-1:2", "0:0", "6:0", "0:1", "nan:1", "inf:1"):
         with pytest.raises(MetaSimError, match="--mix"):
             parse_mix(bad, 7)
     for bad in (dict(crop=30), dict(steps=0), dict(lr=0.0), dict(mix=(3, 3)), dict(width=2), dict(pixel_size_m=0)):
