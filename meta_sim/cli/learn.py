@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
-from ..core.fileio import writable_dir
+from ..core.fileio import made_folder, writable_dir
 from ..experiments.splits import ALL_SPLIT_NAMES, get_split, single_seed
 from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
 
@@ -199,8 +199,9 @@ def infer_command(ctx, target_dir, model, out, overwrite, group_size, gsd, views
                              weights=str(weights) if weights else None, near=near)
     bars = _Bars()
     try:
-        report = infer(ImageFolder.parse(target_dir), model, out, settings, bars, overwrite=overwrite,
-                       warn=lambda line: click.echo(line, err=True))
+        with made_folder(out.parent):
+            report = infer(ImageFolder.parse(target_dir), model, out, settings, bars, overwrite=overwrite,
+                           warn=lambda line: click.echo(line, err=True))
     finally:
         bars.close()
     for s in report["skipped"]:

@@ -107,7 +107,9 @@ def infer(target_dir, checkpoint_path: Path, out_dir: Path, settings: InferSetti
 
     settings.check()
     out_dir = Path(out_dir)
-    if out_dir.exists() and not (out_dir.is_dir() and (overwrite or not any(out_dir.iterdir()))):
+    if out_dir.exists() and not out_dir.is_dir():
+        raise MetaSimError(f"{out_dir} is a file; give --out a folder for the outputs")
+    if out_dir.is_dir() and not overwrite and any(out_dir.iterdir()):
         raise MetaSimError(f"{out_dir} already exists and holds files; pass --overwrite to replace the earlier "
                            "run's outputs, or choose another --out")
     writable_dir(out_dir.parent)

@@ -34,6 +34,7 @@ BAD = [
     ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out", "--gsd", "-1"),
     ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "/proc/meta-sim-nope/out"),
     ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/out"),  # no such model
+    ("infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/new/out"),
     ("train", "--out", "/proc/meta-sim-nope", "--designs", "2", "--cache", "{tmp}/cache"),
     ("eval", "e1", "--out", "{tmp}/out", "--targets", "0", "--cache", "{tmp}/cache"),
     ("eval", "e1", "--out", "{tmp}/out", "-S", "5", "-M", "2", "--cache", "{tmp}/cache"),
@@ -63,6 +64,7 @@ BAD = [
     ("task", "train", "--real", "{tmp}", "--steps", "0", "--out", "{tmp}/seg.pt"),
     ("task", "eval", "{tmp}/seg.pt", "{tmp}", "--out", "{tmp}/scores"),
     ("export", "{tmp}/no-tiles", "--out", "{tmp}/exported"),
+    ("export", "{tmp}/no-tiles", "--out", "{tmp}/new/exported"),
 ]
 
 
@@ -110,6 +112,13 @@ def test_infer_into_a_folder_of_an_earlier_run_needs_overwrite(tmp_path):
                                       "--out", str(tmp_path / "out")])
     assert result.exit_code == 2 and "--overwrite" in result.output
     assert (tmp_path / "out" / "report.md").read_text() == "earlier run"
+
+
+def test_infer_into_a_file_says_so_even_with_overwrite(tmp_path):
+    (tmp_path / "file").write_text("mine")
+    args = ["infer", "{tmp}", "--model", "{tmp}/nams.pt", "--out", "{tmp}/file", "--overwrite"]
+    assert "is a file" in _refused(tmp_path, args)
+    assert (tmp_path / "file").read_text() == "mine"
 
 
 def test_textures_build_into_a_file_or_a_folder_of_other_files_is_refused(tmp_path):
