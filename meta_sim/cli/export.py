@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
 
+from ..core.fileio import made_folder
 from .base import _Bars, main
 
 
@@ -22,8 +24,15 @@ def export_command(tile_dir, fmt, out, overwrite):
 
     bars = _Bars()
     try:
-        summary = export_tiles(tile_dir, out, fmt, bars, overwrite=overwrite)
+        with made_folder(out.parent):
+            summary = export_tiles(tile_dir, out, fmt, bars, overwrite=overwrite)
     finally:
         bars.close()
     what = f", {summary['annotations']} building annotations" if fmt == "coco" else ""
     click.echo(f"{summary['tiles']} tiles exported as {fmt}{what} to {out}")
+    for path, reason in summary["skipped"]:
+        click.echo(f"skipped {path}: {reason}", err=True)
+    if summary["skipped"]:
+        click.echo(f"error: {len(summary['skipped'])} unreadable tiles left out; render them again and export anew",
+                   err=True)
+        sys.exit(1)

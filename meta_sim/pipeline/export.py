@@ -66,11 +66,12 @@ def tile_paths(folder: str | Path) -> list[Path]:
 def export_tiles(folder: str | Path, out: str | Path, fmt: str = "png", bars: Bars | None = None,
                  overwrite: bool = False) -> dict:
     """Export the tiles of ``folder`` to ``out`` in format ``fmt`` ("png" or "coco"; see the module
-    docstring) and return a summary: format, tile and annotation counts, and ``out``.
+    docstring) and return a summary: format, tile and annotation counts, ``out``, and the tiles skipped
+    as unreadable, each with the reason (one damaged tile need not cost the export of the rest).
 
     An existing ``out`` with files in it is replaced only with ``overwrite``. MetaSimError, with ``out``
-    left as it was, when the format is unknown, ``folder`` holds no tiles (see ``tile_paths``), a tile is
-    unreadable, ``out`` cannot be written or would replace ``folder``."""
+    left as it was, when the format is unknown, ``folder`` holds no tiles (see ``tile_paths``) or no
+    readable one, ``out`` cannot be written or would replace ``folder``."""
     if fmt not in FORMATS:
         raise MetaSimError(f"format must be one of {', '.join(FORMATS)}, not {fmt!r}")
     paths = tile_paths(folder)
@@ -84,13 +85,20 @@ def export_tiles(folder: str | Path, out: str | Path, fmt: str = "png", bars: Ba
         raise MetaSimError(f"{out} already holds files; pass --overwrite to replace them, or choose another --out")
     writable_dir(out.parent)
     progress = bars("export", len(paths)) if bars else None
-    images, annotations, tiles = [], [], []
+    images, annotations, tiles, skipped = [], [], [], []
     with atomic_dir(out, replace=True) as tmp:
-        for image_id, path in enumerate(paths, start=1):
-            tile = read_tile(path)
+        for path in paths:
+            if progress:
+                progress(1)
+            try:
+                tile = read_tile(path)
+            except MetaSimError as exc:
+                skipped.append((path, str(exc).removeprefix(f"{path}: ")))
+                continue
             height, width = tile.instance.shape
             if tile.rgb.shape[:2] != (height, width):
-                raise MetaSimError(f"{path}: its colour and label parts differ in size; render the tile again")
+                skipped.append((path, "its colour and label parts differ in size"))
+                continue
             name = path.stem + ".png"
             meta = {key: tile.meta.get(key) for key in META_KEYS}
             write_png(tmp / "images" / name, to_srgb8(tile.rgb))
@@ -100,10 +108,11 @@ def export_tiles(folder: str | Path, out: str | Path, fmt: str = "png", bars: Ba
                 tiles.append({"name": path.stem, "image": f"images/{name}", "mask": f"masks/{name}",
                               "roof_class": f"roof_class/{name}", "width": width, "height": height, **meta})
             else:
-                images.append({"id": image_id, "file_name": name, "width": width, "height": height, **meta})
-                annotations += _annotations(tile.instance, tile.roof_class, image_id, len(annotations) + 1)
-            if progress:
-                progress(1)
+                images.append({"id": len(images) + 1, "file_name": name, "width": width, "height": height, **meta})
+                annotations += _annotations(tile.instance, tile.roof_class, len(images), len(annotations) + 1)
+        if len(skipped) == len(paths):
+            listing = "; ".join(f"{p.name} ({why})" for p, why in skipped[:3])
+            raise MetaSimError(f"no readable tiles in {folder}: {listing}; render them again")
         if fmt == "png":
             write_text_atomic(tmp / "manifest.json", json.dumps(
                 {"format_version": EXPORT_FORMAT_VERSION, "format": "png", "tiles": tiles}, indent=2) + "\n")
@@ -111,7 +120,8 @@ def export_tiles(folder: str | Path, out: str | Path, fmt: str = "png", bars: Ba
             coco = {"info": {"description": "meta-sim rendered tiles", "version": str(EXPORT_FORMAT_VERSION)},
                     "images": images, "annotations": annotations, "categories": CATEGORIES}
             write_text_atomic(tmp / "annotations.json", json.dumps(coco, separators=(",", ":")) + "\n")
-    return {"format": fmt, "tiles": len(paths), "annotations": len(annotations), "out": out}
+    return {"format": fmt, "tiles": len(paths) - len(skipped), "annotations": len(annotations), "out": out,
+            "skipped": skipped}
 
 
 def _annotations(instance: np.ndarray, roof_class: np.ndarray, image_id: int, first_id: int) -> list[dict]:

@@ -150,14 +150,29 @@ def test_bad_inputs_fail_with_one_line_and_leave_out_as_it_was(tmp_path):
     (source / "z broken.exr").write_bytes(b"x")
     with pytest.raises(MetaSimError, match="not a safe name"):
         export_tiles(source, out, overwrite=True)
-    (source / "z broken.exr").rename(source / "z_broken.exr")
-    with pytest.raises(MetaSimError, match="z_broken.exr"):  # found only after the other tiles were written
-        export_tiles(source, out, overwrite=True)
+    (source / "z broken.exr").unlink()
+    (tmp_path / "empty" / "broken.exr").write_bytes(b"x")
+    with pytest.raises(MetaSimError, match="no readable tiles .*broken.exr"):  # found after the attempt to read it
+        export_tiles(tmp_path / "empty", out, overwrite=True)
     assert [p.name for p in out.iterdir()] == ["keep.txt"] and not (tmp_path / "new").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty", "out", "tiles"]  # no temporary folder left
-    (source / "z_broken.exr").unlink()
     export_tiles(source, out, overwrite=True)
     assert sorted(p.name for p in out.iterdir()) == ["images", "manifest.json", "masks", "roof_class"]
+
+
+def test_an_unreadable_tile_is_listed_and_the_rest_exported(tmp_path):
+    source = _tiles(tmp_path / "tiles")
+    (source / "d00001_t00.exr").write_bytes((source / "d00001_t00.exr").read_bytes()[:300])  # truncated
+    for fmt in ("png", "coco"):
+        result = CliRunner().invoke(cli, ["export", str(source), "--format", fmt, "--out", str(tmp_path / fmt)])
+        assert result.exit_code == 1 and "Traceback" not in result.output, result.output
+        assert f"2 tiles exported as {fmt}" in result.output
+        assert f"skipped {source / 'd00001_t00.exr'}: " in result.output
+        assert result.output.strip().splitlines()[-1].startswith("error: 1 unreadable tiles left out")
+        assert sorted(p.name for p in (tmp_path / fmt / "images").iterdir()) == ["d00000_t00.png", "d00002_t00.png"]
+    coco = json.loads((tmp_path / "coco" / "annotations.json").read_text())
+    assert [image["id"] for image in coco["images"]] == [1, 2]
+    assert {a["image_id"] for a in coco["annotations"]} == {1}  # the third tile has no building
 
 
 def test_cli(tmp_path):
