@@ -535,3 +535,50 @@ def test_two_processes_sharing_a_cache_prepare_a_training_set_once(tmp_path):
     assert [run.returncode for run in runs] == [0, 0], [err for _, err in outputs]
     rendered = sorted(int(re.search(r"\((\d+) rendered now\)", out)[1]) for out, _ in outputs)
     assert rendered == [0, 6]
+
+
+def test_infer_reads_each_target_at_its_stated_pixel_size_and_records_it(evaluated, tmp_path):
+    from meta_sim.sim.textures.pngio import write_png
+
+    out, _ = evaluated  # a model of 96 px tiles at 1.2 m
+    folder = tmp_path / "targets"
+    folder.mkdir()
+    rng = np.random.default_rng(5)
+    for k in range(3):
+        write_png(folder / f"p{k}.png", (rng.random((96, 96, 3)) * 255).astype(np.uint8))
+    model = ["--model", str(out / "nams.pt"), "--group-size", "2"]
+
+    def infer(target, name):
+        result = CliRunner().invoke(cli, ["infer", target, *model, "--out", str(tmp_path / name)])
+        report = json.loads((tmp_path / name / "report.json").read_text()) if result.exit_code == 0 else None
+        return result, report
+
+    assumed, report = infer(str(folder), "assumed")
+    assert assumed.exit_code == 0, assumed.output
+    assert [line for line in assumed.stderr.splitlines() if "pixel size" in line] == [
+        f"warning: 3 of 3 images in {folder} do not state their pixel size; taken as the model's 1.2 m. State it: "
+        f"{folder}:METRES, a pixel_size.txt in {folder} or --gsd"]
+    assert report["pixel_sizes"] == {str(folder): [{"pixel_size_m": 1.2, "source": "assumed", "stated": False,
+                                                    "images": 3}]}
+    assert report["tiles"] == 3  # taken as the model's pixels: one tile per image
+    assert f"Pixel size of {folder}: 1.2 m per pixel (assumed) for 3 images." in \
+        (tmp_path / "assumed" / "report.md").read_text()
+
+    (folder / "pixel_size.txt").write_text("2.4\n")
+    from_file, report = infer(str(folder), "file")
+    assert from_file.exit_code == 0 and "warning: 3 of 3" not in from_file.output
+    assert report["tiles"] == 12  # 2.4 m pixels doubled to 1.2 m: 192 px, four tiles per image
+    assert report["pixel_sizes"][str(folder)] == [{"pixel_size_m": 2.4, "source": "pixel_size.txt", "stated": True,
+                                                   "images": 3}]
+    flagged, report = infer(f"{folder}:2.5", "flag")
+    assert flagged.exit_code == 0 and report["pixel_sizes"][str(folder)][0]["source"] == "flag"
+
+    for target, message in ((f"{folder}:0.6", f"{folder}:0.6 says 0.6 m per pixel but {folder / 'pixel_size.txt'} "
+                                              f"says 2.4; correct or remove {folder}:0.6 or"),
+                            (f"{folder}:x", "the pixel size after ':' must be a number")):
+        refused, _ = infer(target, "refused")
+        assert refused.exit_code == 2 and message in refused.output and refused.output.count("\n") == 1
+    (folder / "pixel_size.txt").write_text("2.4 m\n")
+    refused, _ = infer(str(folder), "refused")
+    assert refused.exit_code == 2 and "pixel_size.txt must hold one number" in refused.output
+    assert not (tmp_path / "refused").exists()

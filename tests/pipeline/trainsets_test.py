@@ -102,3 +102,18 @@ def test_caches_of_the_richer_scene_key_on_its_version_and_plain_ones_do_not(mon
     monkeypatch.setattr(layout, "SCENE_VERSION", layout.SCENE_VERSION + 1)
     assert rich.key() != keys[0] and plain.key() == keys[1]
     assert settings.header(job)["scene"] == layout.SCENE_VERSION
+
+
+@pytest.mark.skipif(not (REALDATA / "banepa").is_dir(), reason="../shared/realdata is not beside the project")
+def test_real_folders_at_different_pixel_sizes_are_each_resampled_by_their_own():
+    from meta_sim.sim.pixelsize import ImageFolder
+
+    # Banepa's drone chips at 0.13 m stated with the folder, Rio's SpaceNet chips by the global option (0.5 m)
+    banepa = ImageFolder.parse(f"{REALDATA / 'banepa'}:0.13", "--real", fallback_m=0.5, fallback_flag="--real-gsd")
+    rio = ImageFolder.parse(REALDATA / "rio", "--real", fallback_m=0.5, fallback_flag="--real-gsd")
+    items = [RealDataset(f.path / "images", f.path / "masks", working_pixel_size_m=0.6, folder=f)[0]
+             for f in (banepa, rio)]
+    # 512 px x 0.13 / 0.6 and 406 x 438 px x 0.5 / 0.6
+    assert [tuple(i["image"].shape) for i in items] == [(3, 111, 111), (3, 338, 365)]
+    assert [(i["meta"]["own_pixel_size_m"], i["meta"]["own_pixel_size_source"]) for i in items] == [
+        (0.13, "flag"), (0.5, "global option")]
