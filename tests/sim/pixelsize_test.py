@@ -6,6 +6,8 @@ import math
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from meta_sim.core.errors import MetaSimError
 from meta_sim.sim.pixelsize import (
@@ -145,3 +147,23 @@ def test_reports_say_what_stated_each_size_and_warn_once_for_the_assumed():
         "warning: 2 of 3 images in targets do not state their pixel size; taken as the model's 0.3 m. State it: "
         "targets:METRES, a pixel_size.txt in targets or --gsd")
     assert assumed_warning(folder, sizes[1:2]) is None
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(content=st.binary(max_size=80) | st.text(max_size=80)
+       | st.lists(st.floats(allow_nan=True, allow_infinity=True).map(repr) | st.text(max_size=4), max_size=8)
+       .map("\n".join))
+def test_files_beside_the_images_give_a_size_in_range_or_one_error(tmp_path, content):
+    png = tmp_path / "a.png"
+    if not png.exists():
+        _png(png)
+    readers = {"pixel_size.txt": lambda: read_pixel_size_file(tmp_path / "pixel_size.txt"),
+               "a.pgw": lambda: world_file_pixel_size_m(png)}
+    for name, read in readers.items():
+        (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+        try:
+            metres = read()
+        except MetaSimError as exc:
+            assert "\n" not in str(exc)
+            continue
+        assert metres is not None and 0.01 <= metres <= 10
