@@ -75,10 +75,10 @@ class ImageFolder:
             _check_range(self.fallback_m, self.fallback_flag or "the pixel size for every folder")
 
     @classmethod
-    def parse(cls, text: str | Path, option: str = "", **sizes) -> ImageFolder:
+    def parse(cls, text: str | Path, option: str = "", **fields) -> ImageFolder:
         """The folder a command line names as ``DIR`` or ``DIR:METRES`` (after ``option``, e.g. "--real";
-        "" for an argument); ``sizes``: the other fields. A name that exists as it is given is a folder even
-        when it ends in ``:NUMBER``."""
+        "" for an argument); ``fields``: the fallback and assumed sizes. A name that exists as it is given
+        is a folder even when it ends in ``:NUMBER``."""
         text = str(text)
         head, colon, tail = text.rpartition(":")
         if not colon or not head or not tail or "/" in tail or "\\" in tail or Path(text).exists():
@@ -88,12 +88,12 @@ class ImageFolder:
         else:
             raise MetaSimError(f"{text}: the pixel size after ':' must be a number of metres per pixel from "
                                f"{LIMITS_M[0]:g} to {LIMITS_M[1]:g}, for example {head}:0.5")
-        return cls(Path(head), stated, f"{option} {head}:METRES".strip(), **sizes)
+        return cls(Path(head), stated, f"{option} {head}:METRES".strip(), **fields)
 
     @classmethod
-    def of(cls, folder: str | Path | ImageFolder, **sizes) -> ImageFolder:
-        """``folder`` as it is, or a path with ``sizes`` (no ``:METRES`` suffix: a path from code is a path)."""
-        return folder if isinstance(folder, ImageFolder) else cls(Path(folder), **sizes)
+    def of(cls, folder: str | Path | ImageFolder, **fields) -> ImageFolder:
+        """``folder`` as it is, or a path with ``fields`` (no ``:METRES`` suffix: a path from code is a path)."""
+        return folder if isinstance(folder, ImageFolder) else cls(Path(folder), **fields)
 
     def ways(self) -> str:
         """The ways a user can state the folder's pixel size, for messages."""
