@@ -11,16 +11,16 @@ import contextlib
 import json
 import shlex
 import uuid
-from dataclasses import replace
+from dataclasses import astuple, replace
 from pathlib import Path
 
 import bpy
 
-from ..meta_sim.blender.scene import CITY_TAG, city_buildings, remove_city, set_roofs
+from ..meta_sim.blender.scene import CITY_TAG, bounding_rect, city_buildings, remove_city, set_roofs
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.core.fileio import write_text_atomic
 from ..meta_sim.render.jobs import Job, RenderSettings, design_jobs, sample_population, write_job_manifest
-from ..meta_sim.render.loop import build_city, finish_tile, layout_params, resolve_textures
+from ..meta_sim.render.loop import build_city, finish_tile, layout_params, resolve_textures, tile_blocks, tile_cut
 from ..meta_sim.render.options import RENDER_OPTIONS
 from ..meta_sim.sim import meshes
 from ..meta_sim.sim.design import DesignSpace
@@ -174,11 +174,14 @@ def render_preview_steps(settings, library):
     with tile_city(library.space, params, chosen) as (city, look):
         yield 0.05, "building the preview tile"
         city.set_roofs(textures)
-        instance, roof_class = city.render_labels(city.rects[tile])
+        # the block the farm renders the tile in, cut as it cuts it: a tile rendered alone differs at its edges
+        block = bounding_rect([city.rects[j] for j in tile_blocks([astuple(r) for r in city.rects], look, [tile])[0]])
+        cut = tile_cut(block, city.rects[tile], params["gsd"], params["tile_px"])
+        instance, roof_class = (labels[cut] for labels in city.render_labels(block))
         yield 0.15, "rendering the label pass"
-        rgb = yield from tasks.scaled(city.render_rgb_in_strips(city.rects[tile], preset),
+        rgb = yield from tasks.scaled(city.render_rgb_in_strips(block, preset),
                                       f"rendering the tile ({preset.name})", 0.15, 1.0)
-    image = finish_tile(look, rgb, instance, roof_class, params["seed"], tile, preset)
+    image = finish_tile(look, rgb[cut], instance, roof_class, params["seed"], tile, preset)
     folder = preferences.user_dir("preview")
     paths = (folder / "preview.png", folder / "preview_labels.png")
     write_png(paths[0], to_srgb8(image))

@@ -7,7 +7,7 @@ Runs wherever ``bpy`` imports: the ``bpy`` module in a virtual environment
 Work is grouped by city: a city's geometry is built once and its labels are
 rendered once; each design then only swaps the roof materials. Tiles are
 rendered in blocks of up to 3 x 3 adjacent tiles and cut afterwards (one by one
-when the design's view is a perspective one). A tile
+when the design's view is a perspective one, see ``tile_blocks``). A tile
 that already exists, reads back completely and carries the same metadata is
 skipped, so a rerun resumes an interrupted job.
 """
@@ -146,12 +146,9 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
         clock = time.perf_counter()
         layout, rects = layout_for_tiles(city_seed, settings.n_tiles, settings.tile_m, params)
         summary.seconds["layout"] += time.perf_counter() - clock
-        cols = _grid_columns(rects)
         needed = sorted({j for _, _, pending, _ in work for j in pending})
         look = work[0][3]  # the jobs of one scene share ground, its albedo, greenness, sun, shadows and view
-        # A perspective view is a photo over each tile's centre: one render per tile, not per block.
-        blocks = ([b for b in blocks_of(settings.n_tiles, cols) if set(b) & set(needed)]
-                  if look.view_height_m is None else [[j] for j in needed])
+        blocks = tile_blocks(rects, look, needed)
         clock = time.perf_counter()
         # The scene always holds every requested tile, whichever are pending, so a resumed
         # job renders the same pixels as an uninterrupted one.
@@ -177,7 +174,7 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
                     summary.seconds["render"] += time.perf_counter() - clock
                     clock = time.perf_counter()
                     for j in todo:
-                        cut = _cut(rect, Rect(*rects[j]), settings)
+                        cut = tile_cut(rect, Rect(*rects[j]), settings.pixel_size_m, settings.tile_px)
                         path = tile_path(out_dir, job, j)
                         meta = tiles.tile_metadata(
                             design=job.design, space=settings.space.name, city_seed=job.city_seed,
@@ -202,14 +199,25 @@ def render_jobs(jobs: list[Job], settings: RenderSettings,
     return summary
 
 
+def tile_blocks(rects, look: Appearance, needed) -> list[list[int]]:
+    """The tiles rendered together, as one image cut afterwards, to make the tiles ``needed`` of a city whose
+    tiles are ``rects``: the blocks of ``blocks_of`` that hold any, or for a perspective view (a photo over
+    each tile's centre) each tile alone. A tile's pixels depend on the image it is cut from (anti-aliasing
+    and shadows are not the same at another frame), so whatever renders a tile as the farm does renders its
+    block."""
+    if look.view_height_m is not None:
+        return [[j] for j in needed]
+    return [block for block in blocks_of(len(rects), _grid_columns(rects)) if set(block) & set(needed)]
+
+
 def _grid_columns(rects) -> int:
     """Columns of the row-major tile grid (tiles of the first row share its y)."""
     first_y = rects[0][1]
     return sum(1 for r in rects if abs(r[1] - first_y) < 1e-6)
 
 
-def _cut(block, tile, settings: RenderSettings):
+def tile_cut(block, tile, pixel_size_m: float, tile_px: int):
     """Row/column slices of ``tile`` inside the render of ``block`` (row 0 = north)."""
-    col = int(round((tile.x0 - block.x0) / settings.pixel_size_m))
-    row = int(round((block.y1 - tile.y1) / settings.pixel_size_m))
-    return slice(row, row + settings.tile_px), slice(col, col + settings.tile_px)
+    col = int(round((tile.x0 - block.x0) / pixel_size_m))
+    row = int(round((block.y1 - tile.y1) / pixel_size_m))
+    return slice(row, row + tile_px), slice(col, col + tile_px)

@@ -21,7 +21,7 @@ import pytest
 from meta_sim.render.options import RENDER_OPTIONS
 from meta_sim.render.worker import build_argparser
 from meta_sim.sim import tiles
-from meta_sim.sim.design import DesignSpace
+from meta_sim.sim.design import DesignSpace, builtin_spaces
 from meta_sim.sim.presets import DesignPreset, load_preset, population, save_preset
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -1001,3 +1001,66 @@ def test_a_design_dropped_applies_only_over_the_city(addon, settings):
         assert not assets_ui.hits_city(scene, depsgraph, Vector((1e5, 1e5, 500.0)), down, settings)
     finally:
         bpy.data.objects.remove(cube)
+
+
+# Every shipped space; and two cities of four tiles (previewing the last): an orthographic one the worker renders as
+# one 2 x 2 block and cuts, and one seen in perspective with a sensor, rendered tile by tile.
+MATRIX = [(name, 1) for name in builtin_spaces()] + [("overhead-v3", 4), ("overhead-towns-v12", 4)]
+RENDER_ALL = """
+import json, sys
+from meta_sim.cli import main
+for argv in json.load(open(sys.argv[1])):
+    try:
+        main(argv, standalone_mode=False)
+    except SystemExit as exc:
+        if exc.code:
+            raise
+"""
+
+
+def test_a_preview_tile_of_any_design_in_any_shipped_space_is_the_farms(addon, settings, tmp_path):
+    """For each space: a random design picked in the panel's controls, a city generated, its preview tile;
+    `meta-sim render` of the exported job, and of the same design in the shipped space, write the same pixels."""
+    import bpy
+    import numpy as np
+
+    from meta_sim.sim.imageio import read_rgb8
+
+    runs, cases = [], []
+    for k, (name, n_tiles) in enumerate(MATRIX):
+        space = DesignSpace.load(name)
+        settings.space, settings.city_tiles, settings.preview_tile = name, n_tiles, n_tiles - 1
+        assert bpy.ops.meta_sim.load_bank() == {"FINISHED"}
+        design = space.sample(np.random.default_rng([55, k]), 1)[0]
+        _pick(settings, **design)
+        picked = addon.blender_addon.design_values.design(settings, addon.blender_addon.library.require(settings).space)
+        assert set(picked) == set(space.names) and all(
+            picked[n] == design[n] if isinstance(design[n], str) else abs(picked[n] - design[n]) < 1e-4 * (
+                1 + abs(design[n])) for n in space.names)
+        assert bpy.ops.meta_sim.generate_city() == {"FINISHED"}, name
+        job_dir = tmp_path / f"{name}-{n_tiles}"
+        settings.job_dir = str(job_dir)
+        assert bpy.ops.meta_sim.export_job() == {"FINISHED"}
+        bpy.ops.meta_sim.render_preview()
+        preview = read_rgb8(bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath))
+        job = json.loads((job_dir / "render-job.json").read_text())
+        assert job["design"] == picked and job["design_space"] == name
+        plain = ["render", "--space", name, "--design", space.format(picked), "--seed", str(SMALL["seed"]),
+                 "--tiles", str(n_tiles), "--tile-px", "64", "--gsd", "1.8", "--out", str(job_dir / "cli"), "--preview"]
+        runs += [["render", *job["argv"], "--preview"], plain]
+        cases.append((name, n_tiles, picked, preview, job_dir))
+    (tmp_path / "runs.json").write_text(json.dumps(runs))
+    done = subprocess.run([sys.executable, "-c", RENDER_ALL, str(tmp_path / "runs.json")], cwd=ROOT,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    differ = []
+    for name, n_tiles, picked, preview, job_dir in cases:
+        for where in (job_dir / "tiles", job_dir / "cli"):
+            exr = next(where.glob(f"*_t{n_tiles - 1:02d}.exr"))
+            assert tiles.read_tile(exr).meta["design"] == picked
+            if not (read_rgb8(exr.with_suffix(".png")) == preview).all():
+                differ.append(f"{name} ({n_tiles} tiles, {where.name})")
+    assert not differ, f"the preview is not the farm's tile in {', '.join(differ)}"
+    settings.space, settings.city_tiles, settings.preview_tile = "BANK", SMALL["city_tiles"], 0
+    bpy.ops.meta_sim.load_bank()
+    bpy.ops.meta_sim.remove_city()
