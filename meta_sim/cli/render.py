@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..core.extras import require
-from ..core.fileio import writable_dir
+from ..core.fileio import made_folder
 from ..core.progress import LineBar, on_terminal
 from .base import _Bars, main
 
@@ -33,11 +33,11 @@ def _render_command():
             jobs, settings = plan(options, bars)
         finally:
             bars.close()
-        writable_dir(settings.out_dir)
         total = len(jobs) * settings.n_tiles
-        bar = tqdm(total=total, unit="tile", desc="render") if on_terminal() else LineBar(total, "render", "tile")
-        with bar:
-            summary = render_jobs(jobs, settings, bar.update)
+        with made_folder(settings.out_dir):
+            bar = tqdm(total=total, unit="tile", desc="render") if on_terminal() else LineBar(total, "render", "tile")
+            with bar:
+                summary = render_jobs(jobs, settings, bar.update)
         click.echo(f"{summary.written} tiles written, {summary.skipped} already done, in {settings.out_dir}")
 
     command = render

@@ -5,7 +5,7 @@ import stat
 
 import pytest
 
-from meta_sim.core.fileio import atomic_dir, atomic_path, write_bytes_atomic, write_text_atomic
+from meta_sim.core.fileio import atomic_dir, atomic_path, made_folder, write_bytes_atomic, write_text_atomic
 
 
 def test_written_file_has_the_mode_a_plain_open_gives(tmp_path):
@@ -92,3 +92,16 @@ def test_a_full_disk_is_one_line_and_leaves_no_temporary(tmp_path):
             tmp.write_bytes(b"part")
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_block_removes_the_folders_made_for_it_while_empty(tmp_path):
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(RuntimeError):
+        with made_folder(tmp_path / "kept" / "a" / "b"):
+            raise RuntimeError
+    assert [p.name for p in tmp_path.rglob("*")] == ["kept"]  # the folder that was there stays
+    with pytest.raises(RuntimeError):
+        with made_folder(tmp_path / "kept" / "a" / "b") as folder:
+            (folder / "tile.exr").write_text("written before the error")
+            raise RuntimeError
+    assert (tmp_path / "kept" / "a" / "b" / "tile.exr").is_file()
