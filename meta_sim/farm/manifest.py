@@ -276,7 +276,8 @@ def render_setup(manifest: Manifest, with_banks: bool = True):
     if with_banks:
         from ..sim.textures import ensure_default_bank, ensure_heldout_banks, load_bank
 
-        banks = [load_bank(manifest.bank) if manifest.bank else ensure_default_bank(), *ensure_heldout_banks()]
+        named = [value for task in manifest.tasks for value in task.design.values() if isinstance(value, str)]
+        banks = [load_bank(manifest.bank) if manifest.bank else ensure_default_bank(), *ensure_heldout_banks(ids=named)]
     settings = RenderSettings(space=DesignSpace.from_dict(manifest.space), banks=banks,
                               preset=get_preset(manifest.preset), out_dir=Path(manifest.out_dir),
                               n_tiles=manifest.n_tiles, tile_px=manifest.tile_px,

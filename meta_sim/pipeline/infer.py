@@ -311,7 +311,8 @@ def _write_report(out_dir: Path, report: dict, thumbnails: list, presets, space)
     lines += ["", f"`render --population` samples {report['population_designs']} distinct designs: {drawn_from}."]
     write_text_atomic(out_dir / "report.md", "\n".join(lines) + "\n")
 
-    banks = [ensure_default_bank(), *ensure_heldout_banks()]
+    named = [value for preset in presets for value in preset.design.values() if isinstance(value, str)]
+    banks = [ensure_default_bank(), *ensure_heldout_banks(ids=named)]
 
     def swatch(texture_id):
         bank = next((b for b in banks if b.contains(texture_id)), None)
