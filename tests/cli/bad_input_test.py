@@ -41,6 +41,7 @@ BAD = [
     ("textures", "sheet", "--thumb", "0", "--out", "{tmp}/sheet.png"),
     ("textures", "sheet", "--thumb", "100000", "--out", "{tmp}/sheet.png"),
     ("textures", "sheet", "--out", "/proc/meta-sim-nope/sheet.png"),
+    ("textures", "similarity", "--out", "/proc/meta-sim-nope/similarity.json"),
     ("dataset", "--designs", "0", "--cache", "{tmp}/cache"),
     ("dataset", "--gsd", "-1", "--cache", "{tmp}/cache"),
     ("dataset", "--hidden", "0,-5", "--cache", "{tmp}/cache"),
