@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
-from .base import main
+from .base import _Bars, main
 
 # A job beyond this is more often a slip of the keyboard than a plan: days of farm time, a manifest too big to read.
 MANY_TILES = 1_000_000
@@ -51,7 +51,11 @@ def jobs_plan(manifest_path, out_dir, yes, **options):
     if designs * options["tiles"] > MANY_TILES and not yes:
         raise MetaSimError(f"this job asks for {designs * options['tiles']:,} tiles ({designs:,} designs x "
                            f"--tiles {options['tiles']}); pass --yes to plan more than {MANY_TILES:,}")
-    manifest = farm.plan(options, out_dir or farm.default_out_dir(manifest_path))
+    bars = _Bars()
+    try:
+        manifest = farm.plan(options, out_dir or farm.default_out_dir(manifest_path), bars)
+    finally:
+        bars.close()
     farm.save(manifest, manifest_path)
     click.echo(f"{len(manifest.tasks)} tasks, {manifest.n_outputs} tiles -> {manifest.out_dir}; "
                f"wrote {manifest_path}")

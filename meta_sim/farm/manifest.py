@@ -23,6 +23,7 @@ from pathlib import Path
 from ..core.errors import MetaSimError
 from ..core.fileio import abandoned, write_text_atomic
 from ..core.names import safe_name
+from ..core.progress import Bars
 
 FORMAT = "meta-sim-farm-job"
 VERSION = 1
@@ -205,17 +206,17 @@ def task_name(design: dict, city_seed: int, settings: dict, order: tuple = ()) -
     return f"{readable}_s{city_seed}_{digest}"
 
 
-def plan(options: dict, out_dir: Path) -> Manifest:
+def plan(options: dict, out_dir: Path, bars: Bars | None = None) -> Manifest:
     """A manifest from the render options of `meta-sim render` (``--design`` or ``--random-designs``).
 
-    Designs are validated and the banks built here (via the worker's own planning), so a
-    planned job fails on bad input now rather than on the farm. Duplicate tasks (a random
-    design drawn twice for one city) are planned once.
+    Designs are validated and the banks built here (via the worker's own planning, ``bars`` showing
+    each bank it builds), so a planned job fails on bad input now rather than on the farm. Duplicate
+    tasks (a random design drawn twice for one city) are planned once.
     """
     from ..render.jobs import tile_path
     from ..render.plan import plan as plan_render
 
-    jobs, settings = plan_render({**options, "out": out_dir, "preview": False})
+    jobs, settings = plan_render({**options, "out": out_dir, "preview": False}, bars)
     appearance = {"sensor": settings.sensor.name, "roof_jitter": settings.roof_jitter, "ground": settings.ground,
                   "style": settings.style}
     shared = shared_settings(settings.space.name, settings.preset.name, settings.n_tiles, settings.tile_px,
