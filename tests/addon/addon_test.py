@@ -1064,3 +1064,131 @@ def test_a_preview_tile_of_any_design_in_any_shipped_space_is_the_farms(addon, s
     settings.space, settings.city_tiles, settings.preview_tile = "BANK", SMALL["city_tiles"], 0
     bpy.ops.meta_sim.load_bank()
     bpy.ops.meta_sim.remove_city()
+
+
+@pytest.fixture
+def spaces_folder(tmp_path_factory):
+    """A group preset of a random design in every shipped space, a population of overhead-towns-v5, and two bad
+    ones: of a space meta-sim does not ship, and with a value outside its parameter's range."""
+    import numpy as np
+
+    folder = tmp_path_factory.mktemp("spaces")
+    designs = {}
+    for k, name in enumerate(builtin_spaces()):
+        space = DesignSpace.load(name)
+        designs[name] = space.sample(np.random.default_rng([56, k]), 1)[0]
+        save_preset(folder / f"{name}.json", DesignPreset(kind="group", name=name, design_space=name,
+                                                          design=designs[name], model_id="m"))
+    towns = DesignSpace.load("overhead-towns-v5")
+    groups = [DesignPreset(kind="group", name=f"g{k}", design_space=towns.name, design=d)
+              for k, d in enumerate(towns.sample(np.random.default_rng(57), 3))]
+    save_preset(folder / "population.json", population(groups, towns, "towns-population"))
+    save_preset(folder / "unknown-space.json", DesignPreset(kind="group", name="mine", design_space="my-towns-v1",
+                                                            design=designs["overhead-towns-v5"]))
+    bright = towns.parameter("brightness")
+    save_preset(folder / "too-bright.json", DesignPreset(
+        kind="group", name="too-bright", design_space=towns.name,
+        design={**designs["overhead-towns-v5"], "brightness": bright.high + 1.0}))
+    return folder, designs
+
+
+def _design(addon, settings) -> dict:
+    return addon.blender_addon.design_values.design(settings, addon.blender_addon.library.require(settings).space)
+
+
+def test_presets_of_every_shipped_space_load_and_apply_whole(addon, settings, spaces_folder, bank):
+    import bpy
+
+    folder, designs = spaces_folder
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(folder)
+    assert bpy.ops.meta_sim.load_presets() == {"FINISHED"}
+    rows = {Path(row.path).stem: row for row in settings.presets}
+    assert "'my-towns-v1' is not one meta-sim ships" in rows["unknown-space"].error
+    assert "brightness" in rows["too-bright"].error and "out of range" in rows["too-bright"].error
+    assert not [name for name in designs if rows[name].error]
+    towns = rows["overhead-towns-v5"]
+    assert towns.design_space == "overhead-towns-v5" and towns.flat == designs["overhead-towns-v5"]["flat_roof"]
+    values = dict(json.loads(towns.values))
+    assert values["sensor"] == designs["overhead-towns-v5"]["sensor"] and "flat_roof" not in values
+    assert values["brightness"] == designs["overhead-towns-v5"]["brightness"]  # the values themselves, as written
+    assert rows["population"].kind == "population" and not rows["population"].error
+    calls = _draw_all(addon)  # every row draws, each selected in turn below
+    assert any(name == "label" and kw.get("text") == "overhead-towns-v5" for name, args, kw in calls)
+
+    for name in [*designs, "rooftops-v1"]:  # back to the roofs-only space at the end
+        settings.presets_index = list(settings.presets).index(rows[name])
+        assert bpy.ops.meta_sim.apply_preset() == {"FINISHED"}, name
+        assert addon.blender_addon.library.require(settings).space.name == name
+        assert _design(addon, settings) == designs[name]  # every parameter, exactly
+        assert _roof_images_on_polygons(addon)[1] == str(bank.image_path(designs[name]["flat_roof"]))
+        city, space = addon.blender_addon.city, addon.blender_addon.library.require(settings).space
+        assert city.find(settings)[city.SCENE_TAG] == city.scene_key(space, city.city_knobs(settings), designs[name])
+        _draw_all(addon)
+    applied, city_key = _design(addon, settings), settings.city_key
+    for name in ("unknown-space", "too-bright"):
+        settings.presets_index = list(settings.presets).index(rows[name])
+        with pytest.raises(RuntimeError, match="cannot be applied"):
+            bpy.ops.meta_sim.apply_preset()
+        assert _design(addon, settings) == applied and settings.city_key == city_key
+    settings.space = "BANK"
+    bpy.ops.meta_sim.load_bank()
+
+
+def test_assets_preview_and_farm_jobs_are_in_each_presets_own_space(addon, settings, spaces_folder, tmp_path):
+    import shutil
+
+    import bpy
+    import numpy as np
+
+    from meta_sim.sim.imageio import read_rgb8
+
+    source, designs = spaces_folder
+    folder = tmp_path / "presets"
+    folder.mkdir()
+    for name in ("rooftops-v1", "overhead-towns-v12", "population"):
+        shutil.copy(source / f"{name}.json", folder)
+    settings.tile_px, settings.gsd = 256, 0.45  # the asset previews' pixels: a preview tile renders the same
+    bpy.ops.meta_sim.generate_city()
+    settings.presets_folder = str(folder)
+    bpy.ops.meta_sim.load_presets()
+    assert bpy.ops.meta_sim.build_assets() == {"FINISHED"}
+    found = _library_assets(folder / "meta-sim-assets" / "meta-sim-designs.blend")
+    assert set(found) == {"rooftops-v1", "overhead-towns-v12", "towns-population"}
+    assert "overhead-towns-v12" in found["overhead-towns-v12"].tags
+    addon.blender_addon.assets.apply_asset(bpy.context.scene, settings, addon.blender_addon.library.require(settings),
+                                           found["overhead-towns-v12"])
+    assert settings.space == "overhead-towns-v12" and _design(addon, settings) == designs["overhead-towns-v12"]
+    bpy.ops.meta_sim.render_preview()  # the design's own look: its view from a drone, its sensor
+    tile = read_rgb8(bpy.path.abspath(bpy.data.images["Meta-Sim Preview"].filepath))
+    assert (np.round(found["overhead-towns-v12"].pixels[..., :3] * 255) == tile).all()
+
+    settings.tile_px, settings.gsd = SMALL["tile_px"], SMALL["gsd"]
+    bpy.ops.meta_sim.generate_city()
+    for kind in ("CURRENT", "POPULATION"):  # the job carries the space; `meta-sim jobs plan` takes its command
+        settings.presets_index = next(k for k, row in enumerate(settings.presets) if row.kind == "population")
+        job_dir = tmp_path / kind
+        settings.job_designs, settings.job_dir, settings.job_images, settings.job_cities = kind, str(job_dir), 3, 2
+        assert bpy.ops.meta_sim.export_job() == {"FINISHED"}
+        job = json.loads((job_dir / "render-job.json").read_text())
+        space = json.loads((job_dir / "design-space.json").read_text())
+        expected = "overhead-towns-v12" if kind == "CURRENT" else "overhead-towns-v5"
+        assert job["design_space"] == expected and space["name"] == f"{expected}+city-s{SMALL['seed']}"
+        plan = shlex.split(job["plan_command"])
+        done = subprocess.run([sys.executable, "-m", "meta_sim.cli", *plan[1:]], cwd=ROOT, capture_output=True,
+                              text=True)
+        assert done.returncode == 0, done.stdout + done.stderr
+        farm = json.loads((job_dir / "farm-job.json").read_text())
+        assert farm["space"] == space
+        if kind == "CURRENT":
+            assert [t["design"] for t in farm["tasks"]] == [job["design"]]
+        else:
+            jobs = json.loads(Path(job["designs_file"]).read_text())["jobs"]
+            pairs = list(dict.fromkeys(json.dumps([j["design"], j["city_seed"]], sort_keys=True) for j in jobs))
+            assert [json.dumps([t["design"], t["city_seed"]], sort_keys=True) for t in farm["tasks"]] == pairs
+            member = [entry["design"] for entry in load_preset(folder / "population.json").designs]
+            assert load_preset(job["options"]["population"]).designs == load_preset(
+                folder / "population.json").designs and any(j["design"] in member for j in jobs)
+    settings.job_designs, settings.space = "CURRENT", "BANK"
+    bpy.ops.meta_sim.load_bank()
+    bpy.ops.meta_sim.remove_city()
