@@ -126,11 +126,13 @@ def _missing(space_: DesignSpace, banks) -> list[str]:
             if not any(bank.contains(choice) for bank in banks)]
 
 
-def _fallbacks(cache: Path) -> list[tuple[str, Path]]:
+def _fallbacks(cache: Path) -> list[tuple[str, Path, set]]:
     """Where a space's textures are looked for after its bank, in order: the default bank, then the held-out
-    banks (as `meta-sim render` looks ids up)."""
-    return [("default", default_bank_dir(cache_dir=cache)),
-            *((name, heldout_bank_dir(cache_dir=cache, name=name)) for name in procedural.HELDOUT_SETS)]
+    banks (as `meta-sim render` looks ids up); each with the texture ids its recipes make, so only a bank
+    that holds a missing one is built."""
+    return [("default", default_bank_dir(cache_dir=cache), {r.id for r in procedural.recipes()}),
+            *((name, heldout_bank_dir(cache_dir=cache, name=name), {r.id for r in procedural.recipes(heldout=name)})
+              for name in procedural.HELDOUT_SETS)]
 
 
 def get(settings, build: bool = False) -> Library | None:
@@ -149,9 +151,9 @@ def get(settings, build: bool = False) -> Library | None:
         if str(folder) not in _banks:
             _banks[str(folder)] = load_bank(folder)
         banks = [_banks[str(folder)]]
-        for _, where in _fallbacks(preferences.cache_dir()):
-            if not _missing(space(settings, banks[0]), banks):
-                break
+        for _, where, ids in _fallbacks(preferences.cache_dir()):
+            if not ids & set(_missing(space(settings, banks[0]), banks)):
+                continue
             if not (where / MANIFEST).is_file():
                 return None  # a bank still to be built: Load builds it, with progress
             if str(where) not in _banks:
@@ -178,10 +180,10 @@ def load_steps(settings):
     bank = _banks[str(folder)]
     chosen = space(settings, bank)
     banks = [bank]
-    fallbacks = [(name, where) for name, where in _fallbacks(cache) if where != folder]
-    for k, (name, where) in enumerate(fallbacks):
-        if not _missing(chosen, banks):
-            break
+    fallbacks = [fallback for fallback in _fallbacks(cache) if fallback[1] != folder]
+    for k, (name, where, ids) in enumerate(fallbacks):
+        if not ids & set(_missing(chosen, banks)):
+            continue
         if str(where) not in _banks:
             if (where / MANIFEST).is_file():
                 _banks[str(where)] = load_bank(where)

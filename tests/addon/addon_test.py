@@ -1192,3 +1192,41 @@ def test_assets_preview_and_farm_jobs_are_in_each_presets_own_space(addon, setti
     settings.job_designs, settings.space = "CURRENT", "BANK"
     bpy.ops.meta_sim.load_bank()
     bpy.ops.meta_sim.remove_city()
+
+
+def test_a_space_naming_held_out_textures_builds_only_their_bank_with_progress(addon, settings, prefs, tmp_path,
+                                                                              bank, heldout_bank):
+    import bpy
+
+    library = addon.blender_addon.library
+    held = heldout_bank.ids("flat")[0]
+    space = {"format": "meta-sim-design-space", "version": 1, "name": "with-held-out", "parameters": [
+        {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "choices": [bank.ids("flat")[0], held]},
+        {"name": "sun", "type": "continuous", "low": 20.0, "high": 70.0, "appearance": "sun_elevation_deg"}],
+        "layout": {"sloped_share": 0.0}}
+    (tmp_path / "space.json").write_text(json.dumps(space))
+    prefs.cache_folder = str(tmp_path / "cache")  # a fresh cache: the held-out bank is still to be built
+    settings.bank_source, settings.bank_folder = "FOLDER", str(bank.root)
+    settings.space, settings.space_file = "FILE", str(tmp_path / "space.json")
+    assert library.get(settings) is None  # drawing never builds: the panel offers Load
+    steps, texts = library.load_steps(settings), set()
+    while True:
+        try:
+            texts.add(next(steps)[1])
+        except StopIteration as done:
+            loaded = done.value
+            break
+    assert texts == {"building the texture bank heldout-v1 (design space with-held-out names its textures)"}
+    assert sorted(p.name for p in (tmp_path / "cache" / "banks").iterdir()) == ["heldout-v1-256"]
+    assert loaded.bank_of(held).name == "heldout-v1" and loaded.space.name == "with-held-out"
+    bpy.ops.meta_sim.load_bank()
+    assert [row.name for row in settings.design] == ["flat_roof", "sun"]
+    _pick(settings, flat_roof=held, sun=31.5)
+    assert bpy.ops.meta_sim.generate_city() == {"FINISHED"}
+    assert _roof_images_on_polygons(addon)[1] == str(loaded.bank_of(held).image_path(held))
+    assert _design(addon, settings) == {"flat_roof": held, "sun": 31.5}
+    calls = _draw_all(addon)
+    assert {("share", "Sun"), ("value", "")} <= {(args[1], kw.get("text")) for name, args, kw in calls
+                                                  if name == "prop" and len(args) > 1}
+    bpy.ops.meta_sim.remove_city()
+    settings.space, settings.bank_source, settings.bank_folder = "BANK", "DEFAULT", ""
