@@ -8,9 +8,12 @@ runs inside ``blender -b`` and with the ``bpy`` module.
   materials of the flat-roof and sloped-roof slots and rescales their UVs to
   the texture's physical repeat size.
 * Several adjacent tiles are rendered as one image and cut afterwards: an
-  orthographic nadir camera makes that exact, and it spreads the per-render
-  overhead over the tiles. A city seen in perspective (``view_height_m``: a
-  drone's photo) is rendered tile by tile, each from over its own centre.
+  orthographic nadir camera makes the tiles join exactly, and it spreads the
+  per-render overhead over the tiles. A tile cut from a block is not the tile
+  rendered alone (anti-aliasing and shadows differ at its edges), so whatever
+  must match the farm renders the same block (``render.loop.tile_blocks``).
+  A city seen in perspective (``view_height_m``: a drone's photo) is rendered
+  tile by tile, each from over its own centre.
 * Labels come from a separate Workbench render with flat shading, no
   anti-aliasing and the per-polygon label colours of ``meshes.label_color``:
   every pixel is one exact instance id and roof class, independent of the
