@@ -179,9 +179,9 @@ def render_preview_steps(settings, library):
         cut = tile_cut(block, city.rects[tile], params["gsd"], params["tile_px"])
         instance, roof_class = (labels[cut] for labels in city.render_labels(block))
         yield 0.15, "rendering the label pass"
-        rgb = yield from tasks.scaled(city.render_rgb_in_strips(block, preset),
+        rgb = yield from tasks.scaled(city.render_rgb_in_strips(block, preset, cut=cut),
                                       f"rendering the tile ({preset.name})", 0.15, 1.0)
-    image = finish_tile(look, rgb[cut], instance, roof_class, params["seed"], tile, preset)
+    image = finish_tile(look, rgb, instance, roof_class, params["seed"], tile, preset)
     folder = preferences.user_dir("preview")
     paths = (folder / "preview.png", folder / "preview_labels.png")
     write_png(paths[0], to_srgb8(image))

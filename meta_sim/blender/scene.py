@@ -591,8 +591,8 @@ class CityScene:
         self.camera.rotation_euler = (0.0, 0.0, 0.0)
         return width, height
 
-    def _render_to_array(self, rect: Rect, name: str, strip: bool = False) -> np.ndarray:
-        """The render of ``rect``; a ``strip`` (a border render) is as wide as it, its height Blender's."""
+    def _render_to_array(self, rect: Rect, name: str, border: bool = False) -> np.ndarray:
+        """The render of ``rect``; a ``border`` render is the size of its border (the caller checks it)."""
         width, height = self._frame(rect)
         path = os.path.join(self._tmp, f"{name}.exr")
         self.scene.render.filepath = path
@@ -606,7 +606,7 @@ class CityScene:
         finally:
             image.close()
             os.remove(path)
-        if pixels is None or pixels.shape[1] != width or (not strip and pixels.shape[0] != height):
+        if pixels is None or (not border and pixels.shape[:2] != (height, width)):
             raise RuntimeError(f"render of {name} has an unexpected shape")
         return np.asarray(pixels, dtype=np.float32)
 
@@ -630,15 +630,20 @@ class CityScene:
         self._set_quality(preset)
         return _exposed(self._render_to_array(rect, "rgb")[..., :3], preset)
 
-    def render_rgb_in_strips(self, rect: Rect, preset: RenderPreset, rows: int = 64):
+    def render_rgb_in_strips(self, rect: Rect, preset: RenderPreset, rows: int = 64, cut=None):
         """`render_rgb` as a generator that renders path-traced images in horizontal strips of about
         ``rows`` rows, yielding the share done after each, so a caller can show progress and stop between
-        strips; returns the image. Cycles samples each pixel on its own, so the strips join into the same
-        pixels as one render (not so with denoising, and Workbench is fast: both render whole)."""
-        height = self._frame(rect)[1]
-        strips = -(-height // rows)
-        if preset.engine != "CYCLES" or preset.denoise or strips < 2:
-            rgb = self.render_rgb(rect, preset)
+        strips; returns the image, or with ``cut`` (its row and column slices, as ``render.loop.tile_cut``
+        gives them) only that part of it, of which a path-traced render renders only that part. Cycles
+        samples each pixel on its own, so strips and parts are the pixels of one whole render (not so with
+        denoising, and Workbench is fast: both render whole)."""
+        width, height = self._frame(rect)
+        cut = cut or (slice(0, height), slice(0, width))
+        top, bottom, left, right = cut[0].start, cut[0].stop, cut[1].start, cut[1].stop
+        strips = -(-(bottom - top) // rows)
+        whole = (bottom - top, right - left) == (height, width)
+        if preset.engine != "CYCLES" or preset.denoise or (strips < 2 and whole):
+            rgb = self.render_rgb(rect, preset)[top:bottom, left:right]
             yield 1.0
             return rgb
         self._set_quality(preset)
@@ -646,16 +651,18 @@ class CityScene:
         render.use_border = render.use_crop_to_border = True
         parts = []
         try:
-            edges = [round(k * height / strips) / height for k in range(strips + 1)]
+            edges = [top + round(k * (bottom - top) / strips) for k in range(strips + 1)]
             for k in range(strips):
-                render.border_min_x, render.border_max_x = 0.0, 1.0
-                render.border_min_y, render.border_max_y = 1.0 - edges[k + 1], 1.0 - edges[k]
-                parts.append(self._render_to_array(rect, "rgb", strip=True)[..., :3])
+                # Blender truncates border x size to whole pixels: half a pixel in keeps each edge on its pixel.
+                render.border_min_x, render.border_max_x = (left + 0.5) / width, min(1.0, (right + 0.5) / width)
+                render.border_min_y = (height - edges[k + 1] + 0.5) / height
+                render.border_max_y = min(1.0, (height - edges[k] + 0.5) / height)
+                parts.append(self._render_to_array(rect, "rgb", border=True)[..., :3])
                 yield (k + 1) / strips
         finally:
             render.use_border = render.use_crop_to_border = False
         rgb = np.concatenate(parts)
-        if rgb.shape[0] != height:
+        if rgb.shape[:2] != (bottom - top, right - left):
             raise RuntimeError("the strips of the render do not add up to the image")
         return _exposed(rgb, preset)
 

@@ -1003,9 +1003,11 @@ def test_a_design_dropped_applies_only_over_the_city(addon, settings):
         bpy.data.objects.remove(cube)
 
 
-# Every shipped space; and two cities of four tiles (previewing the last): an orthographic one the worker renders as
-# one 2 x 2 block and cuts, and one seen in perspective with a sensor, rendered tile by tile.
-MATRIX = [(name, 1) for name in builtin_spaces()] + [("overhead-v3", 4), ("overhead-towns-v12", 4)]
+# Every shipped space; and three cities of four tiles (previewing the last): orthographic ones the worker renders
+# as one 2 x 2 block and cuts (the preview path-traces only the tile's part of it with Cycles), and one seen in
+# perspective with a sensor, rendered tile by tile.
+MATRIX = [(name, 1, "fast") for name in builtin_spaces()] + [
+    ("overhead-v3", 4, "fast"), ("overhead-v3", 4, "balanced"), ("overhead-towns-v12", 4, "fast")]
 RENDER_ALL = """
 import json, sys
 from meta_sim.cli import main
@@ -1027,9 +1029,10 @@ def test_a_preview_tile_of_any_design_in_any_shipped_space_is_the_farms(addon, s
     from meta_sim.sim.imageio import read_rgb8
 
     runs, cases = [], []
-    for k, (name, n_tiles) in enumerate(MATRIX):
+    for k, (name, n_tiles, quality) in enumerate(MATRIX):
         space = DesignSpace.load(name)
         settings.space, settings.city_tiles, settings.preview_tile = name, n_tiles, n_tiles - 1
+        settings.render_preset = quality
         assert bpy.ops.meta_sim.load_bank() == {"FINISHED"}
         design = space.sample(np.random.default_rng([55, k]), 1)[0]
         _pick(settings, **design)
@@ -1038,7 +1041,7 @@ def test_a_preview_tile_of_any_design_in_any_shipped_space_is_the_farms(addon, s
             picked[n] == design[n] if isinstance(design[n], str) else abs(picked[n] - design[n]) < 1e-4 * (
                 1 + abs(design[n])) for n in space.names)
         assert bpy.ops.meta_sim.generate_city() == {"FINISHED"}, name
-        job_dir = tmp_path / f"{name}-{n_tiles}"
+        job_dir = tmp_path / f"{name}-{n_tiles}-{quality}"
         settings.job_dir = str(job_dir)
         assert bpy.ops.meta_sim.export_job() == {"FINISHED"}
         bpy.ops.meta_sim.render_preview()
@@ -1046,22 +1049,24 @@ def test_a_preview_tile_of_any_design_in_any_shipped_space_is_the_farms(addon, s
         job = json.loads((job_dir / "render-job.json").read_text())
         assert job["design"] == picked and job["design_space"] == name
         plain = ["render", "--space", name, "--design", space.format(picked), "--seed", str(SMALL["seed"]),
-                 "--tiles", str(n_tiles), "--tile-px", "64", "--gsd", "1.8", "--out", str(job_dir / "cli"), "--preview"]
+                 "--tiles", str(n_tiles), "--tile-px", "64", "--gsd", "1.8", "--preset", quality,
+                 "--out", str(job_dir / "cli"), "--preview"]
         runs += [["render", *job["argv"], "--preview"], plain]
-        cases.append((name, n_tiles, picked, preview, job_dir))
+        cases.append((f"{name} ({n_tiles} tiles, {quality})", n_tiles, picked, preview, job_dir))
     (tmp_path / "runs.json").write_text(json.dumps(runs))
     done = subprocess.run([sys.executable, "-c", RENDER_ALL, str(tmp_path / "runs.json")], cwd=ROOT,
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     differ = []
-    for name, n_tiles, picked, preview, job_dir in cases:
+    for case, n_tiles, picked, preview, job_dir in cases:
         for where in (job_dir / "tiles", job_dir / "cli"):
             exr = next(where.glob(f"*_t{n_tiles - 1:02d}.exr"))
             assert tiles.read_tile(exr).meta["design"] == picked
             if not (read_rgb8(exr.with_suffix(".png")) == preview).all():
-                differ.append(f"{name} ({n_tiles} tiles, {where.name})")
+                differ.append(f"{case}, {where.name}")
     assert not differ, f"the preview is not the farm's tile in {', '.join(differ)}"
     settings.space, settings.city_tiles, settings.preview_tile = "BANK", SMALL["city_tiles"], 0
+    settings.render_preset = "fast"
     bpy.ops.meta_sim.load_bank()
     bpy.ops.meta_sim.remove_city()
 
