@@ -19,7 +19,7 @@ from pathlib import Path
 import bpy
 
 from ..meta_sim.core.errors import MetaSimError
-from ..meta_sim.sim.design import DesignSpace, builtin_spaces
+from ..meta_sim.sim.design import DEFAULT_SPACE, DesignSpace, builtin_spaces
 from ..meta_sim.sim.textures import (
     MANIFEST,
     TextureBank,
@@ -108,7 +108,7 @@ def space(settings, bank: TextureBank | None = None) -> DesignSpace:
             _spaces[key] = DesignSpace.for_textures(f"bank:{bank.name}", bank.ids("flat"), bank.ids("sloped"))
         else:
             _spaces[key] = DesignSpace.load(key[1] if key[0] == FILE_SPACE else
-                                            "rooftops-v1" if key[0] == BANK_SPACE else key[0])
+                                            DEFAULT_SPACE if key[0] == BANK_SPACE else key[0])
     return _spaces[key]
 
 

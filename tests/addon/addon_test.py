@@ -463,6 +463,18 @@ def test_user_errors_are_reported_not_raised_as_tracebacks(settings, tmp_path):
     with pytest.raises(RuntimeError, match="not a texture bank"):
         bpy.ops.meta_sim.generate_city()
     settings.bank_source = "DEFAULT"
+    settings.space, settings.space_file = "FILE", str(tmp_path / "no-such-space.json")
+    with pytest.raises(RuntimeError, match="no-such-space.json does not exist"):
+        bpy.ops.meta_sim.load_bank()
+    (tmp_path / "space.json").write_text('{"format": "meta-sim-design-space", "version": 1, "parameters": [')
+    settings.space_file = str(tmp_path / "space.json")
+    with pytest.raises(RuntimeError, match="not valid JSON"):
+        bpy.ops.meta_sim.generate_city()
+    (tmp_path / "space.json").write_text(json.dumps({"format": "meta-sim-design-space", "version": 1, "parameters": [
+        {"name": "sun", "type": "continuous", "low": 20, "high": 70, "appearance": "__import__('os')"}]}))
+    with pytest.raises(RuntimeError, match="appearance must be a field name"):
+        bpy.ops.meta_sim.load_bank()
+    settings.space = "BANK"
 
 
 class RecordingLayout:
