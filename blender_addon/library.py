@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import bpy
 
@@ -126,13 +127,22 @@ def _missing(space_: DesignSpace, banks) -> list[str]:
             if not any(bank.contains(choice) for bank in banks)]
 
 
-def _fallbacks(cache: Path) -> list[tuple[str, Path, set]]:
-    """Where a space's textures are looked for after its bank, in order: the default bank, then the held-out
-    banks (as `meta-sim render` looks ids up); each with the texture ids its recipes make, so only a bank
-    that holds a missing one is built."""
-    return [("default", default_bank_dir(cache_dir=cache), {r.id for r in procedural.recipes()}),
-            *((name, heldout_bank_dir(cache_dir=cache, name=name), {r.id for r in procedural.recipes(heldout=name)})
-              for name in procedural.HELDOUT_SETS)]
+def _needed(chosen: DesignSpace, bank: TextureBank, cache: Path) -> list[tuple[str, Path, Callable]]:
+    """The banks after ``bank`` that hold the textures of ``chosen`` it lacks, in the order `meta-sim render`
+    looks ids up (the default bank, then the held-out banks), told by their recipes' ids (nothing is read or
+    built here): each bank's name, folder and what builds it."""
+    fallbacks = [("default", default_bank_dir(cache_dir=cache), procedural.recipes(),
+                  lambda: ensure_default_bank(cache_dir=cache))]
+    fallbacks += [(name, heldout_bank_dir(cache_dir=cache, name=name), procedural.recipes(heldout=name),
+                   lambda name=name: ensure_heldout_bank(cache_dir=cache, name=name))
+                  for name in procedural.HELDOUT_SETS]
+    missing, out = set(_missing(chosen, [bank])), []
+    for name, where, recipes, build in fallbacks:
+        ids = {recipe.id for recipe in recipes}
+        if where != bank.root and missing & ids:
+            out.append((name, where, build))
+            missing -= ids
+    return out
 
 
 def get(settings, build: bool = False) -> Library | None:
@@ -150,15 +160,10 @@ def get(settings, build: bool = False) -> Library | None:
             return None
         if str(folder) not in _banks:
             _banks[str(folder)] = load_bank(folder)
-        banks = [_banks[str(folder)]]
-        for _, where, ids in _fallbacks(preferences.cache_dir()):
-            if not ids & set(_missing(space(settings, banks[0]), banks)):
-                continue
-            if not (where / MANIFEST).is_file():
-                return None  # a bank still to be built: Load builds it, with progress
-            if str(where) not in _banks:
-                _banks[str(where)] = load_bank(where)
-            banks.append(_banks[str(where)])
+        bank = _banks[str(folder)]
+        if any(not (where / MANIFEST).is_file() for _, where, _ in _needed(space(settings, bank), bank,
+                                                                          preferences.cache_dir())):
+            return None  # a bank still to be built: Load builds it, with progress
     return tasks.run(load_steps(settings))
 
 
@@ -180,19 +185,14 @@ def load_steps(settings):
     bank = _banks[str(folder)]
     chosen = space(settings, bank)
     banks = [bank]
-    fallbacks = [fallback for fallback in _fallbacks(cache) if fallback[1] != folder]
-    for k, (name, where, ids) in enumerate(fallbacks):
-        if not ids & set(_missing(chosen, banks)):
-            continue
-        if str(where) not in _banks:
-            if (where / MANIFEST).is_file():
-                _banks[str(where)] = load_bank(where)
-            else:  # built on a thread, as the default bank is
-                build = (ensure_default_bank if name == "default" else
-                         lambda cache_dir, name=name: ensure_heldout_bank(cache_dir=cache_dir, name=name))
-                work = tasks.Threaded(lambda progress, build=build: build(cache_dir=cache))
-                text = f"building the texture bank {name} (design space {chosen.name} names its textures)"
-                _banks[str(where)] = yield from work.wait(text, k / len(fallbacks), (k + 1) / len(fallbacks))
+    needed = _needed(chosen, bank, cache)
+    for k, (name, where, build) in enumerate(needed):
+        if str(where) not in _banks and (where / MANIFEST).is_file():
+            _banks[str(where)] = load_bank(where)
+        elif str(where) not in _banks:  # built on a thread, as the default bank is
+            work = tasks.Threaded(lambda progress, build=build: build())
+            text = f"building the texture bank {name} (design space {chosen.name} names its textures)"
+            _banks[str(where)] = yield from work.wait(text, k / len(needed), (k + 1) / len(needed))
         banks.append(_banks[str(where)])
     missing = _missing(chosen, banks)
     if missing:
