@@ -21,7 +21,7 @@ import numpy as np
 
 from ..meta_sim.core.errors import MetaSimError
 from ..meta_sim.core.fileio import atomic_path, write_text_atomic
-from ..meta_sim.render.loop import finish_tile, resolve_textures
+from ..meta_sim.render.loop import resolve_textures
 from ..meta_sim.sim import design_assets as lib
 from ..meta_sim.sim.design import DesignSpace
 from ..meta_sim.sim.imageio import read_rgb8
@@ -29,7 +29,7 @@ from ..meta_sim.sim.presets import DesignPreset
 from ..meta_sim.sim.preview import to_srgb8
 from ..meta_sim.sim.quality import PRESETS, get_preset
 from ..meta_sim.sim.textures import write_png
-from . import city, preferences, tasks
+from . import city, preferences
 from . import library as libraries
 
 SETTINGS_FILE = "library.json"
@@ -108,6 +108,7 @@ def build_steps(settings, library, folder: Path, keep_settings: bool = False):
 
 
 def _shown_key(space, design: dict) -> str:
+    """A design to preview in its space, as text (a key before its preview key is known)."""
     return json.dumps([space.to_dict(), design], sort_keys=True)
 
 
@@ -123,14 +124,12 @@ def _render_previews(library, recorded: dict, shown: list[tuple], keys: dict):
     done = 0
     for group in by_scene.values():
         with city.tile_city(group[0][0], knobs, group[0][1], pixel_size_m=pixel_size) as (scene, _):
-            instance, roof_class = scene.render_labels(scene.rects[tile])
             for space, chosen in group:
                 scene.set_roofs(resolve_textures(space, chosen, library.banks))
                 text = f"rendering preview {done + 1} of {len(shown)} ({quality.name})"
-                rgb = yield from tasks.scaled(scene.render_rgb_in_strips(scene.rects[tile], quality), text,
-                                              0.9 * done / len(shown), 0.9 * (done + 1) / len(shown))
-                image = finish_tile(city.look(space, knobs, chosen), rgb, instance, roof_class, knobs["seed"], tile,
-                                    quality)
+                image, _, _ = yield from city.render_tile_steps(
+                    scene, city.look(space, knobs, chosen), tile, knobs, lib.PREVIEW_PX, quality, text,
+                    0.9 * done / len(shown), 0.9 * (done + 1) / len(shown))
                 out[keys[_shown_key(space, chosen)]] = to_srgb8(image)
                 done += 1
     return out

@@ -174,19 +174,25 @@ def render_preview_steps(settings, library):
     with tile_city(library.space, params, chosen) as (city, look):
         yield 0.05, "building the preview tile"
         city.set_roofs(textures)
-        # the block the farm renders the tile in, cut as it cuts it: a tile rendered alone differs at its edges
-        block = bounding_rect([city.rects[j] for j in tile_blocks([astuple(r) for r in city.rects], look, [tile])[0]])
-        cut = tile_cut(block, city.rects[tile], params["gsd"], params["tile_px"])
-        instance, roof_class = (labels[cut] for labels in city.render_labels(block))
-        yield 0.15, "rendering the label pass"
-        rgb = yield from tasks.scaled(city.render_rgb_in_strips(block, preset, cut=cut),
-                                      f"rendering the tile ({preset.name})", 0.15, 1.0)
-    image = finish_tile(look, rgb, instance, roof_class, params["seed"], tile, preset)
+        image, instance, roof_class = yield from render_tile_steps(
+            city, look, tile, params, params["tile_px"], preset, f"rendering the tile ({preset.name})", 0.1, 1.0)
     folder = preferences.user_dir("preview")
     paths = (folder / "preview.png", folder / "preview_labels.png")
     write_png(paths[0], to_srgb8(image))
     write_png(paths[1], label_image(instance, roof_class))
     return tuple(_show(name, path) for name, path in zip(PREVIEW_IMAGES, paths))
+
+
+def render_tile_steps(city, look, tile: int, params: dict, tile_px: int, preset, text: str, start: float,
+                      end: float):
+    """Steps (progress from ``start`` to ``end``): tile ``tile`` of a built city of the knobs ``params``, ``tile_px``
+    pixels square, as the render worker renders it: the block the worker renders it in, cut as the worker cuts
+    it (a tile rendered alone differs at its edges), finished by ``look``; returns it with its labels."""
+    block = bounding_rect([city.rects[j] for j in tile_blocks([astuple(r) for r in city.rects], look, [tile])[0]])
+    cut = tile_cut(block, city.rects[tile], city.pixel_size_m, tile_px)
+    instance, roof_class = (labels[cut] for labels in city.render_labels(block))
+    rgb = yield from tasks.scaled(city.render_rgb_in_strips(block, preset, cut=cut), text, start, end)
+    return finish_tile(look, rgb, instance, roof_class, params["seed"], tile, preset), instance, roof_class
 
 
 @contextlib.contextmanager
