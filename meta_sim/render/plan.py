@@ -56,13 +56,12 @@ def plan(options: dict, bars: Bars | None = None):
     ground = options.get("ground") or "plain"
     get_mix(ground)
     style = style_text(parse_style(options.get("style") or "suburban"))  # checked, in one spelling
-    banks = ([load_bank(options["bank"])] if options.get("bank") else
-             [ensure_default_bank(progress=bars("texture bank default", build_steps()) if bars else None)])
+    bank = load_bank(options["bank"]) if options.get("bank") else None
     population = load_preset(options["population"]) if options.get("population") is not None else None
     if options.get("space"):
         space = DesignSpace.load(options["space"])
     elif options.get("bank"):
-        space = DesignSpace.for_textures(f"bank:{banks[0].name}", banks[0].ids("flat"), banks[0].ids("sloped"))
+        space = DesignSpace.for_textures(f"bank:{bank.name}", bank.ids("flat"), bank.ids("sloped"))
     elif population is not None:
         space = population_space(population, options["population"])
     else:
@@ -90,8 +89,10 @@ def plan(options: dict, bars: Bars | None = None):
         designs = sample_designs(space, options["random_designs"], options["seed"])
         jobs = design_jobs(space, designs, options["seed"], options["cities"])
     named = {job.design[name] for job in jobs for name in extra}
-    heldout = ensure_heldout_banks(ids=[t for t in named if not banks[0].contains(t)], bars=bars)
-    settings = RenderSettings(space=space, banks=banks + heldout, preset=preset,
+    # The banks last, so that bad input fails before a fresh cache spends seconds building them.
+    bank = bank or ensure_default_bank(progress=bars("texture bank default", build_steps()) if bars else None)
+    heldout = ensure_heldout_banks(ids=[t for t in named if not bank.contains(t)], bars=bars)
+    settings = RenderSettings(space=space, banks=[bank, *heldout], preset=preset,
                               out_dir=Path(options["out"]), n_tiles=options["tiles"],
                               tile_px=options["tile_px"], pixel_size_m=options["gsd"],
                               preview=bool(options.get("preview")), sensor=sensor, roof_jitter=roof_jitter,

@@ -86,8 +86,8 @@ def _refused(tmp_path, args) -> str:
 
 
 @pytest.mark.parametrize("args", BAD, ids=[" ".join(a[:2]) + f" #{i}" for i, a in enumerate(BAD)])
-def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args):
-    _refused(tmp_path, args)
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args, bank):
+    _refused(tmp_path, args)  # with the default bank built (``bank``): its first build shows a progress line
 
 
 # Command lines whose one line must name what fixes them.
