@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from ..core.errors import MetaSimError
-from ..core.fileio import made_folder, writable_dir
+from ..core.fileio import made_folder
 from ..experiments.splits import ALL_SPLIT_NAMES, get_split, single_seed
 from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
 
@@ -128,12 +128,12 @@ def train_command(out, **o):
     from ..pipeline.workflow import ensure_models
 
     dataset, settings = _configs(o)
-    writable_dir(out)  # before hours of training, not after
-    bars = _Bars()
-    models = ensure_models(dataset, settings, o["cache"], bars)
-    bars.close()
-    shutil.copy2(models.nams_path, out / "nams.pt")
-    shutil.copy2(models.dr_path, out / "dr.pt")
+    with made_folder(out):  # before hours of training, not after
+        bars = _Bars()
+        models = ensure_models(dataset, settings, o["cache"], bars)
+        bars.close()
+        shutil.copy2(models.nams_path, out / "nams.pt")
+        shutil.copy2(models.dr_path, out / "dr.pt")
     click.echo(f"wrote {out / 'nams.pt'} ({settings.architecture} NAMS) and {out / 'dr.pt'} "
                + ", ".join(f"{k} {v:.0f} s" for k, v in models.seconds.items()))
 
@@ -250,10 +250,10 @@ def _design_eval(experiment: str, summary: str):
         eval_settings = EvalSettings(targets=targets, tiles=target_tiles, seed=seed, split=split, ms2=ms2, sbi=sbi,
                                      M=M, k=k, S=S, iterations=iterations, lr=lr, r=r)
         eval_settings.check()
-        writable_dir(out)
-        bars = _Bars()
-        results = run_eval(experiment, out, dataset, settings, eval_settings, o["cache"], bars)
-        bars.close()
+        with made_folder(out):
+            bars = _Bars()
+            results = run_eval(experiment, out, dataset, settings, eval_settings, o["cache"], bars)
+            bars.close()
         click.echo(results_markdown(results))
         if split.touches_test:
             click.echo(f"These targets are the {split.report_split} split's: report these figures; choose nothing "
@@ -303,11 +303,11 @@ def eval_task_command(experiments, out, sim_only, quick, seeds, steps, realdata,
     from ..experiments.realdomains import REALDATA, require
 
     realdata = require(realdata or REALDATA)
-    writable_dir(out)
     bars = _Bars()
     try:
-        results = run_task_eval(list(dict.fromkeys(experiments)), out, dataset, settings, task_settings, o["cache"],
-                                realdata, sim_only, bars)
+        with made_folder(out):
+            results = run_task_eval(list(dict.fromkeys(experiments)), out, dataset, settings, task_settings,
+                                    o["cache"], realdata, sim_only, bars)
     finally:
         bars.close()
     click.echo(task_markdown(results))

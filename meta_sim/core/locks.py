@@ -13,6 +13,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from .errors import MetaSimError
+
 
 def lock_path(entry: str | os.PathLike) -> Path:
     """The lock file of ``entry`` (a folder or a file): ``.NAME.lock`` beside it."""
@@ -27,7 +29,10 @@ def locked(entry: str | os.PathLike) -> Iterator[None]:
     Blender's own Python has no ``filelock``; the render worker run by a stock Blender then works
     without the lock, as before, which only matters for two renders into one folder at once."""
     path = lock_path(entry)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a cache or output folder that cannot be made: the user's to change
+        raise MetaSimError(f"cannot make the folder {path.parent}: {exc.strerror or exc}") from None
     try:
         from filelock import FileLock
     except ImportError:
