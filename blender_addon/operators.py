@@ -27,7 +27,7 @@ def _folder(path: str, what: str) -> Path:
 
 def poll_bank_chosen(cls, settings) -> bool:
     if settings.bank_source == "FOLDER" and libraries.bank_folder(settings) is None:
-        cls.poll_message_set("Choose a texture bank folder (Roof Textures > Folder), or a default bank folder in "
+        cls.poll_message_set("Choose a texture bank folder (Design > Folder), or a default bank folder in "
                              "the add-on's preferences")
         return False
     return True
@@ -37,7 +37,7 @@ def poll_bank_loaded(cls, settings) -> bool:
     if not poll_bank_chosen(cls, settings):
         return False
     if libraries.get_quietly(settings) is None:
-        cls.poll_message_set("Load a texture bank first (Roof Textures > Load Texture Bank)")
+        cls.poll_message_set("Load a texture bank first (Design > Load Texture Bank)")
         return False
     return True
 

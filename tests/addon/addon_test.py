@@ -1033,15 +1033,25 @@ for argv in json.load(open(sys.argv[1])):
 
 
 def test_a_preview_tile_of_any_design_in_any_shipped_space_is_the_farms(addon, settings, tmp_path):
-    """For each space: a random design picked in the panel's controls, a city generated, its preview tile;
-    `meta-sim render` of the exported job, and of the same design in the shipped space, write the same pixels."""
+    _check_previews(addon, settings, tmp_path, MATRIX)
+
+
+@pytest.mark.slow
+def test_a_path_traced_preview_in_a_city_of_nine_tiles_in_any_shipped_space_is_the_farms(addon, settings, tmp_path):
+    _check_previews(addon, settings, tmp_path, [(name, 9, "balanced") for name in builtin_spaces()])
+
+
+def _check_previews(addon, settings, tmp_path, matrix):
+    """For each (space, tiles, quality): a random design picked in the panel's controls, a city generated, the
+    preview of its last tile; `meta-sim render` of the exported job, and of the same design in the shipped
+    space, write the same pixels."""
     import bpy
     import numpy as np
 
     from meta_sim.sim.imageio import read_rgb8
 
     runs, cases = [], []
-    for k, (name, n_tiles, quality) in enumerate(MATRIX):
+    for k, (name, n_tiles, quality) in enumerate(matrix):
         space = DesignSpace.load(name)
         settings.space, settings.city_tiles, settings.preview_tile = name, n_tiles, n_tiles - 1
         settings.render_preset = quality
