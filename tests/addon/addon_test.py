@@ -1256,4 +1256,15 @@ def test_a_space_naming_held_out_textures_builds_only_their_bank_with_progress(a
     assert {("share", "Sun"), ("value", "")} <= {(args[1], kw.get("text")) for name, args, kw in calls
                                                   if name == "prop" and len(args) > 1}
     bpy.ops.meta_sim.remove_city()
+
+    # A shipped space with a bank of other textures: found in the default bank, but a job names one bank.
+    prefs.cache_folder = ""
+    settings.bank_folder, settings.space = str(heldout_bank.root), "rooftops-v1"
+    assert bpy.ops.meta_sim.load_bank() == {"FINISHED"} and bpy.ops.meta_sim.generate_city() == {"FINISHED"}
+    assert _roof_images_on_polygons(addon)[1] == str(bank.image_path(_picked(settings)["flat_roof"]))
+    settings.job_dir = str(tmp_path / "job")
+    with pytest.raises(RuntimeError, match="choose the Default texture bank to export it"):
+        bpy.ops.meta_sim.export_job()
+    assert not (tmp_path / "job").exists()
+    bpy.ops.meta_sim.remove_city()
     settings.space, settings.bank_source, settings.bank_folder = "BANK", "DEFAULT", ""
