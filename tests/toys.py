@@ -30,3 +30,24 @@ def distance_to_polygon(x, y, polygon) -> float:
         t = min(1.0, max(0.0, ((x - x0) * dx + (y - y0) * dy) / (dx * dx + dy * dy)))
         best = min(best, math.hypot(x - x0 - t * dx, y - y0 - t * dy))
     return best
+
+
+def job_pixels(manifest, tasks=None) -> dict:
+    """The tiles of a farm job's tasks (all by default): (rgb, instance, roof_class) keyed by file name."""
+    from meta_sim.sim import tiles
+
+    out = {}
+    for task in manifest.tasks if tasks is None else tasks:
+        for name in task.outputs:
+            tile = tiles.read_tile(manifest.out_dir / name)
+            out[name] = (tile.rgb, tile.instance, tile.roof_class)
+    return out
+
+
+def assert_same_tiles(a: dict, b: dict) -> None:
+    """Two ``job_pixels`` results hold the same tiles, pixel for pixel."""
+    import numpy as np
+
+    assert a.keys() == b.keys()
+    for name in a:
+        assert all(np.array_equal(x, y) for x, y in zip(a[name], b[name])), name

@@ -12,9 +12,9 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
+from toys import assert_same_tiles, job_pixels
 
 from meta_sim.cli import main as cli
 from meta_sim.core import fileio
@@ -41,22 +41,6 @@ def _plan(path, *args, out_dir=None):
     return farm.load(path)
 
 
-def _pixels(manifest):
-    """Every tile of the job: (rgb, instance, roof_class) keyed by file name."""
-    out = {}
-    for task in manifest.tasks:
-        for name in task.outputs:
-            tile = tiles.read_tile(manifest.out_dir / name)
-            out[name] = (tile.rgb, tile.instance, tile.roof_class)
-    return out
-
-
-def _same_tiles(a, b):
-    assert a.keys() == b.keys()
-    for name in a:
-        assert all(np.array_equal(x, y) for x, y in zip(a[name], b[name])), name
-
-
 def _counts(manifest):
     status = farm.check(manifest)
     return status.count(farm.DONE), status.count(farm.MISSING), status.count(farm.CORRUPT)
@@ -69,7 +53,7 @@ def reference(tmp_path_factory):
     manifest = _plan(folder / "job.json")
     summary = executors.run(manifest, executors.RunOptions(workers=2, recycle=2, **QUIET))
     assert not summary.failed and summary.rendered == manifest.n_outputs == 48
-    return manifest, _pixels(manifest)
+    return manifest, job_pixels(manifest)
 
 
 def test_plan_is_a_pure_function_of_content(tmp_path, reference):
@@ -118,7 +102,7 @@ def test_worker_killed_mid_task_then_resumed_gives_identical_tiles(tmp_path, ref
     result = _cli("jobs", "run", tmp_path / "job.json", "--workers", 2)
     assert result.exit_code == 0, result.output
     assert _counts(manifest) == (48, 0, 0) and not farm.temporaries(manifest)
-    _same_tiles(_pixels(manifest), reference[1])
+    assert_same_tiles(job_pixels(manifest), reference[1])
 
 
 def test_truncated_or_foreign_tile_is_reported_corrupt_and_rerendered(tmp_path, reference):
@@ -140,7 +124,7 @@ def test_truncated_or_foreign_tile_is_reported_corrupt_and_rerendered(tmp_path, 
     assert summary.rendered == 3 and summary.already_done == 45 and not summary.failed
     assert _counts(manifest) == (48, 0, 0) and not farm.temporaries(manifest)
     assert _cli("jobs", "status", tmp_path / "job.json").exit_code == 0
-    _same_tiles(_pixels(manifest), reference[1])
+    assert_same_tiles(job_pixels(manifest), reference[1])
 
 
 def test_task_that_always_fails_is_retried_then_reported_while_others_complete(tmp_path, bank):
@@ -184,7 +168,7 @@ def test_dask_local_cluster_and_scheduler_address_render_the_same_tiles(tmp_path
     summary = executors.run(manifest, executors.RunOptions(executor="dask", workers=2, **QUIET))
     assert not summary.failed and summary.rendered == 48
     assert {b["tasks"] for b in summary.batches} == {4}  # default recycle: 4 tasks per worker process
-    _same_tiles(_pixels(manifest), reference[1])
+    assert_same_tiles(job_pixels(manifest), reference[1])
     # The code path of a remote cluster: a scheduler reached by its address.
     remote = _plan(tmp_path / "remote.json")
     with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
@@ -192,7 +176,7 @@ def test_dask_local_cluster_and_scheduler_address_render_the_same_tiles(tmp_path
         summary = executors.run(remote, executors.RunOptions(executor="dask", scheduler=cluster.scheduler_address,
                                                              recycle=2, **QUIET))
     assert not summary.failed and summary.rendered == 48
-    _same_tiles(_pixels(remote), reference[1])
+    assert_same_tiles(job_pixels(remote), reference[1])
 
 
 def test_shards_and_a_blender_binary_render_the_same_tiles(tmp_path, reference):
@@ -209,7 +193,7 @@ def test_shards_and_a_blender_binary_render_the_same_tiles(tmp_path, reference):
     result = _cli("jobs", "run", tmp_path / "job.json", "--blender", blender)
     assert result.exit_code == 0, result.output
     assert "24 rendered now, 24 already valid" in result.output
-    _same_tiles(_pixels(manifest), reference[1])
+    assert_same_tiles(job_pixels(manifest), reference[1])
     bad = _cli("jobs", "run", tmp_path / "job.json", "--blender", tmp_path / "no-blender")
     assert bad.exit_code == 2 and "no Blender executable" in bad.output
     wrong = subprocess.run([sys.executable, "jobs/farm_shard.py", "--", "--manifest", str(tmp_path / "job.json"),

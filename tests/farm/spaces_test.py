@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from toys import assert_same_tiles, job_pixels
 
 from meta_sim.cli import main as cli
 from meta_sim.core.errors import MetaSimError
@@ -46,21 +47,6 @@ def _plan(path, space):
     result = _cli("jobs", "plan", *_job(space), "--out", path)
     assert result.exit_code == 0, result.output
     return farm.load(path)
-
-
-def _pixels(manifest, tasks=None):
-    out = {}
-    for task in tasks or manifest.tasks:
-        for name in task.outputs:
-            tile = tiles.read_tile(manifest.out_dir / name)
-            out[name] = (tile.rgb, tile.instance, tile.roof_class)
-    return out
-
-
-def _same(a, b):
-    assert a.keys() == b.keys()
-    for name in a:
-        assert all(np.array_equal(x, y) for x, y in zip(a[name], b[name])), name
 
 
 @pytest.fixture(scope="module")
@@ -118,7 +104,7 @@ def test_every_farm_interface_renders_every_shipped_space(space, tmp_path, dask_
     summary = executors.run(reference, executors.RunOptions(executor="dask", scheduler=dask_address, recycle=3,
                                                             **QUIET))
     assert not summary.failed and summary.rendered == reference.n_outputs == 6, summary.failed
-    pixels = _pixels(reference)
+    pixels = job_pixels(reference)
     meta = tiles.read_meta(reference.out_dir / reference.tasks[0].outputs[0])
     assert meta["design_space"] == space and meta["design"] == reference.tasks[0].design
 
@@ -138,7 +124,7 @@ def test_every_farm_interface_renders_every_shipped_space(space, tmp_path, dask_
     assert resumed.exit_code == 0, resumed.output
     done = _cli("jobs", "status", path)
     assert done.exit_code == 0 and "3/3 tasks complete" in done.output, done.output
-    _same(_pixels(manifest), pixels)
+    assert_same_tiles(job_pixels(manifest), pixels)
 
     # One shard of two through the farm's Blender script (here with the bpy module's Python).
     sharded = _plan(tmp_path / "shard" / "job.json", space)
@@ -146,7 +132,7 @@ def test_every_farm_interface_renders_every_shipped_space(space, tmp_path, dask_
                             "job.json"), "--shard", "1/2"], cwd=ROOT, capture_output=True, text=True)
     assert shard.returncode == 0, shard.stderr
     assert farm.check(sharded).complete_tasks == {t.name for t in sharded.tasks[1::2]}
-    _same(_pixels(sharded, sharded.tasks[1::2]), {k: v for k, v in pixels.items()
+    assert_same_tiles(job_pixels(sharded, sharded.tasks[1::2]), {k: v for k, v in pixels.items()
                                                   if k in {o for t in sharded.tasks[1::2] for o in t.outputs}})
 
     # The Flamenco job type of the manifest parses.
