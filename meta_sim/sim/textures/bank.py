@@ -468,8 +468,8 @@ def ensure_heldout_bank(size: int = 256, cache_dir: str | os.PathLike | None = N
                         name: str = procedural.FIRST_HELDOUT, progress: Progress | None = None) -> TextureBank:
     """The cached held-out set ``name`` (textures not in the default bank), built on first use:
     ``heldout-v5`` (E2's validation textures; ``heldout-v4``, those of a day, are among them), ``heldout-v2``
-    (E2's test textures), ``heldout-v3`` (its check textures) or ``heldout-v1`` (E2's validation textures until
-    2026-12-03, and a single seed's); ``progress`` as in `build_default_bank`."""
+    (E2's test textures), ``heldout-v3`` (its check textures) or ``heldout-v1`` (E2's earlier validation
+    textures, and a single seed's); ``progress`` as in `build_default_bank`."""
     return _ensure(heldout_bank_dir(size, cache_dir, name),
                    lambda d: build_default_bank(d, size, heldout=name, progress=progress))
 

@@ -1395,7 +1395,7 @@ HELDOUT_V3_SLOPED_RECIPES: tuple[Recipe, ...] = (
             **_barrel(_p("#6a4aa0", "#64449a", "#7054a8"), gloss=0.3, tone=0.05)),
 )
 
-# The fourth held-out set: E2's validation textures from 2026-12-03 (meta_sim/experiments/splits.py). The
+# The fourth held-out set: once E2's validation textures (meta_sim/experiments/splits.py). The
 # first held-out set shares its colours with the bank, so a choice made on it never saw what the test and
 # check splits show, a texture in a colour the bank lacks. This set is made under the same two conditions as
 # `heldout-v2` and `heldout-v3`, now against all four sets before it (tests/sim/textures_test.py), in colours
@@ -1446,7 +1446,7 @@ HELDOUT_V4_SLOPED_RECIPES: tuple[Recipe, ...] = (
             **_corrugated("#c02040", rust=dict(amount=0.6, palette=_RUST))),
 )
 
-# The fifth held-out set, E2's validation textures from 2026-12-03 (meta_sim/experiments/splits.py): the fourth
+# The fifth held-out set, E2's validation textures (meta_sim/experiments/splits.py): the fourth
 # set's 10 + 10 and 20 + 20 drawn ones. Validation on 10 textures per kind chose a roof match that test (heldout-v2)
 # did not confirm; settings that close are told apart only on more textures. Drawn, not picked: candidate
 # ``index`` of a kind is a family of the kind and a colour (hue uniform, saturation and value in [0.3, 0.95])
