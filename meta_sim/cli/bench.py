@@ -46,7 +46,7 @@ def bench():
 @click.option("--repeats", type=int, default=3, show_default=True, help="runs per preset; medians are reported")
 @click.option("--presets", default="fast,balanced,quality", show_default=True, help="comma-separated presets")
 def bench_render(out, docs, designs, tiles, repeats, presets):
-    """Seconds per tile per preset (render + label pass + EXR write) and city build time."""
+    """Seconds per tile per preset (render + label pass + EXR write), city build and city layout times."""
     from ..experiments.bench import bench_render as run
     from ..experiments.bench import format_render_table
 

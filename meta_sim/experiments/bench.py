@@ -30,17 +30,51 @@ def _blender_import_seconds() -> float:
 # varied roofs and a sensor (issue 18's speed limits hold for it; overhead-v1 before 2026-12-05).
 RICH_SPACE = "overhead-towns-v5"
 
+# Cities bench-render generates without Blender (name -> width m, height m, LayoutParams knobs): a nine-tile and a
+# square-kilometre city of the default knobs, a dense-styled one, and the heaviest clutter (every knob on) alone
+# and in a mix of styles.
+_EVERY_KNOB = {"tree_size": "real", "street_details": True, "car_density": 0.7, "pool_share": 0.6,
+               "shrub_density": 0.7}
+LAYOUT_CASES = {
+    "default_350m": (350.0, 350.0, {}),
+    "default_1km": (1000.0, 1000.0, {}),
+    "dense_345m": (345.6, 345.6, {"style": "dense"}),
+    "every_knob_1km": (1000.0, 1000.0, _EVERY_KNOB),
+    "style_mix_every_knob_700x600m": (700.0, 600.0, {
+        "style": {"suburban": 0.3, "dense": 0.3, "downtown": 0.2, "industrial": 0.2}, **_EVERY_KNOB}),
+}
+
 
 def bench_render(designs: int = 4, tiles: int = 9, repeats: int = 3, presets=("fast", "balanced", "quality"),
-                 seed: int = 101, rich: bool = True) -> dict:
+                 seed: int = 101, rich: bool = True, layouts: dict = LAYOUT_CASES) -> dict:
     """Seconds per tile (render + label pass + EXR write) for each preset, one city of ``designs`` designs
-    of the default space; with ``rich`` also of designs of ``RICH_SPACE`` (under "rich")."""
+    of the default space; with ``rich`` also of designs of ``RICH_SPACE`` (under "rich"); and the seconds
+    ``generate_layout`` takes for each city of ``layouts`` (under "layout_seconds")."""
     startup = statistics.median(_blender_import_seconds() for _ in range(repeats))
     result = {**_render_costs("rooftops-v1", designs, tiles, repeats, presets, seed), "designs_per_city": designs,
               "tiles_per_design": tiles, "repeats": repeats, "blender_import_seconds": round(startup, 3),
+              "layout_seconds": _layout_seconds(layouts, repeats),
               "machine": {"cpus": os.cpu_count(), "python": platform.python_version()}}
     if rich:
         result["rich"] = {"space": RICH_SPACE, **_render_costs(RICH_SPACE, designs, tiles, repeats, presets, seed)}
+    return result
+
+
+def _layout_seconds(layouts: dict, repeats: int) -> dict:
+    """Per city of ``layouts``: its size, knobs and the median seconds of ``generate_layout`` over seeds
+    0 .. ``repeats`` - 1."""
+    from ..sim.layout import LayoutParams, generate_layout
+
+    result = {}
+    for name, (width, height, knobs) in layouts.items():
+        params = LayoutParams(**knobs)
+        runs = []
+        for seed in range(repeats):
+            started = time.perf_counter()
+            generate_layout(seed, width, height, params)
+            runs.append(time.perf_counter() - started)
+        result[name] = {"width_m": width, "height_m": height, "knobs": knobs,
+                        "seconds": round(statistics.median(runs), 4)}
     return result
 
 
@@ -102,6 +136,9 @@ def format_render_table(result: dict) -> str:
                  f"{result['blender_import_seconds']:.2f} s; "
                  f"{result['designs_per_city']} designs per city, medians of {result['repeats']} runs, "
                  f"{result['machine']['cpus']} CPUs.")
+    lines.append("")
+    layouts = "; ".join(f"{name} {case['seconds']:.3f} s" for name, case in result["layout_seconds"].items())
+    lines.append(f"City layout alone (`generate_layout`, no Blender; medians of {result['repeats']} seeds): {layouts}.")
     return "\n".join(lines)
 
 

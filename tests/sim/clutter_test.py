@@ -259,14 +259,6 @@ def test_damaged_clutter_in_a_layout_file_is_rejected(city):
         CityLayout.from_dict(data)
 
 
-def test_speed_with_everything_on():
-    import time
-
-    start = time.perf_counter()
-    generate_layout(0, 1000.0, 1000.0, ALL_ON)
-    assert time.perf_counter() - start < 3.0
-
-
 def test_a_sixth_stage_stream_leaves_the_first_five_as_they_were():
     from meta_sim.sim.layout import stage_generators
 
@@ -438,14 +430,6 @@ def test_meshes_of_turned_pavings_and_trucks(styled):
     for t in trucks:  # each truck's mesh lies in its outline
         mesh = meshes.car_mesh([t]).arrays()["vertices"][:, :2].astype(float)
         assert polygons.inside([tuple(p) for p in mesh], t.corners, 1e-3)
-
-
-def test_a_styled_city_with_everything_on_is_quick():
-    import time
-
-    start = time.perf_counter()
-    generate_layout(5, 700.0, 600.0, LayoutParams(style=MIX, **KNOBS))
-    assert time.perf_counter() - start < 8.0
 
 
 def test_greenness_tints_the_foliage_atlas_as_it_turns_the_small_trees():

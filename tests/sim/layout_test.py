@@ -1,7 +1,6 @@
 """City layout: geometric invariants, determinism, proportions, queries, validation."""
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -227,19 +226,6 @@ def test_tile_grid_and_layout_for_tiles():
     assert len(layout.tile_grid()) == 6 and len(tiles) == 5
     assert (layout.width_m, layout.height_m) == (pytest.approx(3 * TILE_M), pytest.approx(2 * TILE_M))
     assert generate_layout(0, 300, 200).tile_grid(100.0)[-1] == (200.0, 100.0, 300.0, 200.0)
-
-
-def test_speed():
-    def best_of(n, size):
-        times = []
-        for seed in range(n):
-            start = time.perf_counter()
-            generate_layout(seed, size, size)
-            times.append(time.perf_counter() - start)
-        return min(times)
-
-    assert best_of(3, 350.0) < 0.5
-    assert best_of(2, 1000.0) < 2.0
 
 
 @pytest.mark.parametrize("kwargs,field", [

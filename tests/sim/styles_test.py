@@ -415,14 +415,6 @@ def test_style_shares_set_how_much_of_the_city_each_style_covers():
     assert 0.0 < little < much / 2.5
 
 
-def test_generating_a_styled_city_is_quick():
-    import time
-
-    start = time.perf_counter()
-    generate_layout(1, 345.6, 345.6, LayoutParams(style="dense"))
-    assert time.perf_counter() - start < 5.0
-
-
 @pytest.mark.parametrize("text,mix", [
     ("dense", (("dense", 1.0),)),
     ("dense=0.7,suburban=0.3", (("suburban", 0.3), ("dense", 0.7))),
