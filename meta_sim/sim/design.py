@@ -11,11 +11,42 @@ A design space is declared in a versioned JSON file (see ``meta_sim/sim/spaces``
      "layout": {"sloped_share": 0.0}}
 
 A categorical parameter with ``texture_kind`` sets the material of every roof
-of that kind; a parameter with ``layout_field`` sets that field of the city
-layout (a number, or a categorical choice such as a city style); a parameter
-with ``appearance`` sets a field of ``sim.appearance`` (ground cover, sensor,
-greenness, sun elevation, brightness, roof jitter, ground albedo). ``layout`` holds fixed layout
-overrides the scene needs (a space without sloped roofs builds none).
+of that kind; its ``choices`` may be ``{"all": KIND}``, KIND its ``texture_kind``:
+every texture of that kind in the default bank, in the bank's manifest order
+(``textures.procedural.recipes(KIND)``: known without building the bank or bpy).
+Loading expands it, so ``to_dict`` always lists the ids. A parameter with
+``layout_field`` sets that field of the city layout (a number, or a categorical
+choice such as a city style); a parameter with ``appearance`` sets a field of
+``sim.appearance`` (ground cover, sensor, greenness, sun elevation, brightness,
+roof jitter, ground albedo). ``layout`` holds fixed layout overrides the scene
+needs (a space without sloped roofs builds none).
+
+A space may extend a shipped one and declare only its differences:
+
+    {"format": "meta-sim-design-space", "version": 1, "name": "my-towns",
+     "extends": "overhead-v2",
+     "remove": ["style"],
+     "parameters": [
+        {"name": "building_density", "type": "continuous", "low": 0.05, "high": 1.0,
+         "layout_field": "building_density"},
+        {"name": "open_share", "type": "continuous", "low": 0.0, "high": 0.3,
+         "layout_field": "open_share", "after": "building_density"}],
+     "layout": {"style": "dense", "roof_furniture": null}}
+
+- ``extends`` names a space meta-sim ships (``builtin_spaces()``), never a path; the base
+  may extend another, at most ``MAX_EXTENDS`` steps deep, and no space may come back in its
+  own chain. The result is the base's parameters and layout with these changes, in order:
+- ``remove`` drops the base's parameters of those names (each must exist in the base).
+- each entry of ``parameters`` is a whole parameter: one of the base's name replaces it
+  where it stands, a new name goes at the end; ``"after": NAME`` places it right after
+  NAME instead (a parameter of the base or one placed before it in this list).
+- ``layout`` is merged key by key: a value replaces the base's or adds a key at the end,
+  ``null`` drops the base's key.
+- ``name`` is this space's own (never inherited); ``format`` and ``version`` are required
+  as in any space. ``remove`` and ``"after"`` need ``extends``.
+
+Every key is checked: an unknown key, a name to remove or place after that the base lacks,
+or a parameter given twice is one MetaSimError saying what to fix.
 
 A design is a plain ``dict``: parameter name -> choice id (categorical) or
 float (continuous). Encoding concatenates a one-hot block per categorical
@@ -38,16 +69,17 @@ import numpy as np
 from ..core.errors import MetaSimError
 from ..core.names import MAX_NAME, safe_name
 from .appearance import check_field
+from .space_names import DEFAULT_SPACE, SPACES_DIR, builtin_spaces
+from .textures.procedural import KINDS, recipes
 
 FORMAT = "meta-sim-design-space"
 VERSION = 1
-SPACES_DIR = Path(__file__).parent / "spaces"
-DEFAULT_SPACE = "rooftops-v1"
-
-
-def builtin_spaces() -> list[str]:
-    """The names of the built-in design spaces (``DesignSpace.load`` takes them by name)."""
-    return sorted(p.stem for p in SPACES_DIR.glob("*.json"))
+MAX_EXTENDS = 4  # a space, its base, ... : a chain of at most this many "extends"
+_SPACE_KEYS = ("format", "version", "name", "extends", "remove", "parameters", "layout")
+_PARAMETER_KEYS = {
+    "categorical": ("name", "type", "choices", "texture_kind", "layout_field", "appearance"),
+    "continuous": ("name", "type", "low", "high", "layout_field", "appearance"),
+}
 
 
 @dataclass(frozen=True)
@@ -139,6 +171,128 @@ def _bindings(raw: Mapping, name: str) -> tuple[str | None, str | None]:
     return out[0], out[1]
 
 
+def _listed(keys) -> str:
+    return ", ".join(f'"{k}"' for k in keys)
+
+
+def _header(data) -> None:
+    """MetaSimError unless ``data`` is a design-space declaration of this version with known keys only."""
+    if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+        raise MetaSimError(f"not a design-space file (expected \"format\": \"{FORMAT}\")")
+    version = data.get("version")
+    if version != VERSION:
+        raise MetaSimError(
+            f"design-space version {version!r} is not supported (this meta-sim reads {VERSION})")
+    unknown = [str(k) for k in data if k not in _SPACE_KEYS]
+    if unknown:
+        raise MetaSimError(f"unknown design-space key(s) {_listed(unknown)}; a space has {_listed(_SPACE_KEYS)}")
+
+
+def _raw_parameters(data: Mapping, where: str = "") -> list[Mapping]:
+    """The ``parameters`` list of a declaration, each an object with an identifier ``name``."""
+    raws = data.get("parameters", [])
+    if not isinstance(raws, list):
+        raise MetaSimError(f"{where}design-space \"parameters\" must be a list")
+    for raw in raws:
+        if not isinstance(raw, Mapping):
+            raise MetaSimError(f"{where}a design-space parameter must be an object, not {raw!r}")
+        name = raw.get("name")
+        if not isinstance(name, str) or not name.isidentifier() or len(name) > MAX_NAME:
+            raise MetaSimError(f"{where}design-space parameter name {name!r} must be an identifier")
+    return raws
+
+
+def _read(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise MetaSimError(f"{path}: not valid JSON ({exc})") from None
+
+
+def _declaration(data, chain: tuple[str, ...] = ()) -> dict:
+    """``data`` with its ``extends`` resolved (see the module docstring): a declaration without
+    ``extends``, ``remove`` or ``"after"``. ``chain`` holds the bases already being resolved."""
+    _header(data)
+    raws = _raw_parameters(data)
+    base_name = data.get("extends")
+    if base_name is None:
+        if "remove" in data or any("after" in raw for raw in raws):
+            raise MetaSimError("\"remove\" and \"after\" change a base space: add \"extends\": "
+                               "the name of a shipped space, or drop them")
+        return dict(data)
+    shipped = builtin_spaces()
+    if not isinstance(base_name, str) or base_name not in shipped:
+        raise MetaSimError(f"\"extends\": {base_name!r} is not a space meta-sim ships; extend one of: "
+                           f"{', '.join(shipped)}")
+    if base_name in chain:
+        raise MetaSimError(f"design spaces extend each other in a cycle: {' -> '.join(chain + (base_name,))}; "
+                           "make one of them declare its parameters")
+    if len(chain) >= MAX_EXTENDS:
+        raise MetaSimError(f"design space {base_name!r} is more than {MAX_EXTENDS} \"extends\" deep "
+                           f"({' -> '.join(chain)}); extend a space nearer the top")
+    base = _declaration(_read(SPACES_DIR / f"{base_name}.json"), chain + (base_name,))
+    return _extended(base, data, raws)
+
+
+def _extended(base: Mapping, data: Mapping, raws: list[Mapping]) -> dict:
+    """The base declaration with the changes ``data`` declares (``raws``: its parameters)."""
+    where = f"extending {data['extends']!r}: "
+    merged = [dict(raw) for raw in _raw_parameters(base)]
+    remove = data.get("remove", [])
+    if not isinstance(remove, list) or not all(isinstance(n, str) for n in remove):
+        raise MetaSimError(f"{where}\"remove\" must be a list of parameter names")
+    given = [raw["name"] for raw in raws]
+    for name in remove:
+        if name not in (p["name"] for p in merged):
+            raise MetaSimError(f"{where}cannot remove {name!r}: the base has {', '.join(p['name'] for p in merged)}")
+        if name in given:
+            raise MetaSimError(f"{where}{name!r} is both removed and declared; drop it from \"remove\"")
+        merged = [p for p in merged if p["name"] != name]
+    if len(set(given)) != len(given):
+        raise MetaSimError(f"{where}each parameter may be declared once")
+    for raw in raws:
+        entry = {k: v for k, v in raw.items() if k != "after"}
+        names = [p["name"] for p in merged]
+        at = names.index(entry["name"]) if entry["name"] in names else None
+        if "after" not in raw:
+            if at is None:
+                merged.append(entry)
+            else:
+                merged[at] = entry
+            continue
+        if at is not None:
+            del merged[at], names[at]
+        if raw["after"] not in names:
+            raise MetaSimError(f"{where}{entry['name']}: \"after\" must name a parameter of the space, "
+                               f"one of {', '.join(names)}; not {raw['after']!r}")
+        merged.insert(names.index(raw["after"]) + 1, entry)
+    layout = data.get("layout", {})
+    if not isinstance(layout, Mapping):
+        raise MetaSimError(f"{where}design-space \"layout\" must be an object")
+    out_layout = dict(base.get("layout", {}))
+    for key, value in layout.items():
+        if value is not None:
+            out_layout[key] = value
+        elif key in out_layout:
+            del out_layout[key]
+        else:
+            raise MetaSimError(f"{where}layout {key!r}: null drops a key of the base's layout, which has none")
+    out = {k: data[k] for k in ("format", "version", "name") if k in data}
+    return {**out, "parameters": merged, "layout": out_layout}
+
+
+def _bank_ids(spec: Mapping, texture_kind: str | None, name: str) -> tuple[str, ...]:
+    """The ids ``{"all": KIND}`` stands for: every texture of that kind in the default bank, in its
+    manifest order (the recipes' order, so nothing is built)."""
+    if set(spec) != {"all"} or spec["all"] not in KINDS:
+        forms = " or ".join(json.dumps({"all": kind}) for kind in KINDS)
+        raise MetaSimError(f"{name}: choices must be a list of ids or {forms}, not {json.dumps(spec)[:80]}")
+    if spec["all"] != texture_kind:
+        kind = json.dumps(spec["all"])
+        raise MetaSimError(f"{name}: choices {{\"all\": {kind}}} need \"texture_kind\": {kind}")
+    return tuple(r.id for r in recipes(spec["all"]))
+
+
 def _preview(choices: tuple[str, ...], n: int = 3) -> str:
     shown = ", ".join(repr(c) for c in choices[:n])
     return shown + (", ..." if len(choices) > n else "")
@@ -154,37 +308,34 @@ class DesignSpace:
     # --- declaration -------------------------------------------------------
     @classmethod
     def from_dict(cls, data: Mapping) -> "DesignSpace":
-        if not isinstance(data, Mapping) or data.get("format") != FORMAT:
-            raise MetaSimError(f"not a design-space file (expected \"format\": \"{FORMAT}\")")
-        version = data.get("version")
-        if version != VERSION:
-            raise MetaSimError(
-                f"design-space version {version!r} is not supported (this meta-sim reads {VERSION})")
+        """A space from its declaration (see the module docstring), ``extends`` and ``{"all": KIND}`` resolved."""
+        data = _declaration(data)
         params: list[Parameter] = []
-        raws = data.get("parameters", [])
-        if not isinstance(raws, list):
-            raise MetaSimError("design-space \"parameters\" must be a list")
-        for raw in raws:
-            if not isinstance(raw, Mapping):
-                raise MetaSimError(f"a design-space parameter must be an object, not {raw!r}")
-            name, kind = raw.get("name"), raw.get("type")
-            if not isinstance(name, str) or not name.isidentifier() or len(name) > MAX_NAME:
-                raise MetaSimError(f"design-space parameter name {name!r} must be an identifier")
+        for raw in _raw_parameters(data):
+            name, kind = raw["name"], raw.get("type")
+            if kind not in _PARAMETER_KEYS:
+                raise MetaSimError(f"{name}: type must be 'categorical' or 'continuous', not {kind!r}")
+            unknown = [str(k) for k in raw if k not in _PARAMETER_KEYS[kind]]
+            if unknown:
+                raise MetaSimError(f"{name}: unknown key(s) {_listed(unknown)}; a {kind} parameter has "
+                                   f"{_listed(_PARAMETER_KEYS[kind])}")
             if kind == "categorical":
+                texture_kind = raw.get("texture_kind")
+                if texture_kind not in (None, *KINDS):
+                    raise MetaSimError(f"{name}: texture_kind must be \"flat\" or \"sloped\", not {texture_kind!r}")
                 choices = raw.get("choices") or ()
+                if isinstance(choices, Mapping):
+                    choices = _bank_ids(choices, texture_kind, name)
                 if not isinstance(choices, (list, tuple)) or not choices or len(set(map(str, choices))) != len(choices):
                     raise MetaSimError(f"{name}: choices must be a non-empty list of unique ids")
                 choices = tuple(safe_name(c, f"{name}: choice") for c in choices)
-                texture_kind = raw.get("texture_kind")
-                if texture_kind not in (None, "flat", "sloped"):
-                    raise MetaSimError(f"{name}: texture_kind must be \"flat\" or \"sloped\", not {texture_kind!r}")
                 field, look = _bindings(raw, name)
                 if look is not None:
                     check_field(look, True, name, choices)
                 if sum(x is not None for x in (texture_kind, field, look)) > 1:
                     raise MetaSimError(f"{name}: set at most one of texture_kind, layout_field and appearance")
                 params.append(Categorical(name, choices, texture_kind, field, look))
-            elif kind == "continuous":
+            else:
                 low, high = (_finite(raw.get(key), f"{name}: {key}") for key in ("low", "high"))
                 if not low < high:
                     raise MetaSimError(f"{name}: low ({low}) must be below high ({high})")
@@ -194,8 +345,6 @@ class DesignSpace:
                 if field is not None and look is not None:
                     raise MetaSimError(f"{name}: set layout_field or appearance, not both")
                 params.append(Continuous(name, low, high, field, look))
-            else:
-                raise MetaSimError(f"{name}: type must be 'categorical' or 'continuous', not {kind!r}")
         if not params:
             raise MetaSimError("a design space needs at least one parameter")
         if len({p.name for p in params}) != len(params):
@@ -226,12 +375,10 @@ class DesignSpace:
         if not path.suffix:
             path = SPACES_DIR / f"{path_or_name}.json"
         try:
-            data = json.loads(path.read_text())
+            data = _read(path)
         except FileNotFoundError:
             raise MetaSimError(f"design space {str(path_or_name)!r} not found; "
                                f"give a JSON file or one of: {', '.join(builtin_spaces())}") from None
-        except json.JSONDecodeError as exc:
-            raise MetaSimError(f"{path}: not valid JSON ({exc})") from None
         return cls.from_dict(data)
 
     @classmethod

@@ -410,3 +410,193 @@ def test_a_view_height_outside_its_range_is_refused():
                             "high": 100.0}]}
     with pytest.raises(MetaSimError, match="view_height_m must stay within"):
         DesignSpace.from_dict(spec)
+
+
+# --- declared once: {"all": KIND} choices and "extends" ----------------------------------------------------------
+
+# sha256 of each shipped space's to_dict() as json.dumps gives it with sort_keys (the canonical form preset and
+# search caches key on) and without (the feature cache's, where the layout's key order counts too), computed
+# from the files before they were shortened with "all" and "extends": a rewrite must never change a space.
+SHIPPED_SPACE_SHA256 = {
+    "overhead-towns-v1": ("1070097e35e5a7b0f4b82f7243fa1bec7c01d13aad8df99f963ee04fbdb12428",
+                         "0513093ef80ee91b55c517487280ae6177954bba656d786beacc0eb72d41eccf"),
+    "overhead-towns-v10": ("42a8eecc6b523f537935cfb772a5bfd6464c1022434b5c3b12ec7a0e0c35ec17",
+                          "f51c009ba89ce3e8d394f1096c3dba77c74b3cc97780ead320858883648bc5f1"),
+    "overhead-towns-v11": ("bf4c9a95cd6c9fc254159887d2cc8d782236aaf91d6daba2254f99a8b87bc8c9",
+                          "a50b69e103b85c0e36cf6161db5043bac14d5daf5b6f872b790fe94089126612"),
+    "overhead-towns-v12": ("dd9cf6d03ff20e75853cd339eec8d56c100f3ff2344a0eafb18d95965ce83ae6",
+                          "9f483a2f9305527d1f4504a1a8fb081367a89d90c2748f408bd2440923325236"),
+    "overhead-towns-v13": ("eae0b0d1404c1583631889d4a4ac87dbbed3e67755435a52491df3e31ee64b36",
+                          "e0533961dde635e1fb7fcaa6c98e44a4c5083abfe4f21e86ec23a10d4073f779"),
+    "overhead-towns-v2": ("2d2ad55e68929e5e72f63070bc2427a2772f8ac2060847e5beee9c112e0cb342",
+                         "6e691721e5e2914b022e3827106ea3d01243fc90db439360ddee15995c048a35"),
+    "overhead-towns-v3": ("d420d20d44d5c7d8239c7c088d90e2dd23bff81b2cd63fd863b60d718ed65323",
+                         "f60162389a280b0711bc5ef363a0a030e0dc9231915e9ac22c35cbf6baf88637"),
+    "overhead-towns-v4": ("2378a57d19e8106dd73242e3f3831ae1a7c1807218f5015fa6ab163611dc55fd",
+                         "ec6a7382d56a1435d762c07f78d8487a61664473b3fd87c87fc34f96c3bd0722"),
+    "overhead-towns-v5": ("a06d57221f3940e04322eceef7801d6d85fdcb7af0f3d1b07f0de5dd67d4e12b",
+                         "32e4f95031514c286533a5ed19a49c0d78f5c578ac68de40ce650529ca7df5fb"),
+    "overhead-towns-v6": ("0c8273444651455833838a651f42164145bce244e75b8e1d9f55d2b3e80dc626",
+                         "d96f806f45b1245e954f43f4cd3df051194b4d20479ffb38c160f535f3f7e064"),
+    "overhead-towns-v7": ("79de781b14e136afffc960eab0762538ee2b8e4bd32b66301723c2c4097d6bef",
+                         "97806e6fd697d313ca7c3760a34fe89299827d3119d96da2d2ca94e3eb24faa9"),
+    "overhead-towns-v8": ("dca72f3c4c2ae797567fb0d8b4eefc31d737562de4ecad21ed39b809fa37f8fb",
+                         "4a05823b71f845fd3856c42df8eef9fc9df5d34bd64f112858fc8c97ca84c6af"),
+    "overhead-towns-v9": ("59f88c766ad5a048eb4034d7c8b83a6d6d400fc55b693d8a73406227041e151a",
+                         "44cedf21bf98dcf089de72005d2ecf7b1f062f36cddd5cdffa17b4e4fa9ff73e"),
+    "overhead-v1": ("112d7d12a2292a360a6c90f069fcffa10f329ff3a667a75abdd9eb4deebd8c9d",
+                   "87e9785453b3ed098469411492a08ded75719cd787172072714e7f6d6b1897f1"),
+    "overhead-v2": ("e578ee82ae1eda2b3a8e31dcd8eec98b027db581e25a7e0cdad3138a20251cfb",
+                   "119b235bf5e1894745d9b765edf79f363ac290599c407bc4c40bf873d1c8a423"),
+    "overhead-v3": ("777c80348c3bab4bfc2e74b80f63496eb4a2f37978c050f8d0a007b2bdf0961b",
+                   "0d20d24376dc7cbe39fb79f05a980ed3768cace2e8ea4d2c1a1828ac4eb5d024"),
+    "rooftops-flat-v1": ("22cc4ba8f3d8b6f077d5dde20e20e17681ca8799b56d3c22f1b3625c37465a54",
+                        "32f5d2bd88fd6750120ca2635fd58afdfb6a971e0c41be66ee6f413528b990f8"),
+    "rooftops-v1": ("422b43d26b1c68e8a3c5de7430f3ff84c25a94ff6060095d111955e4b475e3fd",
+                   "76b5a7ea08d35b62e1e17c06d899e4c213985de66466eecfe3277c90b1c6ba36"),
+}
+
+
+def _declared(**fields) -> dict:
+    return {"format": "meta-sim-design-space", "version": 1, "name": "mine", **fields}
+
+
+def _write(folder, name, data) -> str:
+    path = folder / f"{name}.json"
+    path.write_text(json.dumps(data))
+    return str(path)
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_SPACE_SHA256))
+def test_shipped_spaces_load_exactly_as_pinned(name):
+    import hashlib
+
+    data = DesignSpace.load(name).to_dict()
+    canonical, as_written = SHIPPED_SPACE_SHA256[name]
+    assert hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest() == canonical
+    assert hashlib.sha256(json.dumps(data).encode()).hexdigest() == as_written
+
+
+def test_every_shipped_space_is_pinned():
+    from meta_sim.sim.design import builtin_spaces
+
+    assert sorted(SHIPPED_SPACE_SHA256) == builtin_spaces()
+
+
+def test_all_choices_are_the_default_banks_textures_in_manifest_order(tmp_path, bank):
+    path = _write(tmp_path, "mine", _declared(parameters=[
+        {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "choices": {"all": "flat"}},
+        {"name": "sloped_roof", "type": "categorical", "texture_kind": "sloped", "choices": {"all": "sloped"}}]))
+    space = DesignSpace.load(path)
+    assert list(space.parameter("flat_roof").choices) == bank.ids("flat")
+    assert list(space.parameter("sloped_roof").choices) == bank.ids("sloped")
+    assert space.to_dict()["parameters"] == DesignSpace.load("rooftops-v1").to_dict()["parameters"]
+
+
+@pytest.mark.parametrize("choices, texture_kind, message", [
+    ({"all": "sloped"}, "flat", r'need "texture_kind": "sloped"'),
+    ({"all": "flat"}, None, r'need "texture_kind": "flat"'),
+    ({"all": "round"}, "flat", r'a list of ids or \{"all": "flat"\} or \{"all": "sloped"\}'),
+    ({"all": "flat", "but": ["flat-wood-deck"]}, "flat", "a list of ids or"),
+    ({}, "flat", "non-empty list of unique ids"),
+])
+def test_all_choices_are_checked(choices, texture_kind, message):
+    raw = {"name": "roof", "type": "categorical", "choices": choices}
+    if texture_kind:
+        raw["texture_kind"] = texture_kind
+    with pytest.raises(MetaSimError, match=message):
+        DesignSpace.from_dict(_declared(parameters=[raw]))
+
+
+def test_extends_replaces_in_place_adds_removes_and_merges_the_layout(tmp_path):
+    base = DesignSpace.load("overhead-v2")
+    density = {"name": "building_density", "type": "continuous", "layout_field": "building_density",
+               "low": 0.05, "high": 1.0}
+    open_share = {"name": "open_share", "type": "continuous", "layout_field": "open_share", "low": 0.0, "high": 0.3}
+    paint = {"name": "roof_paint", "type": "continuous", "appearance": "roof_paint", "low": 0.0, "high": 0.8}
+    ground = {"name": "ground", "type": "categorical", "appearance": "ground", "choices": ["plain", "arid"]}
+    space = DesignSpace.load(_write(tmp_path, "mine", _declared(
+        extends="overhead-v2", remove=["style", "greenness"],
+        parameters=[density, {**open_share, "after": "building_density"}, paint, {**ground, "after": "sensor"}],
+        layout={"roof_furniture": None, "style": "dense", "car_density": 0.1})))
+    # ground, a replacement placed after sensor, moves there: before roof_paint, appended before it was placed
+    assert space.names == ("flat_roof", "sloped_roof", "ground_albedo", "tree_density", "building_density",
+                           "open_share", "sun_elevation", "brightness", "roof_jitter", "sensor", "ground",
+                           "roof_paint")
+    assert space.name == "mine"
+    assert (space.parameter("building_density").low, space.parameter("ground").choices) == (0.05, ("plain", "arid"))
+    assert space.parameter("flat_roof") == base.parameter("flat_roof")
+    # the base's keys keep their places, a changed value too; a new key goes at the end, null drops one
+    layout = {k: v for k, v in base.layout.items() if k != "roof_furniture"}
+    assert list(space.layout.items()) == list({**layout, "car_density": 0.1, "style": "dense"}.items())
+
+
+def test_extends_with_its_differences_gives_the_shipped_space(tmp_path):
+    path = _write(tmp_path, "v13", _declared(name="overhead-towns-v13", extends="overhead-towns-v10",
+                                             layout={"roof_furniture": 1.0}))
+    assert DesignSpace.load(path).to_dict() == DesignSpace.load("overhead-towns-v13").to_dict()
+
+
+@pytest.mark.parametrize("extends", ["overhead-v99", "../../etc/passwd", "/etc/passwd", "rooftops-v1.json",
+                                     "spaces/rooftops-v1", "", ["rooftops-v1"], 1])
+def test_extends_names_only_a_shipped_space(extends):
+    with pytest.raises(MetaSimError, match="is not a space meta-sim ships; extend one of: overhead-towns-v1, "):
+        DesignSpace.from_dict(_declared(extends=extends))
+
+
+@pytest.fixture
+def shipped_folder(tmp_path, monkeypatch):
+    """A folder standing in for the shipped spaces, so tests can ship spaces that extend each other."""
+    from meta_sim.sim import design, space_names
+
+    monkeypatch.setattr(space_names, "SPACES_DIR", tmp_path)
+    monkeypatch.setattr(design, "SPACES_DIR", tmp_path)
+    return tmp_path
+
+
+def test_extends_refuses_cycles(shipped_folder):
+    _write(shipped_folder, "a", _declared(name="a", extends="b"))
+    _write(shipped_folder, "b", _declared(name="b", extends="a"))
+    _write(shipped_folder, "c", _declared(name="c", extends="c"))
+    with pytest.raises(MetaSimError, match="extend each other in a cycle: b -> a -> b"):
+        DesignSpace.load("a")
+    with pytest.raises(MetaSimError, match="cycle: c -> c"):
+        DesignSpace.load("c")
+
+
+def test_extends_is_at_most_a_few_steps_deep(shipped_folder):
+    from meta_sim.sim.design import MAX_EXTENDS
+
+    roof = {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "choices": {"all": "flat"}}
+    _write(shipped_folder, "s0", _declared(name="s0", parameters=[roof]))
+    for k in range(1, MAX_EXTENDS + 2):
+        _write(shipped_folder, f"s{k}", _declared(name=f"s{k}", extends=f"s{k - 1}"))
+    assert DesignSpace.load(f"s{MAX_EXTENDS}").names == ("flat_roof",)
+    with pytest.raises(MetaSimError, match=f"more than {MAX_EXTENDS} \"extends\" deep"):
+        DesignSpace.load(f"s{MAX_EXTENDS + 1}")
+
+
+_ROOF = {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "choices": {"all": "flat"}}
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"extend": "rooftops-v1"}, r'unknown design-space key\(s\) "extend"; a space has "format", "version", '),
+    ({"parameters": [{**_ROOF, "kind": "flat"}]},
+     r'flat_roof: unknown key\(s\) "kind"; a categorical parameter has "name", "type", "choices"'),
+    ({"parameters": [{"name": "x", "type": "continuous", "low": 0, "high": 1, "choices": [1]}]},
+     r'x: unknown key\(s\) "choices"; a continuous parameter has'),
+    ({"parameters": [{**_ROOF, "after": "x"}]}, r'"remove" and "after" change a base space: add "extends"'),
+    ({"parameters": [_ROOF], "remove": ["x"]}, r'"remove" and "after" change a base space'),
+    ({"extends": "rooftops-v1", "remove": ["style"]}, "cannot remove 'style': the base has flat_roof, sloped_roof"),
+    ({"extends": "rooftops-v1", "remove": "flat_roof"}, r'"remove" must be a list of parameter names'),
+    ({"extends": "rooftops-v1", "remove": ["flat_roof"], "parameters": [_ROOF]}, "both removed and declared"),
+    ({"extends": "rooftops-v1", "parameters": [_ROOF, _ROOF]}, "each parameter may be declared once"),
+    ({"extends": "rooftops-v1", "parameters": [{**_ROOF, "name": "roof2", "after": "style"}]},
+     r'roof2: "after" must name a parameter of the space, one of flat_roof, sloped_roof; not \'style\''),
+    ({"extends": "rooftops-v1", "layout": {"style": None}}, "null drops a key of the base's layout, which has none"),
+    ({"extends": "rooftops-v1", "layout": ["style"]}, r'"layout" must be an object'),
+    ({"extends": "rooftops-v1", "version": 2}, "version 2 is not supported"),
+])
+def test_declarations_are_checked_key_by_key(fields, message):
+    with pytest.raises(MetaSimError, match=message):
+        DesignSpace.from_dict(_declared(**fields))
