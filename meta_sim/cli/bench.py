@@ -8,6 +8,7 @@ import click
 
 from ..core.errors import MetaSimError
 from ..experiments.publish import DOCS, publish, publish_section
+from ..sim.space_names import builtin_spaces
 from .base import _Bars, _torch_threads, main
 
 README = Path("README.md")
@@ -100,14 +101,13 @@ def bench_nams_command(out, docs, targets, adjoint_targets, cache):
               help="folder for sheet.png (targets beside their inferred designs) [default: benchmarks/appearance, "
                    "or benchmarks/appearance/SPACE]")
 @click.option("--space", default="overhead-v1", show_default=True,
-              help="a built-in design space with appearance parameters (overhead-towns-v3: the realism run's model)")
+              help=f"a design space meta-sim ships with appearance parameters ({', '.join(builtin_spaces())})")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder")
 @_torch_threads
 def bench_appearance_command(out, docs, targets, pictures, space, cache):
     """E1 in overhead-v1 (or --space): how well NAMS infers a target's look (ground, vegetation, sun, sensor,
     city style)."""
     from ..experiments.bench import APPEARANCE_SPACE, bench_appearance, format_appearance_table
-    from ..sim.design import builtin_spaces
 
     if space not in builtin_spaces():
         raise MetaSimError(f"--space must be a built-in design space ({', '.join(builtin_spaces())}), not {space!r}")

@@ -9,6 +9,7 @@ import click
 from ..core.errors import MetaSimError
 from ..core.fileio import made_folder
 from ..experiments.splits import ALL_SPLIT_NAMES, get_split, single_seed
+from ..sim.space_names import builtin_spaces
 from .base import ARCHITECTURE_NAMES, _Bars, _torch_threads, main
 
 
@@ -23,12 +24,7 @@ def _dataset_options(command):
         click.option("--cities", type=int, default=8, show_default=True, help="cities the designs are spread over"),
         click.option("--preset", default="fast", show_default=True, help="render preset of the training tiles"),
         click.option("--space", default="rooftops-v1", show_default=True,
-                     help="design space: a built-in name (rooftops-v1; overhead-v1 adds city style, ground, "
-                          "vegetation, sun, brightness and sensor for real targets; overhead-v2 also the "
-                          "ground's albedo; overhead-v3 also sparse towns, building density from 0.05; "
-                          "overhead-towns-v1 is overhead-v2 with every city a dense town; overhead-towns-v2 adds "
-                          "painted roofs and darker ground; overhead-towns-v3 also open ground among the houses and "
-                          "deeper shadows) or a JSON file"),
+                     help=f"design space: a JSON file or one meta-sim ships ({', '.join(builtin_spaces())})"),
         click.option("--tile-px", type=int, default=384, show_default=True, help="training tile size in pixels"),
         click.option("--gsd", type=float, default=0.3, show_default=True, help="training tiles' metres per pixel"),
         click.option("--extractor", default="colour-texture", show_default=True,

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..sim.space_names import builtin_spaces
+
 
 @dataclass(frozen=True)
 class Option:
@@ -52,8 +54,9 @@ RENDER_OPTIONS = (
            "weathering drawn per building (see meta_sim/sim/jitter.py)"),
     Option("--out", Path, None, "output folder for the EXR tiles (created if missing)"),
     Option("--bank", Path, None, "texture bank folder (default: the built-in bank, built on first use)"),
-    Option("--space", str, None, "design space: a built-in name or a JSON file (default: rooftops-v1; with "
-           "--bank, one parameter per roof kind of that bank; with --population, the space it was inferred in)"),
+    Option("--space", str, None, f"design space: a JSON file or one meta-sim ships ({', '.join(builtin_spaces())}; "
+           "default: rooftops-v1; with --bank, one parameter per roof kind of that bank; with --population, the "
+           "space it was inferred in)"),
     Option("--tile-px", int, 384, "tile width and height in pixels"),
     Option("--gsd", float, 0.3, "ground sampling distance: metres per pixel"),
     Option("--preview", bool, False, "also write an RGB PNG and a colour-coded label PNG per tile", True),
