@@ -313,7 +313,7 @@ class DesignSpace:
         params: list[Parameter] = []
         for raw in _raw_parameters(data):
             name, kind = raw["name"], raw.get("type")
-            if kind not in _PARAMETER_KEYS:
+            if not isinstance(kind, str) or kind not in _PARAMETER_KEYS:
                 raise MetaSimError(f"{name}: type must be 'categorical' or 'continuous', not {kind!r}")
             unknown = [str(k) for k in raw if k not in _PARAMETER_KEYS[kind]]
             if unknown:
