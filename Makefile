@@ -102,7 +102,7 @@ bench-appearance: setup
 # classifier);
 # shares bench-task's cache of trained segmenters.
 bench-realism: setup
-	META_SIM_THREADS=2 $(BIN)/meta-sim bench realism --out benchmarks/realism.json --pictures benchmarks/realism
+	META_SIM_THREADS=2 $(BIN)/meta-sim bench realism --out benchmarks/realism.json --pictures out/bench-pictures/realism
 
 # E1 and E2 on the test split (300 target groups each, 95% intervals) with the validation split beside it, every
 # method (the adjoint search at 64 starts x 100 steps; its other settings are bench-adjoint's).
