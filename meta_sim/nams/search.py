@@ -47,7 +47,7 @@ import torch
 
 from ..core.errors import MetaSimError
 from ..core.progress import Bars
-from ..sim.design import Categorical, DesignSpace
+from ..sim.design import Categorical, DesignSpace, diversify
 from .model import NAMS, DirectRegression
 
 MAX_EXHAUSTIVE_DESIGNS = 200_000
@@ -487,28 +487,43 @@ def near_designs(results: list[SearchResult], n: int) -> list[dict]:
     return [dict(design) for r in results for design in ([d for d, _ in r.ranked[:n]] or [r.design])]
 
 
+class TorchDraws:
+    """The draws ``sim.design`` samples with (``integers``, ``uniform``, ``random`` as a numpy Generator
+    has them), taken from a ``torch.Generator`` (None: torch's global one): the searches keep their
+    torch streams and share the one sampler."""
+
+    def __init__(self, generator: torch.Generator | None):
+        self.generator = generator
+
+    def integers(self, high: int, size: int | None = None):
+        return self._one(torch.randint(high, (1 if size is None else size,), generator=self.generator), size)
+
+    def random(self, size: int | None = None):
+        return self._one(torch.rand(1 if size is None else size, generator=self.generator, dtype=torch.float64),
+                         size)
+
+    def uniform(self, low: float, high: float, size: int | None = None):
+        values = [low + u * (high - low) for u in self.random(1 if size is None else size)]
+        return values[0] if size is None else values
+
+    @staticmethod
+    def _one(draws: torch.Tensor, size: int | None):
+        values = draws.tolist()
+        return values[0] if size is None else values
+
+
 def uniform_predict(space: DesignSpace, n: int, generator: torch.Generator | None = None) -> list[dict]:
     """``n`` designs drawn uniformly from the space (the paper's Uniform baseline)."""
-    columns = {}
-    for p in space.parameters:
-        if isinstance(p, Categorical):
-            columns[p.name] = [p.choices[i] for i in torch.randint(p.width, (n,), generator=generator).tolist()]
-        else:
-            u = torch.rand(n, generator=generator, dtype=torch.float64).tolist()
-            columns[p.name] = [p.low + v * (p.high - p.low) for v in u]
-    return [{name: columns[name][i] for name in space.names} for i in range(n)]
+    return space.sample(TorchDraws(generator), n, order="parameter")
 
 
 def _diversify(results: list[SearchResult], space: DesignSpace, r: float,
                generator: torch.Generator | None) -> list[SearchResult]:
     """Diversify with rejection: with probability r, a target's design is replaced by a uniform draw."""
-    if r == 0.0:
-        return results
-    u = torch.rand(len(results), generator=generator, dtype=torch.float64).tolist()
-    for result, draw in zip(results, u):
-        if draw < r:
-            result.design = uniform_predict(space, 1, generator)[0]
-            result.rejected = True
+    drawn = diversify(space, TorchDraws(generator), len(results), r, lambda k: results[k].design, coins_first=True)
+    for result, (design, replaced) in zip(results, drawn):
+        if replaced:
+            result.design, result.rejected = design, True
     return results
 
 

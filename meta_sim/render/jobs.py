@@ -16,7 +16,7 @@ from ..core.locks import locked
 from ..core.names import safe_name
 from ..sim import tiles
 from ..sim.appearance import Appearance
-from ..sim.design import DesignSpace
+from ..sim.design import DesignSpace, diversify
 from ..sim.layout import scene_version
 from ..sim.quality import RenderPreset
 from ..sim.sensor import Sensor
@@ -137,11 +137,8 @@ def sample_population(space: DesignSpace, designs: list[dict], counts: list[int]
     depend on n."""
     rng = np.random.default_rng([seed, 2])
     shares = np.asarray(counts, dtype=np.float64) / float(sum(counts))
-    out = []
-    for _ in range(n):
-        uniform, pick = rng.random() < r, int(rng.choice(len(designs), p=shares))
-        out.append(space.sample(rng, 1)[0] if uniform else dict(designs[pick]))
-    return out
+    drawn = diversify(space, rng, n, r, lambda _: dict(designs[int(rng.choice(len(designs), p=shares))]))
+    return [design for design, _ in drawn]
 
 
 def write_job_manifest(out_dir: Path, jobs: list[Job], settings: RenderSettings) -> Path:

@@ -62,7 +62,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping
+from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -293,6 +293,15 @@ def _bank_ids(spec: Mapping, texture_kind: str | None, name: str) -> tuple[str, 
     return tuple(r.id for r in recipes(spec["all"]))
 
 
+def _draw(p: Parameter, rng, size: int | None = None):
+    """One value of ``p`` drawn uniformly from ``rng`` (a list of ``size`` values when size is given)."""
+    if isinstance(p, Categorical):
+        picks = rng.integers(len(p.choices), size=size)
+        return p.choices[int(picks)] if size is None else [p.choices[int(i)] for i in picks]
+    values = rng.uniform(p.low, p.high, size=size)
+    return float(values) if size is None else [float(v) for v in values]
+
+
 def _preview(choices: tuple[str, ...], n: int = 3) -> str:
     shown = ", ".join(repr(c) for c in choices[:n])
     return shown + (", ..." if len(choices) > n else "")
@@ -452,18 +461,22 @@ class DesignSpace:
             design[name.strip()] = value.strip()
         return self.validate(design, extra)
 
-    def sample(self, rng: np.random.Generator, n: int) -> list[dict]:
-        """``n`` designs drawn uniformly; design k depends only on the generator state."""
-        out = []
-        for _ in range(n):
-            design = {}
-            for p in self.parameters:
-                if isinstance(p, Categorical):
-                    design[p.name] = p.choices[int(rng.integers(len(p.choices)))]
-                else:
-                    design[p.name] = float(rng.uniform(p.low, p.high))
-            out.append(design)
-        return out
+    def sample(self, rng: np.random.Generator, n: int, order: str = "design") -> list[dict]:
+        """``n`` designs drawn uniformly: every uniform design of meta-sim comes from here.
+
+        ``rng`` is a ``numpy.random.Generator``, or anything with its ``integers(high, size)`` and
+        ``uniform(low, high, size)`` (``nams.search.TorchDraws`` draws them from a ``torch.Generator``).
+        ``order`` lays out the stream, and each order keeps the designs its callers have always had:
+        "design" draws one design's values after another, so design k depends only on the generator
+        state (a larger set extends a smaller); "parameter" draws each parameter's ``n`` values at once
+        (``nams.uniform_predict``, the paper's Uniform baseline).
+        """
+        if order == "design":
+            return [{p.name: _draw(p, rng) for p in self.parameters} for _ in range(n)]
+        if order == "parameter":
+            columns = [_draw(p, rng, n) for p in self.parameters]
+            return [{p.name: column[k] for p, column in zip(self.parameters, columns)} for k in range(n)]
+        raise MetaSimError(f"sample order must be 'design' or 'parameter', not {order!r}")
 
     def encode(self, design: Mapping) -> np.ndarray:
         design = self.validate(design)
@@ -509,3 +522,25 @@ class DesignSpace:
             if p.layout_field:
                 out[p.layout_field] = float(design[p.name]) if isinstance(p, Continuous) else design[p.name]
         return out
+
+
+def diversify(space: DesignSpace, rng: np.random.Generator, n: int, r: float, base: Callable[[int], dict],
+              coins_first: bool = False) -> list[tuple[dict, bool]]:
+    """Diversify with rejection (the paper's, section 4): design k is ``base(k)``, replaced with
+    probability ``r`` by a uniform design of ``space``; each design with whether it was replaced.
+
+    ``rng`` is as for ``DesignSpace.sample`` (with ``random(size)`` besides); ``base`` may draw from it.
+    ``coins_first`` lays out the stream, and each layout keeps the designs its callers have always had:
+    False draws, for each design in turn, its coin, its base and its replacement, so the first k designs
+    do not depend on n (``render.jobs.sample_population``); True draws the n coins at once first, and
+    nothing at all when r is 0 (the searches' answers, ``nams.search``).
+    """
+    if coins_first and r == 0.0:
+        return [(base(k), False) for k in range(n)]
+    coins = list(rng.random(n)) if coins_first else None
+    out = []
+    for k in range(n):
+        replaced = bool((coins[k] if coins_first else rng.random()) < r)
+        design = base(k)
+        out.append((space.sample(rng, 1)[0] if replaced else design, replaced))
+    return out
