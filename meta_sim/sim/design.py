@@ -302,6 +302,18 @@ def _draw(p: Parameter, rng, size: int | None = None):
     return float(values) if size is None else [float(v) for v in values]
 
 
+def _check_layout_value(key, value) -> None:
+    """A fixed layout override is a field name with a finite number, true/false or a short name (a city style);
+    anything else (NaN, a list, an object) is refused here, before it reaches the layout or a file."""
+    if not isinstance(key, str) or not key.isidentifier() or len(key) > MAX_NAME:
+        raise MetaSimError(f"design-space layout key {key!r} must be a field name")
+    if isinstance(value, str):
+        if len(value) > MAX_NAME:
+            raise MetaSimError(f"design-space layout {key}: a name of at most {MAX_NAME} characters")
+    elif isinstance(value, float) and not math.isfinite(value) or not isinstance(value, (bool, int, float)):
+        raise MetaSimError(f"design-space layout {key}: {value!r} must be a finite number, true/false or a name")
+
+
 def _preview(choices: tuple[str, ...], n: int = 3) -> str:
     shown = ", ".join(repr(c) for c in choices[:n])
     return shown + (", ..." if len(choices) > n else "")
@@ -370,6 +382,8 @@ class DesignSpace:
             raise MetaSimError(f"design-space name must be a short non-empty string, not {space_name!r}")
         if not isinstance(layout, Mapping):
             raise MetaSimError("design-space \"layout\" must be an object")
+        for key, value in layout.items():
+            _check_layout_value(key, value)
         return cls(space_name, tuple(params), dict(layout))
 
     def to_dict(self) -> dict:

@@ -600,3 +600,12 @@ _ROOF = {"name": "flat_roof", "type": "categorical", "texture_kind": "flat", "ch
 def test_declarations_are_checked_key_by_key(fields, message):
     with pytest.raises(MetaSimError, match=message):
         DesignSpace.from_dict(_declared(**fields))
+
+
+@pytest.mark.parametrize("value", [float("inf"), float("nan"), [1], {"a": 1}, None, "x" * 201])
+def test_a_layout_override_is_a_finite_number_a_flag_or_a_short_name(value):
+    """The reader fuzz test found an infinite layout value accepted, then refused by every JSON writer."""
+    data = DesignSpace.load("rooftops-v1").to_dict()
+    with pytest.raises(MetaSimError, match="design-space layout x"):
+        DesignSpace.from_dict({**data, "layout": {"x": value}})
+    assert DesignSpace.from_dict({**data, "layout": {"x": 1, "y": True, "style": "dense"}}).layout["y"] is True
