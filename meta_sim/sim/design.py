@@ -303,15 +303,24 @@ def _draw(p: Parameter, rng, size: int | None = None):
 
 
 def _check_layout_value(key, value) -> None:
-    """A fixed layout override is a field name with a finite number, true/false or a short name (a city style);
-    anything else (NaN, a list, an object) is refused here, before it reaches the layout or a file."""
+    """A fixed layout override is a field name with a finite number, true/false, a short name or a mapping of
+    short names to finite numbers (a city style mix); anything else (NaN, a list, a nested object) is refused
+    here, before it reaches the layout or a file. The layout checks what the values mean."""
     if not isinstance(key, str) or not key.isidentifier() or len(key) > MAX_NAME:
         raise MetaSimError(f"design-space layout key {key!r} must be a field name")
-    if isinstance(value, str):
+    if isinstance(value, Mapping):
+        if not all(isinstance(k, str) and len(k) <= MAX_NAME and _is_finite_number(v) for k, v in value.items()):
+            raise MetaSimError(f"design-space layout {key}: a mapping must give each name a finite number")
+    elif isinstance(value, str):
         if len(value) > MAX_NAME:
             raise MetaSimError(f"design-space layout {key}: a name of at most {MAX_NAME} characters")
-    elif isinstance(value, float) and not math.isfinite(value) or not isinstance(value, (bool, int, float)):
+    elif not _is_finite_number(value):
         raise MetaSimError(f"design-space layout {key}: {value!r} must be a finite number, true/false or a name")
+
+
+def _is_finite_number(value) -> bool:
+    """True for true/false, whole numbers and finite floats."""
+    return isinstance(value, (bool, int)) or isinstance(value, float) and math.isfinite(value)
 
 
 def _preview(choices: tuple[str, ...], n: int = 3) -> str:

@@ -602,10 +602,12 @@ def test_declarations_are_checked_key_by_key(fields, message):
         DesignSpace.from_dict(_declared(**fields))
 
 
-@pytest.mark.parametrize("value", [float("inf"), float("nan"), [1], {"a": 1}, None, "x" * 201])
+@pytest.mark.parametrize("value", [float("inf"), float("nan"), [1], {"a": float("inf")}, {"a": {"b": 1}}, None,
+                                   "x" * 201])
 def test_a_layout_override_is_a_finite_number_a_flag_or_a_short_name(value):
     """The reader fuzz test found an infinite layout value accepted, then refused by every JSON writer."""
     data = DesignSpace.load("rooftops-v1").to_dict()
     with pytest.raises(MetaSimError, match="design-space layout x"):
         DesignSpace.from_dict({**data, "layout": {"x": value}})
-    assert DesignSpace.from_dict({**data, "layout": {"x": 1, "y": True, "style": "dense"}}).layout["y"] is True
+    fine = DesignSpace.from_dict({**data, "layout": {"x": 1, "y": True, "style": {"dense": 0.7, "suburban": 0.3}}})
+    assert fine.layout["y"] is True and fine.layout["style"] == {"dense": 0.7, "suburban": 0.3}
