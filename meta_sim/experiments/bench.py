@@ -27,7 +27,7 @@ def _blender_import_seconds() -> float:
 
 # The richer scene bench-render also times: the space the README has users try first on real towns, whose
 # designs bring dense towns, street details, cars, pools, real-sized trees, ground cover, open water, painted and
-# varied roofs and a sensor (issue 18's speed limits hold for it; overhead-v1 before 2026-12-05).
+# varied roofs and a sensor (issue 18's speed limits hold for it; older rows measured overhead-v1).
 RICH_SPACE = "overhead-towns-v5"
 
 # Cities bench-render generates without Blender (name -> width m, height m, LayoutParams knobs): a nine-tile and a

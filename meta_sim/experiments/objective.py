@@ -19,11 +19,11 @@ targets:
   and sloped) is the best on validation, the default (``pipeline.roofcolour.SEARCH_COLOUR`` and ``SEARCH_MATCH``
   on the default model, itself this bench's choice) winning ties; it is chosen to replace the default only when
   its gain over it is more than resampling shows (``paired_gain``: the lower end of the paired 95% interval
-  above 0), else the default stays (since 2026-12-03: settings within noise of each other had been chosen on
+  above 0), else the default stays (settings within noise of each other had been chosen on
   validation and not carried to test);
 * on the test split only the default, the best setting, the default without its far-target search, with the
   far comparison (``SEARCH_FAR``, the default before the roof match), the plain comparison (exponent 0.5, no
-  blur) and that on the model without the score cone (the default before 2026-12-02) are scored, for the report;
+  blur) and that on the model without the score cone (the earlier default) are scored, for the report;
 * on the check split (``splits.py``: fresh seeds, E2 on ``heldout-v3``) the default, the best setting, the
   default without its far-target search, with the far comparison, and the default before the score cone, to
   confirm on targets no choice looked at.
@@ -50,7 +50,7 @@ FAR_EXPONENTS = (0.4, 0.5, 0.6)
 FAR_WEIGHTS = (0.0, 10.0, 30.0)  # blurred by 1 bin
 FAR_MARGINS = (None, 0.02, 0.05, 0.1, 0.2)  # None: a far target is always ranked again
 MATCH_LOSSES = (5.0, 10.0, 20.0)  # far targets ranked by the roof match (``pipeline.roofcolour.roof_match``)
-# Its swatch weight and margin (in match loss): 0.3 and 5% were never chosen in the runs of 2026-12-03, and are left
+# Its swatch weight and margin (in match loss): 0.3 and 5% were never chosen in the objective runs, and are left
 # out for the render shares.
 MATCH_WEIGHTS = (0.0, 0.5, 0.7, 1.0)
 MATCH_MARGINS = (None, 0.02)
@@ -127,7 +127,7 @@ class Setting:
 
 
 # The search's default (pipeline.roofcolour.search_colour) on the default model, and its far comparison (the default
-# before the roof match, 2026-12-03).
+# before the roof match).
 FAR_DEFAULT = Setting(*SEARCH_COLOUR, True, *SEARCH_FAR, SEARCH_FAR_MARGIN)
 DEFAULT = (FAR_DEFAULT if SEARCH_MATCH is None else
            Setting(*SEARCH_COLOUR, True, far_loss=SEARCH_MATCH[0], far_margin=SEARCH_MATCH[2],
@@ -276,7 +276,7 @@ def bench_objective(targets: int = 100, root: Path | None = None, settings: list
     for setting in fars:
         scored(setting)
     # The best setting replaces the default only when its gain on validation is more than resampling shows: the
-    # lower end of its paired 95% interval above 0 (2026-12-03: on 30 textures per kind the best five lay within
+    # lower end of its paired 95% interval above 0 (on 30 textures per kind the best five lay within
     # 0.002, and on 10 a choice had not carried to test). Otherwise the default stays, and says so.
     best = choose(rows)
     gain = paired_gain(Setting(**rows[0]["setting"]), Setting(**best["setting"]), validation)

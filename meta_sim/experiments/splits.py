@@ -6,7 +6,7 @@ cities, ``evaluate.target_jobs``) and, for E2, the held-out texture set the targ
 * ``validation``: anything may be chosen on it (a default, an architecture, a search setting, a
   profile) and it may be looked at as often as needed. It holds target seed 1, where every choice
   of meta-sim so far was made (``make bench-nams``'s targets before the splits), seed 7, which issue
-  20 looked at, and seed 2. E2 uses the fifth held-out set, ``heldout-v5`` (made later on 2026-12-03): the
+  20 looked at, and seed 2. E2 uses the fifth held-out set, ``heldout-v5`` (made after ``heldout-v4``): the
   fourth set's 10 + 10 textures and 20 + 20 drawn by seeded code under the same conditions, against every set
   before it. The fourth set alone (``heldout-v4``, colours no set before it has) was E2's validation for a day:
   on 10 textures per kind it chose a roof match the test split did not confirm, so the split grew threefold
@@ -18,7 +18,7 @@ cities, ``evaluate.target_jobs``) and, for E2, the held-out texture set the targ
   (``meta_sim/sim/textures/procedural.py``), whose colours neither the bank nor ``heldout-v1`` has.
   Nothing may be chosen by looking at its figures: a choice made there makes it a validation split.
 * ``check``: report only, like ``test``, and not run by the benches: fresh seeds (31, 32, 33) and, for E2, the
-  third held-out set, ``heldout-v3``, made on 2026-12-02 after the test split's figures had suggested a change
+  third held-out set, ``heldout-v3``, made after the test split's figures had suggested a change
   to the search (its numbers were chosen on validation). It confirms such a change on targets nothing ever
   looked at: `meta-sim eval e1|e2 --split check`.
 
@@ -129,7 +129,7 @@ def single_seed(experiment: str, seed: int, heldout: str = FIRST_HELDOUT) -> Spl
 
 # The defaults meta-sim chose by measuring accuracy, each with where it is defined and what it was chosen
 # on. Before the splits existed every choice on targets was made on `make bench-nams`'s and `make
-# bench-tradeoff`'s targets, target seed 1 with heldout-v1: the validation split. Until 2026-12-03 E2's
+# bench-tradeoff`'s targets, target seed 1 with heldout-v1: the validation split. At first E2's
 # validation split used heldout-v1 (``VALIDATION_V1``), then for a day heldout-v4 (``VALIDATION_V4``); a choice
 # that scored E2 there names it. Two were
 # measured on renders that are no target at all. docs/design.md ("Splits") names each, and a test keeps this

@@ -584,8 +584,8 @@ def _scored(h: Harness, real: Pool | None, synthetic: Pool | None, label: str, p
 
 
 # The real-versus-rendered classifier's seeds (0, 1, ...): it trains in about a second, and its accuracy
-# varies by 0.1 and more from seed to seed on a few renders, so it gets more seeds than the segmenters (3
-# before 2026-12-05; a row's "per_seed" says how many it had).
+# varies by 0.1 and more from seed to seed on a few renders, so it gets more seeds than the segmenters (older
+# rows had 3; a row's "per_seed" says how many it had).
 REALNESS_SEEDS = 10
 # The seeds of the classifier in each reduced view (``task.realness.VIEWS`` but "full"): where the gap lies.
 REALNESS_VIEW_SEEDS = 3
